@@ -1,0 +1,7 @@
+"""vlpcal: calibrated 3D visible light positioning from a few cheap ceiling cameras.
+
+Layers (DESIGN.md): geometry → detection → triangulation → fusion → deployment →
+survey / planning → cli. Units are metres and radians; the world is z-up with the floor at z = 0.
+"""
+
+__version__ = "0.1.0"

@@ -1,0 +1,252 @@
+"""Camera model: OpenCV pinhole with Brown–Conrady distortion, posed in the world frame.
+
+Conventions (DESIGN.md, fixed): metres and radians; world z up, floor at z = 0; pixels are
+OpenCV's (u, v) = (column, row) with the centre of the top-left pixel at (0, 0);
+``x_cam = R · (X_world − position)`` with ``R = Rodrigues(rotation)``, so OpenCV's
+``rvec = rotation`` and ``tvec = −R · position``; ``dist = [k1, k2, p1, p2, k3]``.
+
+Everything here is vectorised over points: arrays are ``N×3`` world points and ``N×2`` pixels.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: The paper's camera (Table 2, section 3.1): OV2640 at 160 × 120 px seeing ~240 × 180 cm of
+#: floor from 2.3 m, hence f ≈ 160 · 2.3 / 2.4 ≈ 153.3 px (see FIELD-NOTES: the 4.8 mm datasheet
+#: lens would give ~218 px; the stated coverage is what we follow).
+PAPER_WIDTH, PAPER_HEIGHT, PAPER_F = 160, 120, 153.3
+#: Rodrigues vector of a camera looking straight down with image-right along world +x.
+NADIR = (math.pi, 0.0, 0.0)
+
+
+def rodrigues(rvec) -> np.ndarray:
+    """Rotation matrix of a Rodrigues vector (same result as ``cv2.Rodrigues``)."""
+    r = np.asarray(rvec, dtype=float).reshape(3)
+    theta = float(np.linalg.norm(r))
+    if theta < 1e-15:
+        return np.eye(3)
+    k = r / theta
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(theta) * kx + (1.0 - math.cos(theta)) * (kx @ kx)
+
+
+def rotation_vector(R) -> np.ndarray:
+    """Rodrigues vector of a rotation matrix (inverse of :func:`rodrigues`)."""
+    R = np.asarray(R, dtype=float)
+    cos = min(1.0, max(-1.0, (np.trace(R) - 1.0) / 2.0))
+    theta = math.acos(cos)
+    if theta < 1e-12:
+        return np.zeros(3)
+    if math.pi - theta < 1e-6:
+        # Near π the antisymmetric part vanishes: take the axis from R + I.
+        M = (R + np.eye(3)) / 2.0
+        i = int(np.argmax(np.diag(M)))
+        axis = M[:, i] / math.sqrt(max(M[i, i], 1e-300))
+        return axis / np.linalg.norm(axis) * theta
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return w / (2.0 * math.sin(theta)) * theta
+
+
+def distort(xy: np.ndarray, dist) -> np.ndarray:
+    """Apply OpenCV's distortion to undistorted normalised coordinates ``N×2``."""
+    k1, k2, p1, p2, k3 = dist
+    x, y = xy[..., 0], xy[..., 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return np.stack([xd, yd], axis=-1)
+
+
+def distortion_jacobian(xy: np.ndarray, dist) -> np.ndarray:
+    """``N×2×2`` derivative of :func:`distort` with respect to its input."""
+    k1, k2, p1, p2, k3 = dist
+    x, y = xy[..., 0], xy[..., 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
+    J = np.empty(xy.shape[:-1] + (2, 2))
+    J[..., 0, 0] = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
+    J[..., 0, 1] = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+    J[..., 1, 0] = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+    J[..., 1, 1] = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
+    return J
+
+
+def undistort(xy_d: np.ndarray, dist, iterations: int = 20, tol: float = 1e-15) -> np.ndarray:
+    """Invert :func:`distort` by Newton's method, to machine precision.
+
+    ``cv2.undistortPoints`` runs a fixed few fixed-point steps and leaves ~1e-4 of error with
+    strong distortion; triangulation round trips need ~1e-12, hence Newton here.
+    """
+    xy_d = np.asarray(xy_d, dtype=float)
+    if not np.any(dist):
+        return xy_d.copy()
+    xy = xy_d.copy()
+    for _ in range(iterations):
+        r = distort(xy, dist) - xy_d
+        J = distortion_jacobian(xy, dist)
+        det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+        dx = (J[..., 1, 1] * r[..., 0] - J[..., 0, 1] * r[..., 1]) / det
+        dy = (J[..., 0, 0] * r[..., 1] - J[..., 1, 0] * r[..., 0]) / det
+        xy[..., 0] -= dx
+        xy[..., 1] -= dy
+        step = np.nanmax(np.abs(np.stack([dx, dy]))) if dx.size else 0.0
+        if not step > tol:  # also stops on all-NaN input
+            break
+    return xy
+
+
+@dataclass(frozen=True)
+class Camera:
+    """One installed camera: intrinsics, OpenCV distortion and pose (DESIGN.md contract).
+
+    Immutable; refinements return new cameras (``dataclasses.replace``).
+    """
+
+    id: str
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[float, float, float] = NADIR
+    R: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        for name, n in (("dist", 5), ("position", 3), ("rotation", 3)):
+            value = tuple(float(v) for v in np.asarray(getattr(self, name), dtype=float).ravel())
+            if len(value) != n:
+                raise ValueError(f"camera {self.id}: {name} needs {n} numbers, got {len(value)}")
+            object.__setattr__(self, name, value)
+        for name in ("fx", "fy", "cx", "cy"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        R = rodrigues(self.rotation)
+        R.setflags(write=False)
+        object.__setattr__(self, "R", R)
+
+    # -- the contract's dict form -------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, d: dict) -> Camera:
+        """Build from the deployment file's camera mapping (keys as in DESIGN.md)."""
+        return cls(
+            id=str(d["id"]), width=d["width"], height=d["height"], fx=d["fx"], fy=d["fy"],
+            cx=d["cx"], cy=d["cy"], dist=d.get("dist", (0, 0, 0, 0, 0)),
+            position=d["position"], rotation=d["rotation"],
+        )
+
+    def to_dict(self) -> dict:
+        """The deployment file's camera mapping: plain floats and lists, metres and radians."""
+        return {
+            "id": self.id, "width": self.width, "height": self.height,
+            "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy,
+            "dist": list(self.dist), "position": list(self.position),
+            "rotation": list(self.rotation),
+        }
+
+    # -- derived quantities -------------------------------------------------------------------
+    @property
+    def K(self) -> np.ndarray:
+        """3×3 intrinsic matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def center(self) -> np.ndarray:
+        """Optical centre in the world, metres."""
+        return np.array(self.position)
+
+    @property
+    def tvec(self) -> np.ndarray:
+        """OpenCV's translation vector, ``−R · position``."""
+        return -self.R @ self.center
+
+    @property
+    def axis(self) -> np.ndarray:
+        """Unit optical axis in the world frame."""
+        return self.R[2].copy()
+
+    # -- projection -----------------------------------------------------------------------------
+    def to_camera(self, X) -> np.ndarray:
+        """World points ``N×3`` → camera-frame points ``N×3``."""
+        X = np.asarray(X, dtype=float)
+        return (X - self.center) @ self.R.T
+
+    def project(self, X, margin: float = 0.0):
+        """Project world points ``N×3`` to pixels.
+
+        Returns ``(uv N×2, in_front N, in_image N)``: ``in_front`` is a positive depth,
+        ``in_image`` also needs the pixel inside the sensor shrunk by ``margin`` px (pixel centres
+        run from 0 to width − 1). Points behind the camera get NaN pixels.
+        """
+        Xc = self.to_camera(X)
+        z = Xc[..., 2]
+        in_front = z > 1e-9
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = Xc[..., :2] / np.where(in_front, z, np.nan)[..., None]
+        uv = self.normalised_to_pixels(distort(xy, self.dist) if any(self.dist) else xy)
+        lo = margin - 0.5
+        in_image = (
+            in_front
+            & (uv[..., 0] >= lo) & (uv[..., 0] <= self.width - 0.5 - margin)
+            & (uv[..., 1] >= lo) & (uv[..., 1] <= self.height - 0.5 - margin)
+        )
+        return uv, in_front, in_image
+
+    def normalised_to_pixels(self, xy_d) -> np.ndarray:
+        """Distorted normalised coordinates → pixels (applies fx, fy, cx, cy only)."""
+        xy_d = np.asarray(xy_d, dtype=float)
+        return np.stack([xy_d[..., 0] * self.fx + self.cx, xy_d[..., 1] * self.fy + self.cy], -1)
+
+    def normalise(self, uv) -> np.ndarray:
+        """Pixels ``N×2`` → undistorted normalised coordinates ``N×2`` (x/z, y/z in the camera)."""
+        uv = np.asarray(uv, dtype=float)
+        xy_d = np.stack([(uv[..., 0] - self.cx) / self.fx, (uv[..., 1] - self.cy) / self.fy], -1)
+        return undistort(xy_d, self.dist)
+
+    def rays(self, uv) -> np.ndarray:
+        """Pixels ``N×2`` → unit world directions ``N×3`` from :attr:`center` (NaN stays NaN)."""
+        xy = self.normalise(uv)
+        d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1) @ self.R
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def jacobian(self, X) -> np.ndarray:
+        """``N×2×3`` derivative of pixels with respect to world position (distortion included).
+
+        ``J = diag(fx, fy) · D · (1/z) [[1, 0, −x], [0, 1, −y]] · R`` with D the distortion
+        Jacobian; the planner's accuracy model builds the information ``Σ JᵀJ / σ²`` from it.
+        """
+        Xc = self.to_camera(X)
+        z = Xc[..., 2]
+        xy = Xc[..., :2] / z[..., None]
+        P = np.zeros(Xc.shape[:-1] + (2, 3))
+        P[..., 0, 0] = 1.0 / z
+        P[..., 1, 1] = 1.0 / z
+        P[..., 0, 2] = -xy[..., 0] / z
+        P[..., 1, 2] = -xy[..., 1] / z
+        if any(self.dist):
+            P = distortion_jacobian(xy, self.dist) @ P
+        P[..., 0, :] *= self.fx
+        P[..., 1, :] *= self.fy
+        return P @ self.R
+
+
+def paper_camera(id: str = "C1", position=(0.6, 0.9, 2.3), rotation=NADIR) -> Camera:
+    """The paper's camera (160 × 120 px, fx = fy = 153.3 px, centred principal point, nadir)."""
+    return Camera(
+        id=id, width=PAPER_WIDTH, height=PAPER_HEIGHT, fx=PAPER_F, fy=PAPER_F,
+        cx=(PAPER_WIDTH - 1) / 2, cy=(PAPER_HEIGHT - 1) / 2, position=position, rotation=rotation,
+    )
+
+
+def paper_rig() -> list[Camera]:
+    """The paper's three cameras in a line 1.2 m apart at 2.3 m over a 3.6 × 1.8 m area."""
+    return [paper_camera(f"C{i + 1}", (0.6 + 1.2 * i, 0.9, 2.3)) for i in range(3)]
