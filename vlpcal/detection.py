@@ -39,11 +39,11 @@ DEFAULT_DETECTOR = "blob"
 class DetectorSettings:
     """Thresholds shared by the detectors; defaults suit 8-bit frames of a small LED.
 
-    The noise level is estimated per frame (median absolute deviation of a pixel subsample).
+    The noise level is estimated per frame from a pixel subsample (see ``_noise``).
     """
 
     #: below this peak-over-background in noise sigmas there is nothing to detect
-    min_snr: float = 5.0
+    min_snr: float = 6.0
     #: below this peak-over-background (DN) the spot is too faint to trust its sub-pixel centre
     min_contrast: float = 12.0
     #: the centroid threshold: background + this share of the peak's height above background
@@ -160,12 +160,34 @@ def as_gray(image) -> np.ndarray | None:
 
 # -- shared steps (vectorised over a stack) ----------------------------------------------------
 
-def _background(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame background level and noise sigma from a 1-in-16 pixel subsample (median, MAD)."""
-    sub = stack[:, ::4, ::4].reshape(len(stack), -1).astype(np.float32)
-    bg = np.median(sub, axis=1)
-    mad = np.median(np.abs(sub - bg[:, None]), axis=1)
-    return bg.astype(float), np.maximum(1.4826 * mad, 1.0).astype(float)
+def _noise(stack: np.ndarray) -> np.ndarray:
+    """Per-frame noise sigma (DN) from a 1-in-16 pixel subsample.
+
+    The median absolute difference of horizontally adjacent pixels (over √2): a smooth
+    background gradient does not inflate it. Floor of 1 DN (8-bit quantisation and JPEG
+    smoothing make smaller estimates meaningless).
+    """
+    a = stack[:, ::4, 0:-1:4].reshape(len(stack), -1).astype(np.float32)
+    b = stack[:, ::4, 1::4].reshape(len(stack), -1).astype(np.float32)
+    return np.maximum(1.4826 * np.median(np.abs(b - a), axis=1) / np.sqrt(2.0), 1.0).astype(float)
+
+
+#: half size of the square ring (15×15) whose median is the background under the spot
+_RING = 7
+
+
+def _peak(stack: np.ndarray, s: DetectorSettings):
+    """Brightest pixel (row, column, value), local background, noise sigma and reason codes.
+
+    The background is the median of a ring of pixels around the brightest one: local, so a
+    gradient or vignetting across the frame neither hides a spot nor invents one.
+    """
+    r, c, peak = _argmax(stack)
+    win, _, _ = _windows(stack, r, c, _RING)
+    ring = np.concatenate([win[:, 0, :], win[:, -1, :], win[:, 1:-1, 0], win[:, 1:-1, -1]], 1)
+    bg = np.median(ring, axis=1)
+    sigma = _noise(stack)
+    return r, c, peak, bg, sigma, _classify(peak, bg, sigma, s)
 
 
 def _argmax(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -228,9 +250,7 @@ def _finish(u, v, peak, area, saturated, code, blobs=None) -> SpotBatch:
 def _detect_peak(stack, s: DetectorSettings, method: str) -> SpotBatch:
     """``highest``, ``mean2``, ``nip`` and ``gauss``: all start at the brightest pixel."""
     n, h, w = stack.shape
-    bg, sigma = _background(stack)
-    r, c, peak = _argmax(stack)
-    code = _classify(peak, bg, sigma, s)
+    r, c, peak, bg, sigma, code = _peak(stack, s)
     u, v = c.astype(float), r.astype(float)
     if method == "mean2":
         flat = stack.reshape(n, -1)
@@ -280,9 +300,7 @@ def _window_centroid(stack, r, c, thr, half):
 
 def _detect_centroid(stack, s: DetectorSettings) -> SpotBatch:
     """``centroid``: the thresholded centroid in a window around the brightest pixel."""
-    bg, sigma = _background(stack)
-    r, c, peak = _argmax(stack)
-    code = _classify(peak, bg, sigma, s)
+    r, c, peak, bg, sigma, code = _peak(stack, s)
     thr = bg + np.maximum(s.threshold * (peak - bg), 3.0 * sigma)
     u, v, tot, area, _, touches, frame_edge = _window_centroid(stack, r, c, thr, s.window)
     code[(code == 0) & touches & frame_edge] = _REASON_CODE[AT_EDGE]
@@ -346,9 +364,7 @@ def _detect_blob(stack, s: DetectorSettings) -> SpotBatch:
     replaced by the one at the higher threshold (:data:`_SPLIT_LEVELS`).
     """
     n, h, w = stack.shape
-    bg, sigma = _background(stack)
-    r, c, peak = _argmax(stack)
-    code = _classify(peak, bg, sigma, s)
+    r, c, peak, bg, sigma, code = _peak(stack, s)
     thr = bg + np.maximum(s.threshold * (peak - bg), 3.0 * sigma)
     u, v, _, area, radius, touches, _ = _window_centroid(stack, r, c, thr, s.window)
     total = (stack > thr[:, None, None]).sum(axis=(1, 2))
@@ -359,12 +375,15 @@ def _detect_blob(stack, s: DetectorSettings) -> SpotBatch:
     out = SpotBatch(u, v, peak, area, peak >= s.saturation, code, np.ones(n, int))
     for i in np.flatnonzero((code == 0) & ~simple):
         img = stack[i]
-        share = max(s.threshold, 3.0 * sigma[i] / max(peak[i] - bg[i], 1e-9))
-        found = _segment_one(img, bg[i], share, s)
+        # the whole frame is segmented, so its background is the frame's, not the peak's ring
+        # (which a wide lamp raises)
+        fbg = float(np.median(img[::4, ::4]))
+        share = max(s.threshold, 3.0 * sigma[i] / max(peak[i] - fbg, 1e-9))
+        found = _segment_one(img, fbg, share, s)
         for level in _SPLIT_LEVELS:
             if found is None or level <= share:
                 break
-            higher = _segment_one(img, bg[i], level, s)
+            higher = _segment_one(img, fbg, level, s)
             if higher is None or np.hypot(higher[0] - found[0], higher[1] - found[1]) \
                     <= _SPLIT_SHIFT:
                 break

@@ -1,0 +1,125 @@
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from vlpcal import sim
+from vlpcal.detection import (
+    AT_EDGE, CORRUPT, DEFAULT_DETECTOR, DETECTORS, NO_SPOT, TOO_DIM, detect_spot, detect_spots,
+)
+
+#: per-axis worst error (px) on noise-free Gaussian spots, σ 0.7–1.3 px, no JPEG (measured
+#: maxima: highest 0.50, mean2 0.50, nip 0.080, gauss 0.0006, centroid/blob 0.031)
+NOISE_FREE_BOUND = {"highest": 0.5, "mean2": 0.5, "nip": 0.09, "gauss": 0.002,
+                    "centroid": 0.035, "blob": 0.035}
+
+
+@given(x0=st.floats(-0.49, 0.49), y0=st.floats(-0.49, 0.49),
+       cx=st.floats(0.5, 30), cy=st.floats(0.5, 30))
+def test_nip_returns_the_exact_parabola_vertex(x0, y0, cx, cy):
+    """NI-P (eqs. 4–6) is the 3-point parabola vertex: exact on a sampled paraboloid."""
+    v, u = np.mgrid[0:120, 0:160].astype(float)
+    uc, vc = 70 + x0, 50 + y0
+    img = 1000.0 - cx * (u - uc) ** 2 - cy * (v - vc) ** 2
+    img = np.maximum(img, 0.0)
+    spot = detect_spot(img, "nip")
+    assert spot.ok
+    assert spot.u == pytest.approx(uc, abs=1e-9)
+    assert spot.v == pytest.approx(vc, abs=1e-9)
+
+
+@pytest.mark.parametrize("method", DETECTORS)
+@pytest.mark.parametrize("sigma", [0.7, 1.0, 1.3])
+def test_noise_free_gaussian_error_within_stated_bound(method, sigma, rng):
+    n = 400
+    u, v = rng.uniform(20, 140, n), rng.uniform(20, 100, n)
+    frames = np.full((n, 120, 160), 20.0)
+    sim.add_spots(frames, u, v, sim.SpotLook(sigma, 200.0))
+    res = detect_spots(frames, method)
+    assert res.ok.all()
+    err = np.maximum(np.abs(res.u - u), np.abs(res.v - v))
+    assert err.max() <= NOISE_FREE_BOUND[method]
+
+
+def jpeg_frames(u, v, look=sim.SpotLook(), distractors=(), seed=1):
+    frames = sim.render(u, v, look=look, distractors=distractors, seed=seed)
+    return [sim.encode_jpeg(f, 80) for f in frames]
+
+
+def test_default_survives_saturated_flat_top(rng):
+    n = 300
+    u, v = rng.uniform(20, 140, n), rng.uniform(20, 100, n)
+    jpegs = jpeg_frames(u, v, sim.SpotLook(1.0, 600.0))
+    best = detect_spots(jpegs, DEFAULT_DETECTOR)
+    nip = detect_spots(jpegs, "nip")
+    assert best.saturated.all()
+    rms = lambda r: np.sqrt(np.mean((r.u - u) ** 2 + (r.v - v) ** 2))  # noqa: E731
+    assert rms(best) < 0.06
+    assert rms(nip) > 4 * rms(best)
+
+
+def test_default_picks_the_led_beside_a_reflection_and_says_so(rng):
+    n = 200
+    u, v = rng.uniform(30, 130, n), rng.uniform(30, 90, n)
+    jpegs = jpeg_frames(u, v, distractors=[(6, 4, sim.SpotLook(1.6, 70.0))])
+    res = detect_spots(jpegs)
+    assert (res.blobs > 1).all()
+    assert "chose 1 of" in res[0].note
+    assert np.sqrt(np.mean((res.u - u) ** 2 + (res.v - v) ** 2)) < 0.1
+
+
+def test_default_ignores_a_brighter_wide_lamp(rng):
+    n = 100
+    u, v = rng.uniform(60, 130, n), rng.uniform(30, 90, n)
+    jpegs = jpeg_frames(u, v, distractors=[(-40, 10, sim.SpotLook(4.0, 400.0))])
+    res = detect_spots(jpegs)
+    assert np.abs(res.u - u).max() < 0.3 and np.abs(res.v - v).max() < 0.3
+    # the paper's detector follows the lamp
+    assert np.abs(detect_spots(jpegs, "nip").u - u).mean() > 10
+
+
+@pytest.mark.parametrize("method", DETECTORS)
+@pytest.mark.parametrize("data", [b"", b"not a jpeg", b"\xff\xd8\xff\xe0garbage"])
+def test_corrupt_bytes_give_corrupt_frame(method, data):
+    spot = detect_spot(data, method)
+    assert spot.reason == CORRUPT and np.isnan(spot.u)
+
+
+def test_truncated_jpeg_is_corrupt_but_padding_is_fine():
+    good = jpeg_frames([80.0], [60.0])[0]
+    assert detect_spot(good[: len(good) // 2]).reason == CORRUPT
+    assert detect_spot(good + b"\x00" * 16).ok
+
+
+def test_dark_dim_and_edge_frames_have_reasons():
+    dark = jpeg_frames([np.nan], [np.nan])[0]
+    assert detect_spot(dark).reason == NO_SPOT
+    dim = sim.render([80.0], [60.0], look=sim.SpotLook(0.9, 9.0),
+                     sensor=sim.Sensor(read_noise=0.3, shot_gain=0.0))[0]
+    assert detect_spot(dim).reason == TOO_DIM
+    edge = sim.render([0.2], [60.0])[0]
+    for method in ("nip", "centroid", "blob"):
+        assert detect_spot(edge, method).reason == AT_EDGE
+
+
+def test_batch_matches_single_and_handles_mixed_inputs(rng):
+    u, v = rng.uniform(20, 140, 20), rng.uniform(20, 100, 20)
+    jpegs = jpeg_frames(u, v, distractors=[(5, 5, sim.SpotLook(1.5, 60.0))])
+    frames = list(jpegs) + [b"", np.zeros((60, 80), np.uint8)]
+    batch = detect_spots(frames)
+    for i, data in enumerate(jpegs):
+        single = detect_spot(data)
+        assert batch[i].u == pytest.approx(single.u, abs=1e-9)
+        assert batch[i].blobs == single.blobs
+    assert batch.reasons[-2:] == [CORRUPT, CORRUPT]  # empty bytes; a frame of another size
+
+
+def test_colour_frames_are_converted():
+    gray = sim.render([70.3], [40.6])[0]
+    colour = np.repeat(gray[:, :, None], 3, axis=2)
+    assert detect_spot(colour).u == pytest.approx(detect_spot(gray).u, abs=1e-9)
+
+
+def test_unknown_detector_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown detector 'foo'"):
+        detect_spot(np.zeros((10, 10)), "foo")

@@ -1,0 +1,168 @@
+"""Fusion: the estimates of several cameras → one fix per point, vectorised over points.
+
+Methods by name (:data:`FUSIONS`), on ``uv`` shaped ``C×N×2`` (NaN = not seen):
+
+- ``mean``: the paper's approach (a), the mean of every camera pair's estimate (section 3.3).
+- ``nearest``: approach (b), the estimate of the pair physically closest to the point (the sum
+  of top-view distances from a draft fix, the mean of (a), to the pair's two cameras).
+- ``region``: approach (c), the pair (or larger subset) that a :class:`RegionMap` names for the
+  floor region the draft fix falls in; outside every region, or when that subset did not all see
+  the LED, it falls back to (b).
+- ``all``: N-view least squares over every camera that sees the LED.
+- ``robust``: ``all`` with inconsistent observations dropped (a reflection seen by one camera).
+
+Pairs are solved with the paper's pair method by default (``pair_method="paper"``) or with
+two-view least squares (``"lsq"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+
+from .geometry import Camera
+from .triangulation import (
+    reprojection_errors,
+    triangulate,
+    triangulate_pair_paper,
+    triangulate_robust,
+)
+
+FUSIONS = ("mean", "nearest", "region", "all", "robust")
+PAIR_METHODS = ("paper", "lsq")
+
+#: statuses of a fused point
+OK, NO_SPOT, ONE_CAMERA, DEGENERATE = "ok", "no_spot", "one_camera", "degenerate"
+
+
+@dataclass
+class RegionMap:
+    """Floor polygons, each naming the camera pair or subset to use there (approach (c)).
+
+    ``regions`` is a list of ``(polygon, camera_ids)``; the first polygon containing a point
+    wins. Learning the map from a survey is the survey layer's job.
+    """
+
+    regions: list = field(default_factory=list)
+
+    @classmethod
+    def from_dict(cls, items) -> RegionMap:
+        """From ``[{"polygon": [[x, y], …], "cameras": [id, …]}, …]`` (metres)."""
+        from shapely.geometry import Polygon
+
+        return cls([(Polygon(r["polygon"]), tuple(str(c) for c in r["cameras"])) for r in items])
+
+    def to_dict(self) -> list:
+        return [{"polygon": [list(map(float, p)) for p in poly.exterior.coords[:-1]],
+                 "cameras": list(ids)} for poly, ids in self.regions]
+
+    def lookup(self, xy) -> np.ndarray:
+        """Index of the region containing each floor point ``N×2`` (−1: none, or NaN input)."""
+        import shapely
+
+        xy = np.asarray(xy, dtype=float)
+        out = np.full(len(xy), -1)
+        finite = np.isfinite(xy).all(axis=1)
+        for k, (poly, _) in reversed(list(enumerate(self.regions))):
+            inside = np.zeros(len(xy), bool)
+            inside[finite] = shapely.contains_xy(poly, xy[finite, 0], xy[finite, 1])
+            out[inside] = k
+        return out
+
+
+@dataclass
+class Fused:
+    """One fix per point: ``X`` (N×3, NaN without a fix), status, cameras used, residuals."""
+
+    X: np.ndarray
+    status: np.ndarray  # N strings
+    used: np.ndarray  # C×N bool
+    residual: np.ndarray  # C×N px (undistorted), NaN where the camera was not used
+
+
+def pair_estimates(cameras: list[Camera], uv, pair_method: str = "paper"):
+    """Every camera pair's estimate: ``(pairs, X P×N×3)``, NaN where the pair has none."""
+    if pair_method not in PAIR_METHODS:
+        raise ValueError(f"unknown pair method {pair_method!r}; expected one of {PAIR_METHODS}")
+    uv = np.asarray(uv, dtype=float)
+    seen = np.isfinite(uv).all(axis=2)
+    pairs = list(combinations(range(len(cameras)), 2))
+    X = np.full((len(pairs), uv.shape[1], 3), np.nan)
+    for p, (i, j) in enumerate(pairs):
+        both = seen[i] & seen[j]
+        if not both.any():
+            continue
+        if pair_method == "paper":
+            est = triangulate_pair_paper(cameras[i], cameras[j], uv[i, both], uv[j, both]).X
+        else:
+            est = triangulate([cameras[i], cameras[j]], uv[[i, j]][:, both]).X
+        X[p, both] = est
+    return pairs, X
+
+
+def _nearest_pair(cameras, pairs, Xp, draft) -> np.ndarray:
+    """Index of the valid pair whose cameras are nearest the draft in top view (−1: none)."""
+    pos = np.array([c.position[:2] for c in cameras])
+    dist = np.stack([np.linalg.norm(draft[:, :2] - pos[i], axis=1)
+                     + np.linalg.norm(draft[:, :2] - pos[j], axis=1) for i, j in pairs])
+    dist[~np.isfinite(Xp).all(axis=2)] = np.inf
+    best = np.argmin(dist, axis=0)
+    return np.where(np.isfinite(dist[best, np.arange(dist.shape[1])]), best, -1)
+
+
+def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap | None = None,
+         pair_method: str = "paper") -> Fused:
+    """Fuse the cameras' pixels ``uv`` (``C×N×2``, NaN = not seen) into one fix per point."""
+    if method not in FUSIONS:
+        raise ValueError(f"unknown fusion {method!r}; expected one of {', '.join(FUSIONS)}")
+    uv = np.asarray(uv, dtype=float)
+    C, N = uv.shape[:2]
+    seen = np.isfinite(uv).all(axis=2)
+    views = seen.sum(axis=0)
+    used = np.zeros((C, N), bool)
+    X = np.full((N, 3), np.nan)
+    if method in ("all", "robust"):
+        tri = triangulate(cameras, uv) if method == "all" else triangulate_robust(cameras, uv)
+        X, used = tri.X, tri.used & (views >= 2)
+    else:
+        pairs, Xp = pair_estimates(cameras, uv, pair_method)
+        valid = np.isfinite(Xp).all(axis=2)
+        count = valid.sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            draft = np.where(valid[..., None], Xp, 0.0).sum(axis=0) / count[:, None]
+        if method == "mean":
+            X = draft
+            for p, (i, j) in enumerate(pairs):
+                used[i] |= valid[p]
+                used[j] |= valid[p]
+        else:
+            # subsets[k]: camera indices; choice[n]: index into subsets (−1: none)
+            subsets = list(pairs)
+            choice = _nearest_pair(cameras, pairs, Xp, draft)
+            if method == "region" and region_map is not None:
+                index = {c.id: k for k, c in enumerate(cameras)}
+                region = region_map.lookup(draft[:, :2])
+                for r, (_, ids) in enumerate(region_map.regions):
+                    members = tuple(sorted(index[i] for i in ids if i in index))
+                    if len(members) != len(ids) or len(members) < 2:
+                        continue  # a camera the map names is not in this deployment
+                    if members not in subsets:
+                        subsets.append(members)
+                    take = (region == r) & seen[list(members)].all(axis=0)
+                    choice[take] = subsets.index(members)
+            for k in np.unique(choice[choice >= 0]):
+                pts = choice == k
+                members = list(subsets[k])
+                if k < len(pairs):
+                    X[pts] = Xp[k, pts]
+                else:
+                    X[pts] = triangulate([cameras[m] for m in members], uv[members][:, pts]).X
+                used[np.ix_(members, pts)] = True
+    fixed = np.isfinite(X).all(axis=1)
+    used &= fixed[None, :]
+    status = np.where(fixed, OK, np.where(views == 0, NO_SPOT,
+                                          np.where(views == 1, ONE_CAMERA, DEGENERATE)))
+    residual = np.where(used, reprojection_errors(cameras, uv, X), np.nan)
+    return Fused(np.where(fixed[:, None], X, np.nan), status.astype(object), used, residual)
