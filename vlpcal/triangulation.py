@@ -204,9 +204,10 @@ def _solve(views: _Views, use: np.ndarray, iterations: int) -> np.ndarray:
     """
     n = use.shape[1]
     X = np.empty((n, 3))
-    for s in range(0, n, _CHUNK):
-        sl = slice(s, s + _CHUNK)
-        X[sl] = _solve_chunk(views.cameras, views.xy[:, sl], use[:, sl], iterations)
+    with np.errstate(invalid="ignore", divide="ignore"):  # points seen < 2 times become NaN
+        for s in range(0, n, _CHUNK):
+            sl = slice(s, s + _CHUNK)
+            X[sl] = _solve_chunk(views.cameras, views.xy[:, sl], use[:, sl], iterations)
     return X
 
 
@@ -214,7 +215,8 @@ def _residuals(views: _Views, X: np.ndarray) -> np.ndarray:
     """Reprojection error of ``X`` in undistorted pixels, every camera: ``C×N``, NaN if unseen."""
     out = np.full(views.seen.shape, np.nan)
     for k, cam in enumerate(views.cameras):
-        a, b, _ = _project_n(cam, X)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            a, b, _ = _project_n(cam, X)
         err = np.hypot(cam.fx * (a - views.xy[k, :, 0]), cam.fy * (b - views.xy[k, :, 1]))
         out[k] = np.where(views.seen[k], err, np.nan)
     return out

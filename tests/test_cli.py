@@ -1,0 +1,45 @@
+import subprocess
+import sys
+
+from click.testing import CliRunner
+
+from vlpcal import __version__
+from vlpcal.cli import main
+
+
+def test_version_and_help():
+    runner = CliRunner()
+    out = runner.invoke(main, ["--version"])
+    assert out.exit_code == 0 and __version__ in out.output
+    out = runner.invoke(main, ["--help"])
+    assert out.exit_code == 0 and "demo" in out.output
+
+
+def test_demo_prints_the_comparison_table():
+    out = CliRunner().invoke(main, ["demo", "--step", "0.3"])
+    assert out.exit_code == 0, out.output
+    assert "paper: NI-P + pairs (a) mean" in out.output
+    assert "vlpcal: blob + all-camera LS" in out.output
+    row = [line for line in out.output.splitlines() if "all-camera LS" in line][0]
+    mean_cm = float(row.split()[-5])
+    assert mean_cm < 0.5  # exact cameras, 0.1 px spots: millimetres, not centimetres
+
+
+def test_bad_option_is_one_line_not_a_traceback():
+    out = CliRunner().invoke(main, ["demo", "--step", "abc"])
+    assert out.exit_code == 2
+    assert "Traceback" not in out.output and "Invalid value for '--step'" in out.output
+
+
+def test_cli_start_does_not_import_heavy_modules():
+    code = ("import sys, vlpcal.cli; heavy = {'cv2', 'scipy', 'casadi', 'matplotlib', 'shapely'}"
+            "; print(sorted(heavy & set(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_runtime_path_does_not_import_casadi_or_matplotlib():
+    code = ("import sys, vlpcal.fusion, vlpcal.detection; "
+            "print(sorted({'casadi', 'matplotlib', 'scipy'} & set(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
