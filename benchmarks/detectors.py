@@ -74,7 +74,7 @@ def main(argv=None) -> int:
         jpegs, u, v = make_set(name, args.frames, rng)
         stack = np.stack([decode_gray(j) for j in jpegs])
         if decode_us is None:
-            decode_us = best_time(lambda: [decode_gray(j) for j in jpegs], 3) / len(jpegs) * 1e6
+            decode_us = best_time(lambda js=jpegs: [decode_gray(j) for j in js], 3) / len(jpegs) * 1e6
         rows = []
         for m in DETECTORS:
             res = detect_spots(stack, m)
@@ -86,9 +86,9 @@ def main(argv=None) -> int:
             e2 = np.where(lost, 4.0, e2)
             if name in ACCEPTANCE_SETS:
                 sq[m].append(e2)
-            batch = best_time(lambda: detect_spots(stack, m), 3) / len(stack) * 1e6
+            batch = best_time(lambda st=stack, mm=m: detect_spots(st, mm), 3) / len(stack) * 1e6
             few = stack[:200]
-            single = best_time(lambda: [detect_spot(f, m) for f in few], 3) / len(few) * 1e6
+            single = best_time(lambda fs=few, mm=m: [detect_spot(f, mm) for f in fs], 3) / len(few) * 1e6
             rows.append({"detector": m, "rms_px": float(np.sqrt(e2.mean())),
                          "bias_u_px": float(np.nanmean(du)), "bias_v_px": float(np.nanmean(dv)),
                          "p95_px": float(np.sqrt(np.percentile(e2, 95))),

@@ -5,12 +5,20 @@ from hypothesis import strategies as st
 
 from vlpcal import sim
 from vlpcal.detection import (
-    AT_EDGE, CORRUPT, DEFAULT_DETECTOR, DETECTORS, NO_SPOT, TOO_DIM, detect_spot, detect_spots,
+    AT_EDGE,
+    CORRUPT,
+    DEFAULT_DETECTOR,
+    DETECTORS,
+    NO_SPOT,
+    TOO_DIM,
+    detect_spot,
+    detect_spots,
 )
 
 #: per-axis worst error (px) on noise-free Gaussian spots, σ 0.7–1.3 px, no JPEG (measured
-#: maxima: highest 0.50, mean2 0.50, nip 0.080, gauss 0.0006, centroid 0.031, blob 0.034)
-NOISE_FREE_BOUND = {"highest": 0.5, "mean2": 0.5, "nip": 0.09, "gauss": 0.002,
+#: maxima: highest 0.50, mean2 0.50, nip 0.080, nip_eq5 0.50, gauss 0.0006, centroid 0.031,
+#: blob 0.034)
+NOISE_FREE_BOUND = {"highest": 0.5, "mean2": 0.5, "nip": 0.09, "nip_eq5": 0.5, "gauss": 0.002,
                     "centroid": 0.035, "blob": 0.035}
 
 
@@ -41,8 +49,8 @@ def test_noise_free_gaussian_error_within_stated_bound(method, sigma, rng):
     assert err.max() <= NOISE_FREE_BOUND[method]
 
 
-def jpeg_frames(u, v, look=sim.SpotLook(), distractors=(), seed=1):
-    frames = sim.render(u, v, look=look, distractors=distractors, seed=seed)
+def jpeg_frames(u, v, look=None, distractors=(), seed=1):
+    frames = sim.render(u, v, look=look or sim.SpotLook(), distractors=distractors, seed=seed)
     return [sim.encode_jpeg(f, 80) for f in frames]
 
 
@@ -118,6 +126,35 @@ def test_colour_frames_are_converted():
     gray = sim.render([70.3], [40.6])[0]
     colour = np.repeat(gray[:, :, None], 3, axis=2)
     assert detect_spot(colour).u == pytest.approx(detect_spot(gray).u, abs=1e-9)
+
+
+def test_nip_eq5_is_the_printed_formula_twice_the_vertex_offset():
+    """Eq. 5 as printed: x = (P2 − P1) / (2P − P1 − P2) + x_P (lines of slope ±step, eq. 1)."""
+    img = np.full((30, 30), 10.0)
+    img[15, 14:17] = [60.0, 100.0, 80.0]  # P1, P, P2 along x
+    img[14, 15], img[16, 15] = 70.0, 70.0
+    assert detect_spot(img, "nip_eq5").u == pytest.approx(15 + 20 / 60)
+    assert detect_spot(img, "nip").u == pytest.approx(15 + 20 / 120)
+    assert detect_spot(img, "nip_eq5").v == pytest.approx(15.0)
+
+
+def test_frames_that_cannot_be_measured_are_corrupt_not_errors():
+    good = sim.render([40.2], [30.7])[0].astype(float)
+    nan = good.copy()
+    nan[5, 5] = np.nan
+    batch = detect_spots(np.stack([good, nan]))
+    assert batch.reasons == [None, CORRUPT]
+    assert detect_spot(nan).reason == CORRUPT
+    assert detect_spot(np.zeros((1, 1))).reason == CORRUPT
+    assert len(detect_spots(np.zeros((0, 120, 160)))) == 0
+    assert detect_spots(np.zeros((2, 0, 0))).reasons == [CORRUPT, CORRUPT]
+    assert len(detect_spots([])) == 0
+
+
+def test_colour_frames_of_any_dtype_are_converted_without_wrapping():
+    gray = sim.render([70.3], [40.6])[0]
+    colour16 = np.repeat(gray[:, :, None], 3, axis=2).astype(np.uint16)
+    assert detect_spot(colour16).u == pytest.approx(detect_spot(gray).u, abs=1e-6)
 
 
 def test_unknown_detector_is_a_clear_error():

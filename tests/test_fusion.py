@@ -57,9 +57,12 @@ def test_region_map_picks_the_named_pair_and_falls_back(triangle, rng):
     res = fuse(triangle, uv, "region", rmap)
     nearest = fuse(triangle, uv, "nearest")
     inside = rmap.lookup(fuse(triangle, uv, "mean").X[:, :2]) == 0
-    assert inside.any() and (~inside).any()
-    assert (res.used[:, inside] == np.array([[True], [False], [True]])).all()
-    assert np.array_equal(res.X[~inside], nearest.X[~inside])
+    pairs, Xp = pair_estimates(triangle, uv)
+    c13 = np.isfinite(Xp[pairs.index((0, 2))]).all(axis=1)  # C1–C3 has a solution there
+    assert (inside & c13).any() and (inside & ~c13).any() and (~inside).any()
+    assert (res.used[:, inside & c13] == np.array([[True], [False], [True]])).all()
+    # outside the map, or where C1–C3 is degenerate (near its top-view line): approach (b)
+    assert np.array_equal(res.X[~inside | ~c13], nearest.X[~inside | ~c13], equal_nan=True)
 
 
 def test_region_map_with_a_subset_of_three_uses_least_squares(triangle, rng):
@@ -91,6 +94,19 @@ def test_all_cameras_beat_single_pairs_on_average(triangle, rng):
     err = {m: np.nanmean(np.linalg.norm(fuse(triangle, uv, m).X - X, axis=1))
            for m in ("mean", "nearest", "all")}
     assert err["all"] < err["nearest"] and err["all"] < err["mean"]
+
+
+def test_region_map_naming_unknown_cameras_is_refused(rig):
+    rmap = RegionMap.from_dict([{"polygon": [[0, 0], [4, 0], [4, 4]], "cameras": ["C1", "C9"]}])
+    with pytest.raises(ValueError, match="C9"):
+        fuse(rig, np.full((3, 2, 2), np.nan), "region", rmap)
+
+
+def test_one_or_no_camera_does_not_crash(rig):
+    uv = views(rig[:1], np.array([[0.6, 0.9, 0.0]]))
+    for method in FUSIONS:
+        assert list(fuse(rig[:1], uv, method).status) == ["one_camera"]
+        assert list(fuse([], np.zeros((0, 1, 2)), method).status) == ["no_spot"]
 
 
 def test_unknown_fusion_is_a_clear_error(rig):

@@ -3,10 +3,10 @@ import math
 import cv2
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
-from vlpcal.geometry import Camera, paper_camera, rodrigues, rotation_vector, undistort, distort
+from vlpcal.geometry import Camera, distort, paper_camera, rodrigues, rotation_vector, undistort
 
 
 def tilted_camera(rvec_tilt=(0.03, -0.02, 0.4), dist=(-0.25, 0.08, 0.001, -0.0015, -0.01)):
@@ -107,3 +107,32 @@ def test_paper_preset():
 def test_wrong_shapes_are_refused():
     with pytest.raises(ValueError, match="dist needs 5"):
         Camera("X", 160, 120, 150, 150, 80, 60, dist=(0, 0, 0))
+
+
+@given(st.floats(0.0, 1e-3), st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+def test_rotation_vector_is_accurate_near_pi(eps, axis):
+    """A near-nadir camera's rotation is close to π: the inverse must stay accurate there."""
+    a = np.array(axis)
+    if np.linalg.norm(a) < 1e-3:
+        a = np.array([1.0, 0.0, 0.0])
+    r = a / np.linalg.norm(a) * (math.pi - eps)
+    back = rotation_vector(rodrigues(r))
+    assert np.allclose(rodrigues(back), rodrigues(r), atol=1e-12)
+    if eps > 1e-9:
+        assert np.abs(back - r).max() < 1e-9
+
+
+def test_strong_distortion_has_no_false_roots():
+    """Past the fold of the distortion polynomial there is no inverse and no visibility."""
+    cam = Camera("K", 160, 120, 153.3, 153.3, 79.5, 59.5, (-0.5, 0, 0, 0, 0), (0, 0, 2.3))
+    assert cam.max_radius2 == pytest.approx(2 / 3)
+    assert np.isnan(cam.normalise([[0.0, 0.0]])).all()  # the corner pixel is past the fold
+    cam = Camera("K", 160, 120, 153.3, 153.3, 79.5, 59.5, (-0.3, 0, 0, 0, 0), (0, 0, 2.3))
+    uv, front, inside = cam.project([[2.392, 1.794, 0.0]])  # 52° off axis folds into the image
+    assert front[0] and 0 <= uv[0, 0] < 160 and 0 <= uv[0, 1] < 120
+    assert not inside[0]
+
+
+def test_jacobian_is_nan_behind_the_camera():
+    cam = paper_camera(position=(0, 0, 2.3))
+    assert np.isnan(cam.jacobian([[0.0, 0.0, 3.0]])).all()

@@ -7,7 +7,10 @@ from hypothesis import strategies as st
 
 from vlpcal.geometry import Camera, paper_camera, rodrigues, rotation_vector
 from vlpcal.triangulation import (
-    triangulate, triangulate_cv2, triangulate_pair_paper, triangulate_robust,
+    triangulate,
+    triangulate_cv2,
+    triangulate_pair_paper,
+    triangulate_robust,
 )
 
 
@@ -90,6 +93,31 @@ def test_paper_pair_flags_the_degenerate_top_view_case():
     assert list(est.degenerate) == [True, False]
     assert np.isnan(est.X[0]).all()
     assert est.X[1] == pytest.approx([1.0, 0.5, 0.0], abs=1e-9)
+
+
+def test_paper_pair_flags_the_ill_conditioned_band_near_the_line(rig, rng):
+    """Near the cameras' line the intersection amplifies noise ~1/sin(angle): flagged, not
+    reported as a fix metres off."""
+    X = np.c_[rng.uniform(0.8, 1.6, 500), np.full(500, 0.9) + rng.uniform(-0.005, 0.005, 500),
+              np.zeros(500)]
+    uv1 = rig[0].project(X)[0] + rng.normal(0, 0.1, (500, 2))
+    uv2 = rig[1].project(X)[0] + rng.normal(0, 0.1, (500, 2))
+    est = triangulate_pair_paper(rig[0], rig[1], uv1, uv2)
+    assert est.degenerate.all()
+    far = X + [0, 0.2, 0]
+    est = triangulate_pair_paper(rig[0], rig[1], rig[0].project(far)[0], rig[1].project(far)[0])
+    assert not est.degenerate.any()
+
+
+def test_a_solution_behind_the_cameras_is_refused(rig):
+    """Diverging rays meet above the ceiling: no fix, not an 'ok' point at z = 3.6 m."""
+    uv = np.array([[[10.0, 59.5]], [[150.0, 59.5]], [[np.nan, np.nan]]])
+    assert np.isnan(triangulate(rig, uv).X).all()
+
+
+def test_empty_inputs(rig):
+    assert triangulate(rig, np.zeros((3, 0, 2))).X.shape == (0, 3)
+    assert triangulate_cv2(rig[0], rig[1], np.zeros((0, 2)), np.zeros((0, 2))).shape == (0, 3)
 
 
 def test_paper_pair_beyond_the_baseline(rig):

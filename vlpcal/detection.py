@@ -4,15 +4,18 @@ Detectors by name (:data:`DETECTORS`):
 
 - ``highest``: the brightest pixel (the paper's baseline, section 3.2 (a)).
 - ``mean2``: the mean position of the two brightest pixels (the paper's "mean integer", (b)).
-- ``nip``: the paper's NI-P (section 2.1, eqs. 4–6): the 3-point parabola vertex around the
-  brightest pixel, per axis.
+- ``nip``: the paper's NI-P (section 2.1) as DESIGN.md states it: the 3-point parabola vertex
+  around the brightest pixel, per axis.
+- ``nip_eq5``: NI-P with the paper's eq. 5 exactly as printed, whose offset is twice the
+  parabola vertex's (see ``_vertex``); kept to reproduce the paper, not for use.
 - ``gauss``: the 3-point parabola through the logarithms (exact for a sampled Gaussian).
 - ``centroid``: background-subtracted, thresholded, intensity-weighted centroid in an 11×11
   window around the brightest pixel.
-- ``blob`` (the default, :data:`DEFAULT_DETECTOR`): segments every bright blob, picks the LED by
-  brightness and compactness (a floor reflection is dimmer and wider, a lamp wider), and takes
-  the thresholded centroid of that blob: unbiased on saturated flat tops, where every 3-point
-  fit is pulled ~0.3 px toward the first flat pixel (FIELD-NOTES).
+- ``blob`` (the default, :data:`DEFAULT_DETECTOR`): picks the LED among the bright blobs by
+  brightness and compactness (a floor reflection is dimmer and wider, a lamp wider) and says
+  when it had to choose, then takes a thresholded centroid over a local background plane:
+  unbiased on saturated flat tops, where every 3-point fit is pulled ~0.3 px toward the first
+  flat pixel (FIELD-NOTES), and little moved by the flank of a nearby reflection.
 
 Every detector returns the same fields (:class:`Spot` for one frame, :class:`SpotBatch` for an
 ``N×H×W`` stack); a frame without a usable spot carries a reason instead of raising:
@@ -142,16 +145,27 @@ def decode_gray(data) -> np.ndarray | None:
     return img
 
 
+#: the smallest frame side a spot can be measured in (the background ring is 15 × 15)
+MIN_SIZE = 16
+
+
 def as_gray(image) -> np.ndarray | None:
-    """Image array (H×W, H×W×3 BGR) or JPEG bytes → 2D float-compatible array, None if corrupt."""
+    """Image array (H×W, H×W×3 BGR) or JPEG bytes → 2D array, None if it cannot be a frame.
+
+    Values are taken as 8-bit digital numbers (DN, 0–255), as the thresholds in
+    :class:`DetectorSettings` are; a frame smaller than :data:`MIN_SIZE` or with a NaN is
+    corrupt.
+    """
     if isinstance(image, (bytes, bytearray, memoryview)):
         return decode_gray(image)
     img = np.asarray(image)
     if img.ndim == 3 and img.shape[2] in (3, 4):
         import cv2
 
-        img = cv2.cvtColor(img[..., :3].astype(np.uint8), cv2.COLOR_BGR2GRAY)
-    if img.ndim != 2 or img.size == 0:
+        img = cv2.cvtColor(img[..., :3].astype(np.float32), cv2.COLOR_BGR2GRAY)
+    if img.ndim != 2 or min(img.shape) < MIN_SIZE:
+        return None
+    if img.dtype.kind == "f" and not np.isfinite(img).all():
         return None
     return img
 
@@ -205,12 +219,19 @@ def _neighbours(stack, r, c):
             f[i, np.maximum(r - 1, 0), c], f[i, np.minimum(r + 1, h - 1), c])
 
 
-def _vertex(p1, p, p2):
-    """NI-P, eqs. 4–6: ``(P2 − P1) / (2 (2P − P1 − P2))``; 0 where the three are flat."""
-    den = 2.0 * (2.0 * p - p1 - p2)
+def _vertex(p1, p, p2, printed: bool = False):
+    """NI-P's sub-pixel offset from the brightest pixel P and its neighbours P1, P2.
+
+    DESIGN.md's NI-P is the 3-point parabola vertex ``(P2 − P1) / (2 (2P − P1 − P2))``. The
+    paper's eq. 5 as printed — lines of slope ±step through P1 and P2, with
+    step = ((P − P1) + (P − P2)) / 2 (eq. 1) — gives twice that offset,
+    ``(P2 − P1) / (2P − P1 − P2)`` (``printed=True``, the ``nip_eq5`` detector). 0 where flat.
+    """
+    den = (1.0 if printed else 2.0) * (2.0 * p - p1 - p2)
     with np.errstate(divide="ignore", invalid="ignore"):
         off = np.where(den > 0, (p2 - p1) / den, 0.0)
-    return np.clip(off, -0.5, 0.5)
+    limit = 1.0 if printed else 0.5
+    return np.clip(off, -limit, limit)
 
 
 def _windows(stack: np.ndarray, r, c, half: int):
@@ -254,7 +275,7 @@ def _detect_peak(stack, s: DetectorSettings, method: str) -> SpotBatch:
         flat = stack.reshape(n, -1)
         two = np.argpartition(flat, -2, axis=1)[:, -2:]
         u, v = (two % w).mean(axis=1), (two // w).mean(axis=1)
-    elif method in ("nip", "gauss"):
+    elif method in ("nip", "nip_eq5", "gauss"):
         p1, p2, p3, p4 = _neighbours(stack, r, c)
         if method == "gauss":
             # log of the height above background: a Gaussian becomes an exact parabola
@@ -263,8 +284,9 @@ def _detect_peak(stack, s: DetectorSettings, method: str) -> SpotBatch:
             p, p1, p2, p3, p4 = lg(peak), lg(p1), lg(p2), lg(p3), lg(p4)
         else:
             p = peak
-        u = c + _vertex(p1, p, p2)
-        v = r + _vertex(p3, p, p4)
+        printed = method == "nip_eq5"
+        u = c + _vertex(p1, p, p2, printed)
+        v = r + _vertex(p3, p, p4, printed)
         edge = (c == 0) | (c == w - 1) | (r == 0) | (r == h - 1)
         code[(code == 0) & edge] = _REASON_CODE[AT_EDGE]
     area = (stack.reshape(n, -1) > (bg + s.threshold * (peak - bg))[:, None]).sum(axis=1)
@@ -412,7 +434,8 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     # the sharper axis: a reflection's flank flattens the curvature along its side only
     curv = np.maximum(2 * lp - lg(p1) - lg(p2), 2 * lp - lg(p3) - lg(p4))
     spot_sigma = 1.0 / np.sqrt(np.maximum(curv, 1e-3))
-    half = np.where(cnt > 1, np.ceil(extent).astype(int) + 3, np.ceil(_REACH * spot_sigma - 1e-9))
+    half = np.where(cnt > 1, np.ceil(extent).astype(int) + 3,
+                    np.ceil(_REACH * spot_sigma - 1e-9))
     half = np.clip(half, 3, _MAX_HALF).astype(int)
     rc, cc = np.rint(cv).astype(int), np.rint(cu).astype(int)
     u = np.full(n, np.nan)
@@ -475,39 +498,47 @@ def _detect_blob(stack, s: DetectorSettings) -> SpotBatch:
     return _finish(u, v, top, area, top >= s.saturation, code, blobs)
 
 
-DETECTORS = ("highest", "mean2", "nip", "gauss", "centroid", "blob")
+DETECTORS = ("highest", "mean2", "nip", "nip_eq5", "gauss", "centroid", "blob")
+
+
+def _to_stack(frames):
+    """``(stack, good)``: the frames that can be measured as one ``N×H×W`` array, and which."""
+    if isinstance(frames, np.ndarray) and frames.ndim == 3:
+        good = np.full(len(frames), min(frames.shape[1:], default=0) >= MIN_SIZE)
+        if frames.dtype.kind == "f":
+            good &= np.isfinite(frames).all(axis=(1, 2))
+        return (frames if good.all() else frames[good]), good
+    images = [as_gray(f) for f in frames]
+    shapes = [im.shape for im in images if im is not None]
+    good = np.array([im is not None and im.shape == shapes[0] for im in images], bool)
+    stack = np.stack([im for im, g in zip(images, good) if g]) if good.any() else None
+    return stack, good
 
 
 def detect_spots(frames, method: str = DEFAULT_DETECTOR,
                  settings: DetectorSettings = DEFAULTS) -> SpotBatch:
     """Detect the spot in every frame.
 
-    ``frames``: an ``N×H×W`` array, or a sequence of JPEG bytes / image arrays (frames that do
-    not decode, or whose size differs from the first good frame, get ``corrupt_frame``).
+    ``frames``: an ``N×H×W`` array, or a sequence of JPEG bytes / image arrays. A frame that
+    does not decode, is too small, holds a NaN, or differs in size from the first good frame
+    gets ``corrupt_frame``; the others are measured (a colour image counts as one frame only
+    inside a sequence).
     """
     if method not in DETECTORS:
         raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
-    if isinstance(frames, np.ndarray) and frames.ndim == 3:
-        stack, good = frames, None
-    else:
-        images = [as_gray(f) for f in frames]
-        shapes = [im.shape for im in images if im is not None]
-        if not shapes:
-            out = SpotBatch.empty(len(images))
-            out.reason_code[:] = _REASON_CODE[CORRUPT]
-            return out
-        good = np.array([im is not None and im.shape == shapes[0] for im in images])
-        stack = np.stack([im for im, g in zip(images, good) if g])
+    stack, good = _to_stack(frames)
+    out = SpotBatch.empty(len(good))
+    out.reason_code[:] = _REASON_CODE[CORRUPT]
+    if not good.any():
+        return out
     if method == "centroid":
         res = _detect_centroid(stack, settings)
     elif method == "blob":
         res = _detect_blob(stack, settings)
     else:
         res = _detect_peak(stack, settings, method)
-    if good is None or good.all():
+    if good.all():
         return res
-    out = SpotBatch.empty(len(good))
-    out.reason_code[:] = _REASON_CODE[CORRUPT]
     for name in ("u", "v", "peak", "area", "saturated", "reason_code", "blobs"):
         getattr(out, name)[good] = getattr(res, name)
     return out
@@ -516,6 +547,8 @@ def detect_spots(frames, method: str = DEFAULT_DETECTOR,
 def detect_spot(frame, method: str = DEFAULT_DETECTOR,
                 settings: DetectorSettings = DEFAULTS) -> Spot:
     """Detect the spot in one frame (JPEG bytes or an H×W / H×W×3 image array)."""
+    if method not in DETECTORS:
+        raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
     img = as_gray(frame)
     if img is None:
         return Spot(np.nan, np.nan, 0.0, 0, False, CORRUPT, 0)

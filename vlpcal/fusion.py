@@ -62,7 +62,7 @@ class RegionMap:
         """Index of the region containing each floor point ``N×2`` (−1: none, or NaN input)."""
         import shapely
 
-        xy = np.asarray(xy, dtype=float)
+        xy = np.atleast_2d(np.asarray(xy, dtype=float))
         out = np.full(len(xy), -1)
         finite = np.isfinite(xy).all(axis=1)
         for k, (poly, _) in reversed(list(enumerate(self.regions))):
@@ -104,6 +104,8 @@ def pair_estimates(cameras: list[Camera], uv, pair_method: str = "paper"):
 
 def _nearest_pair(cameras, pairs, Xp, draft) -> np.ndarray:
     """Index of the valid pair whose cameras are nearest the draft in top view (−1: none)."""
+    if not pairs:
+        return np.full(len(draft), -1)
     pos = np.array([c.position[:2] for c in cameras])
     dist = np.stack([np.linalg.norm(draft[:, :2] - pos[i], axis=1)
                      + np.linalg.norm(draft[:, :2] - pos[j], axis=1) for i, j in pairs])
@@ -118,6 +120,8 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
     if method not in FUSIONS:
         raise ValueError(f"unknown fusion {method!r}; expected one of {', '.join(FUSIONS)}")
     uv = np.asarray(uv, dtype=float)
+    if uv.ndim != 3 or uv.shape[0] != len(cameras) or uv.shape[2] != 2:
+        raise ValueError(f"uv must be C×N×2 with C = {len(cameras)} cameras, got {uv.shape}")
     C, N = uv.shape[:2]
     seen = np.isfinite(uv).all(axis=2)
     views = seen.sum(axis=0)
@@ -141,13 +145,18 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
             # subsets[k]: camera indices; choice[n]: index into subsets (−1: none)
             subsets = list(pairs)
             choice = _nearest_pair(cameras, pairs, Xp, draft)
+            nearest = choice.copy()
             if method == "region" and region_map is not None:
                 index = {c.id: k for k, c in enumerate(cameras)}
                 region = region_map.lookup(draft[:, :2])
                 for r, (_, ids) in enumerate(region_map.regions):
-                    members = tuple(sorted(index[i] for i in ids if i in index))
-                    if len(members) != len(ids) or len(members) < 2:
-                        continue  # a camera the map names is not in this deployment
+                    unknown = [i for i in ids if i not in index]
+                    if unknown:
+                        raise ValueError(f"region map region {r} names camera(s) "
+                                         f"{', '.join(unknown)} that the rig does not have")
+                    members = tuple(sorted({index[i] for i in ids}))
+                    if len(members) < 2:
+                        raise ValueError(f"region map region {r} names fewer than 2 cameras")
                     if members not in subsets:
                         subsets.append(members)
                     take = (region == r) & seen[list(members)].all(axis=0)
@@ -160,6 +169,14 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
                 else:
                     X[pts] = triangulate([cameras[m] for m in members], uv[members][:, pts]).X
                 used[np.ix_(members, pts)] = True
+            # a region's subset without a solution (degenerate) falls back to the nearest pair
+            redo = ~np.isfinite(X).all(axis=1) & (choice != nearest) & (nearest >= 0)
+            if redo.any():
+                used[:, redo] = False
+                for k in np.unique(nearest[redo]):
+                    pts = redo & (nearest == k)
+                    X[pts] = Xp[k, pts]
+                    used[np.ix_(list(pairs[k]), pts)] = True
     fixed = np.isfinite(X).all(axis=1)
     used &= fixed[None, :]
     status = np.where(fixed, OK, np.where(views == 0, NO_SPOT,

@@ -35,20 +35,26 @@ def rodrigues(rvec) -> np.ndarray:
 
 
 def rotation_vector(R) -> np.ndarray:
-    """Rodrigues vector of a rotation matrix (inverse of :func:`rodrigues`)."""
+    """Rodrigues vector of a rotation matrix (inverse of :func:`rodrigues`), accurate at any
+    angle: θ from atan2 (not acos), and near θ = π (a camera looking almost straight down has
+    its rotation there) the axis from the symmetric part of R."""
     R = np.asarray(R, dtype=float)
-    cos = min(1.0, max(-1.0, (np.trace(R) - 1.0) / 2.0))
-    theta = math.acos(cos)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin θ · k
+    sin2 = float(np.linalg.norm(w))
+    cos = (np.trace(R) - 1.0) / 2.0
+    theta = math.atan2(sin2 / 2.0, cos)
     if theta < 1e-12:
-        return np.zeros(3)
-    if math.pi - theta < 1e-6:
-        # Near π the antisymmetric part vanishes: take the axis from R + I.
-        M = (R + np.eye(3)) / 2.0
-        i = int(np.argmax(np.diag(M)))
-        axis = M[:, i] / math.sqrt(max(M[i, i], 1e-300))
-        return axis / np.linalg.norm(axis) * theta
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    return w / (2.0 * math.sin(theta)) * theta
+        return w / 2.0
+    if cos > -0.5:
+        return w / sin2 * theta
+    # θ > 120°: (R + Rᵀ)/2 = cos θ I + (1 − cos θ) k kᵀ gives k up to sign; w gives the sign
+    S = (R + R.T) / 2.0 - cos * np.eye(3)
+    i = int(np.argmax(np.diag(S)))
+    k = S[:, i] / math.sqrt(max(S[i, i], 1e-300))
+    k /= np.linalg.norm(k)
+    if k @ w < 0:
+        k = -k
+    return k * theta
 
 
 def distort(xy: np.ndarray, dist) -> np.ndarray:
@@ -77,27 +83,47 @@ def distortion_jacobian(xy: np.ndarray, dist) -> np.ndarray:
     return J
 
 
+def max_radius2(dist) -> float:
+    """Largest squared undistorted radius r² over which the radial distortion is monotonic.
+
+    Past it, r · (1 + k1 r² + k2 r⁴ + k3 r⁶) folds back: a point there would project inside the
+    image although the lens never images it there, and a pixel has two "undistorted" roots.
+    The first positive root of d/dr, 1 + 3 k1 s + 5 k2 s² + 7 k3 s³ = 0 with s = r²; inf if none.
+    """
+    k1, k2, _, _, k3 = dist
+    roots = np.roots([7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]) if any((k1, k2, k3)) else []
+    s = [r.real for r in np.atleast_1d(roots) if abs(r.imag) < 1e-12 and r.real > 0]
+    return min(s) if s else math.inf
+
+
 def undistort(xy_d: np.ndarray, dist, iterations: int = 20, tol: float = 1e-15) -> np.ndarray:
     """Invert :func:`distort` by Newton's method, to machine precision.
 
     ``cv2.undistortPoints`` runs a fixed few fixed-point steps and leaves ~1e-4 of error with
-    strong distortion; triangulation round trips need ~1e-12, hence Newton here.
+    strong distortion; triangulation round trips need ~1e-12, hence Newton here. A point with
+    no inverse inside the lens's monotonic range (:func:`max_radius2`) comes back NaN.
     """
     xy_d = np.asarray(xy_d, dtype=float)
     if not np.any(dist):
         return xy_d.copy()
     xy = xy_d.copy()
+    finite = np.isfinite(xy_d).all(axis=-1)
     for _ in range(iterations):
         r = distort(xy, dist) - xy_d
         J = distortion_jacobian(xy, dist)
         det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
-        dx = (J[..., 1, 1] * r[..., 0] - J[..., 0, 1] * r[..., 1]) / det
-        dy = (J[..., 0, 0] * r[..., 1] - J[..., 1, 0] * r[..., 0]) / det
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dx = (J[..., 1, 1] * r[..., 0] - J[..., 0, 1] * r[..., 1]) / det
+            dy = (J[..., 0, 0] * r[..., 1] - J[..., 1, 0] * r[..., 0]) / det
         xy[..., 0] -= dx
         xy[..., 1] -= dy
-        step = np.nanmax(np.abs(np.stack([dx, dy]))) if dx.size else 0.0
-        if not step > tol:  # also stops on all-NaN input
+        step = np.abs(np.stack([dx, dy], -1))[finite]
+        if not step.size or not step.max() > tol:
             break
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(distort(xy, dist) - xy_d).max(axis=-1) < 1e-9) \
+            | ~((xy * xy).sum(axis=-1) < max_radius2(dist))
+    xy[bad] = np.nan
     return xy
 
 
@@ -119,6 +145,8 @@ class Camera:
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation: tuple[float, float, float] = NADIR
     R: np.ndarray = field(init=False, repr=False, compare=False)
+    #: squared undistorted radius beyond which the lens model folds back (:func:`max_radius2`)
+    max_radius2: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         for name, n in (("dist", 5), ("position", 3), ("rotation", 3)):
@@ -133,6 +161,7 @@ class Camera:
         R = rodrigues(self.rotation)
         R.setflags(write=False)
         object.__setattr__(self, "R", R)
+        object.__setattr__(self, "max_radius2", max_radius2(self.dist))
 
     # -- the contract's dict form -------------------------------------------------------------
     @classmethod
@@ -185,7 +214,9 @@ class Camera:
 
         Returns ``(uv N×2, in_front N, in_image N)``: ``in_front`` is a positive depth,
         ``in_image`` also needs the pixel inside the sensor shrunk by ``margin`` px (pixel centres
-        run from 0 to width − 1). Points behind the camera get NaN pixels.
+        run from 0 to width − 1) and the point inside the lens model's monotonic range (past
+        it the distortion polynomial folds back into the image). Points behind the camera get
+        NaN pixels.
         """
         Xc = self.to_camera(X)
         z = Xc[..., 2]
@@ -194,8 +225,10 @@ class Camera:
             xy = Xc[..., :2] / np.where(in_front, z, np.nan)[..., None]
         uv = self.normalised_to_pixels(distort(xy, self.dist) if any(self.dist) else xy)
         lo = margin - 0.5
+        with np.errstate(invalid="ignore"):
+            in_lens = (xy * xy).sum(axis=-1) < self.max_radius2
         in_image = (
-            in_front
+            in_front & in_lens
             & (uv[..., 0] >= lo) & (uv[..., 0] <= self.width - 0.5 - margin)
             & (uv[..., 1] >= lo) & (uv[..., 1] <= self.height - 0.5 - margin)
         )
@@ -225,7 +258,7 @@ class Camera:
         Jacobian; the planner's accuracy model builds the information ``Σ JᵀJ / σ²`` from it.
         """
         Xc = self.to_camera(X)
-        z = Xc[..., 2]
+        z = np.where(Xc[..., 2] > 1e-9, Xc[..., 2], np.nan)  # behind the camera: NaN
         xy = Xc[..., :2] / z[..., None]
         P = np.zeros(Xc.shape[:-1] + (2, 3))
         P[..., 0, 0] = 1.0 / z

@@ -49,7 +49,14 @@ class Triangulation:
         return self.used.sum(axis=0)
 
 
-def triangulate_pair_paper(cam1: Camera, cam2: Camera, uv1, uv2) -> PairEstimate:
+#: top-view lines crossing at less than this (radians, 3°) are flagged degenerate: the paper's
+#: intersection is undefined on the cameras' line and amplifies pixel noise ~1/sin(angle) near
+#: it (0.1 px of noise gives metres of error within a few mm of the line)
+MIN_CROSSING = np.radians(3.0)
+
+
+def triangulate_pair_paper(cam1: Camera, cam2: Camera, uv1, uv2,
+                           min_angle: float = MIN_CROSSING) -> PairEstimate:
     """The paper's 3D pair method (section 2.2), vectorised over ``N×2`` pixels.
 
     Top view: each camera's line from its position through its floor footprint of the LED
@@ -58,7 +65,12 @@ def triangulate_pair_paper(cam1: Camera, cam2: Camera, uv1, uv2) -> PairEstimate
     and view angles θᵢ along the baseline, ``E = B sin β / sin(180° − α − β)``, ``z = E sin α``
     with α = 90° − θ₁, β = 90° − θ₂, which is ``B / (tan θ₁ + tan θ₂)``. The tangents are signed
     along the baseline, so the result equals the paper's between the cameras (where it applies)
-    and stays right beyond them. Both cameras are taken at their mean height, as the paper does.
+    and stays right beyond them. Both cameras are taken at their mean height, as the paper does
+    (a height difference d between them biases z by up to ~0.4 d).
+
+    Flagged ``degenerate`` (NaN): top-view lines crossing at less than ``min_angle`` (the LED
+    on or near the cameras' line in top view, or straight below a camera), a ray that does not
+    reach the floor, a non-positive depth.
     """
     c1, c2 = cam1.center, cam2.center
     d1, d2 = cam1.rays(uv1), cam2.rays(uv2)
@@ -75,7 +87,9 @@ def triangulate_pair_paper(cam1: Camera, cam2: Camera, uv1, uv2) -> PairEstimate
     b = x2 * yl2 - y2 * xl2
     len1 = np.hypot(xl1 - x1, yl1 - y1)
     len2 = np.hypot(xl2 - x2, yl2 - y2)
-    degenerate = ~(np.abs(den) > 1e-9 * len1 * len2) | ~np.isfinite(den)
+    # |den| = |l1 − C1| |l2 − C2| sin(crossing angle)
+    degenerate = ~(np.abs(den) > max(np.sin(min_angle), 1e-12) * len1 * len2) \
+        | ~np.isfinite(den)
     with np.errstate(divide="ignore", invalid="ignore"):
         xL = np.where(degenerate, np.nan, (a * (x2 - xl2) - (x1 - xl1) * b) / den)
         yL = np.where(degenerate, np.nan, (a * (y2 - yl2) - (y1 - yl1) * b) / den)
@@ -123,8 +137,11 @@ class _Views:
             raise ValueError(f"uv must be C×N×2 with C = {len(cameras)} cameras, got {uv.shape}")
         self.cameras = cameras
         self.uv = uv
-        self.seen = np.isfinite(uv).all(axis=2)
-        self.xy = np.stack([np.nan_to_num(c.normalise(p)) for c, p in zip(cameras, uv)])
+        xy = np.stack([c.normalise(p) for c, p in zip(cameras, uv)]) if cameras \
+            else np.zeros(uv.shape)
+        # a pixel with no undistorted inverse (past the lens's fold) counts as not seen
+        self.seen = np.isfinite(xy).all(axis=2)
+        self.xy = np.where(self.seen[..., None], xy, 0.0)
 
     def subset(self, idx: np.ndarray) -> _Views:
         """The same cameras over the points ``idx`` only."""
@@ -185,7 +202,11 @@ def _solve_chunk(cameras, xy: np.ndarray, use: np.ndarray, iterations: int) -> n
         X = X - step
         if not np.nanmax(np.abs(step), initial=0.0) > 1e-12:
             break
-    X[use.sum(axis=0) < 2] = np.nan
+    bad = use.sum(axis=0) < 2
+    for cam, w in zip(cameras, use):  # a solution behind a camera that saw it is no solution
+        _, _, iz = _project_n(cam, X)
+        bad |= w & ~(iz > 0)
+    X[bad] = np.nan
     return X
 
 
@@ -284,6 +305,8 @@ def triangulate_cv2(cam1: Camera, cam2: Camera, uv1, uv2) -> np.ndarray:
     """``cv2.triangulatePoints`` (linear DLT) on undistorted normalised coordinates → ``N×3``."""
     import cv2
 
+    if len(uv1) == 0:
+        return np.zeros((0, 3))
     P1 = np.hstack([cam1.R, cam1.tvec[:, None]])
     P2 = np.hstack([cam2.R, cam2.tvec[:, None]])
     x1 = cam1.normalise(uv1).T.astype(np.float64)
