@@ -74,7 +74,8 @@ def main(argv=None) -> int:
         jpegs, u, v = make_set(name, args.frames, rng)
         stack = np.stack([decode_gray(j) for j in jpegs])
         if decode_us is None:
-            decode_us = best_time(lambda js=jpegs: [decode_gray(j) for j in js], 3) / len(jpegs) * 1e6
+            decode_s = best_time(lambda js=jpegs: [decode_gray(j) for j in js], 3)
+            decode_us = decode_s / len(jpegs) * 1e6
         rows = []
         for m in DETECTORS:
             res = detect_spots(stack, m)
@@ -88,7 +89,8 @@ def main(argv=None) -> int:
                 sq[m].append(e2)
             batch = best_time(lambda st=stack, mm=m: detect_spots(st, mm), 3) / len(stack) * 1e6
             few = stack[:200]
-            single = best_time(lambda fs=few, mm=m: [detect_spot(f, mm) for f in fs], 3) / len(few) * 1e6
+            single_s = best_time(lambda fs=few, mm=m: [detect_spot(f, mm) for f in fs], 3)
+            single = single_s / len(few) * 1e6
             rows.append({"detector": m, "rms_px": float(np.sqrt(e2.mean())),
                          "bias_u_px": float(np.nanmean(du)), "bias_v_px": float(np.nanmean(dv)),
                          "p95_px": float(np.sqrt(np.percentile(e2, 95))),

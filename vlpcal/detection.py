@@ -405,8 +405,9 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     The window is centred on the brightest pixel and reaches 2.35 σ (at least 3 px), σ the
     spot's width from the log-curvature at its peak; a saturated spot's window is centred on its
     flat top and reaches 3 px beyond it. So the border ring clears the spot, and stays close
-    enough to exclude a neighbouring reflection's core. A plane fitted to the ring is the background, so a gradient, vignetting or the
-    flank of a neighbouring reflection is removed before the centroid; weights are
+    enough to exclude a neighbouring reflection's core. A plane fitted to the ring is the
+    background, so a gradient, vignetting or the flank of a neighbouring reflection is removed
+    before the centroid; weights are
     ``I − plane − T`` with T at ``threshold`` of the remaining peak, so pixels enter at zero.
 
     Returns u, v, the peak over the plane, the pixel count above T, and whether the window
