@@ -26,6 +26,7 @@ v = row, the top-left pixel's centre at (0, 0)).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 
@@ -399,6 +400,17 @@ def _grow(allowed: np.ndarray, r, c) -> np.ndarray:
     return seed
 
 
+@cache
+def _plane_design(half: int):
+    """Pixel grids of a (2h+1)² window, its border ring, and the least-squares operator that
+    turns the ring's values into a plane's (a, b_u, b_v)."""
+    size = 2 * half + 1
+    gy, gx = np.mgrid[0:size, 0:size].astype(float)
+    ring = (gy == 0) | (gx == 0) | (gy == size - 1) | (gx == size - 1)
+    A = np.c_[np.ones(ring.sum()), gx[ring], gy[ring]]
+    return gx, gy, ring, np.linalg.pinv(A).T
+
+
 def _core_centroid(stack, r, c, s: DetectorSettings):
     """Plane-subtracted, thresholded centroid of the spot whose brightest pixel is (r, c).
 
@@ -407,38 +419,41 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     flat top and reaches 3 px beyond it. So the border ring clears the spot, and stays close
     enough to exclude a neighbouring reflection's core. A plane fitted to the ring is the
     background, so a gradient, vignetting or the flank of a neighbouring reflection is removed
-    before the centroid; weights are
-    ``I − plane − T`` with T at ``threshold`` of the remaining peak, so pixels enter at zero.
+    before the centroid; weights are ``I − plane − T`` with T at ``threshold`` of the remaining
+    peak, so pixels enter at zero.
 
     Returns u, v, the peak over the plane, the pixel count above T, and whether the window
     left the frame (``at_edge``).
     """
     n, h, w = stack.shape
-    # centre: the brightest pixel, or the middle of the saturated plateau it belongs to
     look, r0, c0 = _windows(stack, r, c, 5)
-    core = _grow(look >= s.saturation, r - r0, c - c0)
-    core[np.arange(n), r - r0, c - c0] = True
-    yy, xx = np.mgrid[0:look.shape[1], 0:look.shape[2]]
-    cnt = core.sum(axis=(1, 2))
-    cu = c0 + (core * xx).sum(axis=(1, 2)) / cnt
-    cv = r0 + (core * yy).sum(axis=(1, 2)) / cnt
-    extent = np.max(np.where(core, np.maximum(np.abs(xx + c0[:, None, None] - cu[:, None, None]),
-                                              np.abs(yy + r0[:, None, None] - cv[:, None, None])),
-                             0.0), axis=(1, 2))
-    # an unsaturated spot's window reaches _REACH σ, σ from the log-curvature at its peak
+    # an unsaturated spot's window reaches _REACH σ, σ from the log-curvature at its peak;
+    # the sharper axis counts, as a reflection's flank flattens the curvature on its side only
     p1, p2, p3, p4 = _neighbours(stack, r, c)
     lo = np.median(np.concatenate([look[:, 0], look[:, -1], look[:, :, 0], look[:, :, -1]], 1),
                    axis=1)
+
     def lg(x):
         return np.log(np.maximum(x - lo, 0.5))
+
     lp = lg(look.max(axis=(1, 2)))
-    # the sharper axis: a reflection's flank flattens the curvature along its side only
     curv = np.maximum(2 * lp - lg(p1) - lg(p2), 2 * lp - lg(p3) - lg(p4))
-    spot_sigma = 1.0 / np.sqrt(np.maximum(curv, 1e-3))
-    half = np.where(cnt > 1, np.ceil(extent).astype(int) + 3,
-                    np.ceil(_REACH * spot_sigma - 1e-9))
+    half = np.ceil(_REACH / np.sqrt(np.maximum(curv, 1e-3)) - 1e-9)
+    rc, cc = r.copy(), c.copy()
+    # a saturated spot: centre on its flat top (the saturated pixels connected to (r, c))
+    sat = np.flatnonzero(look.max(axis=(1, 2)) >= s.saturation)
+    if len(sat):
+        flat = _grow(look[sat] >= s.saturation, r[sat] - r0[sat], c[sat] - c0[sat])
+        yy, xx = np.mgrid[0:look.shape[1], 0:look.shape[2]]
+        cnt = flat.sum(axis=(1, 2))
+        cu = c0[sat] + (flat * xx).sum(axis=(1, 2)) / cnt
+        cv = r0[sat] + (flat * yy).sum(axis=(1, 2)) / cnt
+        du = np.abs(xx + c0[sat, None, None] - cu[:, None, None])
+        dv = np.abs(yy + r0[sat, None, None] - cv[:, None, None])
+        extent = np.max(np.where(flat, np.maximum(du, dv), 0.0), axis=(1, 2))
+        half[sat] = np.ceil(extent) + 3
+        rc[sat], cc[sat] = np.rint(cv).astype(int), np.rint(cu).astype(int)
     half = np.clip(half, 3, _MAX_HALF).astype(int)
-    rc, cc = np.rint(cv).astype(int), np.rint(cu).astype(int)
     u = np.full(n, np.nan)
     v = np.full(n, np.nan)
     height = np.zeros(n)
@@ -449,13 +464,10 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
         if not len(idx):
             continue
         win, wr0, wc0 = _windows(stack[idx], rc[idx], cc[idx], H)
-        size = 2 * H + 1
-        gy, gx = np.mgrid[0:size, 0:size]
-        ring = (gy == 0) | (gx == 0) | (gy == size - 1) | (gx == size - 1)
-        A = np.c_[np.ones(ring.sum()), gx[ring], gy[ring]]
-        coef = win[:, ring] @ np.linalg.pinv(A).T  # N×3 plane per frame, least squares
-        plane = coef[:, 0, None, None] + coef[:, 1, None, None] * gx + coef[:, 2, None, None] * gy
-        sig = win - plane
+        gx, gy, ring, fit = _plane_design(int(H))
+        coef = win[:, ring] @ fit  # N×3: the background plane of each frame
+        sig = win - (coef[:, 0, None, None] + coef[:, 1, None, None] * gx
+                     + coef[:, 2, None, None] * gy)
         pk = sig.max(axis=(1, 2))
         wgt = np.maximum(sig - (s.threshold * pk)[:, None, None], 0.0)
         tot = wgt.sum(axis=(1, 2))
