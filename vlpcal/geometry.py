@@ -282,4 +282,4 @@ def paper_camera(id: str = "C1", position=(0.6, 0.9, 2.3), rotation=NADIR) -> Ca
 
 def paper_rig() -> list[Camera]:
     """The paper's three cameras in a line 1.2 m apart at 2.3 m over a 3.6 × 1.8 m area."""
-    return [paper_camera(f"C{i + 1}", (0.6 + 1.2 * i, 0.9, 2.3)) for i in range(3)]
+    return [paper_camera(f"C{i + 1}", (x, 0.9, 2.3)) for i, x in enumerate((0.6, 1.8, 3.0))]
