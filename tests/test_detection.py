@@ -86,6 +86,14 @@ def test_default_ignores_a_brighter_wide_lamp(rng):
     assert np.abs(detect_spots(jpegs, "nip").u - u).mean() > 10
 
 
+def test_default_prefers_the_led_to_a_lamp_cut_by_the_frame_edge(rng):
+    u, v = rng.uniform(112, 120, 50), rng.uniform(20, 100, 50)
+    jpegs = jpeg_frames(u, v, distractors=[(45, 0, sim.SpotLook(4.0, 400.0))])
+    res = detect_spots(jpegs)
+    assert res.ok.all()
+    assert np.abs(res.u - u).max() < 0.3
+
+
 @pytest.mark.parametrize("method", DETECTORS)
 @pytest.mark.parametrize("data", [b"", b"not a jpeg", b"\xff\xd8\xff\xe0garbage"])
 def test_corrupt_bytes_give_corrupt_frame(method, data):

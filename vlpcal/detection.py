@@ -336,13 +336,14 @@ def _segment_one(img, bg: float, thr: float, floor: float, s: DetectorSettings):
     ``bg`` reaches ``floor`` (it would be a spot on its own). Each is scored by its height
     divided by ``1 + (core radius / led_radius)²``, the core being its pixels above half its
     own height: a wide lamp or a diffuse reflection has a wide core even when it merges with
-    the LED at the segmentation threshold, a JPEG speck has a tiny height.
+    the LED at the segmentation threshold, a JPEG speck has a tiny height. A blob cut by the
+    frame's edge (a lamp half outside the view) scores a quarter.
     """
     import cv2
 
     h, w = img.shape
     mask = (img > thr).astype(np.uint8)
-    k, labels, _, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    k, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if k <= 1:
         return None
     # per-component sums over the thresholded pixels only (bincount), no loop over pixels
@@ -364,6 +365,9 @@ def _segment_one(img, bg: float, thr: float, floor: float, s: DetectorSettings):
     if not len(cand):
         cand = np.arange(1, k)
     score = (top[cand] - bg) / (1.0 + (np.nan_to_num(radius[cand]) / s.led_radius) ** 2)
+    x0, y0, bw, bh = stats[cand, 0], stats[cand, 1], stats[cand, 2], stats[cand, 3]
+    cut = (x0 == 0) | (y0 == 0) | (x0 + bw == w) | (y0 + bh == h)
+    score[cut] /= 4.0  # a blob cut by the frame's edge looks compact and cannot be measured
     j = int(cand[np.argmax(score)])
     mine = lab == j
     at = int(nz[mine][np.argmax(f[mine])])
