@@ -444,10 +444,13 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     curv = np.maximum(2 * lp - lg(p1) - lg(p2), 2 * lp - lg(p3) - lg(p4))
     half = np.ceil(_REACH / np.sqrt(np.maximum(curv, 1e-3)) - 1e-9)
     rc, cc = r.copy(), c.copy()
-    # a saturated spot: centre on its flat top (the saturated pixels connected to (r, c))
-    sat = np.flatnonzero(look.max(axis=(1, 2)) >= s.saturation)
+    # a saturated spot: centre on its flat top, the pixels above 80 % of its height connected
+    # to (r, c) (JPEG ringing leaves saturated pixels anywhere from ~210 to 255)
+    peak = look.max(axis=(1, 2))
+    sat = np.flatnonzero(peak >= s.saturation)
     if len(sat):
-        flat = _grow(look[sat] >= s.saturation, r[sat] - r0[sat], c[sat] - c0[sat])
+        level = (lo + 0.8 * (peak - lo))[sat, None, None]
+        flat = _grow(look[sat] >= level, r[sat] - r0[sat], c[sat] - c0[sat])
         yy, xx = np.mgrid[0:look.shape[1], 0:look.shape[2]]
         cnt = flat.sum(axis=(1, 2))
         cu = c0[sat] + (flat * xx).sum(axis=(1, 2)) / cnt
