@@ -98,7 +98,7 @@ def test_paper_pair_flags_the_degenerate_top_view_case():
 def test_paper_pair_flags_the_ill_conditioned_band_near_the_line(rig, rng):
     """Near the cameras' line the intersection amplifies noise ~1/sin(angle): flagged, not
     reported as a fix metres off."""
-    X = np.c_[rng.uniform(0.8, 1.6, 500), np.full(500, 0.9) + rng.uniform(-0.005, 0.005, 500),
+    X = np.c_[rng.uniform(1.4, 1.6, 500), np.full(500, 0.9) + rng.uniform(-0.003, 0.003, 500),
               np.zeros(500)]
     uv1 = rig[0].project(X)[0] + rng.normal(0, 0.1, (500, 2))
     uv2 = rig[1].project(X)[0] + rng.normal(0, 0.1, (500, 2))

@@ -58,6 +58,9 @@ class DetectorSettings:
     saturation: float = 250.0
     #: spot radius (second-moment, px) beyond which ``blob`` starts to doubt a blob is the LED
     led_radius: float = 1.5
+    #: a blob whose core (pixels above half its height) has a larger radius (px) is not a point
+    #: source: a lamp, a sunlit patch (an LED's core stays under ~2.5 px even saturated 8×)
+    max_core_radius: float = 3.0
 
 
 DEFAULTS = DetectorSettings()
@@ -335,8 +338,9 @@ def _segment_one(img, bg: float, thr: float, floor: float, s: DetectorSettings):
     Blobs are the connected components above ``thr``; a candidate is one whose height over
     ``bg`` reaches ``floor`` (it would be a spot on its own). Each is scored by its height
     divided by ``1 + (core radius / led_radius)²``, the core being its pixels above half its
-    own height: a wide lamp or a diffuse reflection has a wide core even when it merges with
-    the LED at the segmentation threshold, a JPEG speck has a tiny height. A blob cut by the
+    own height; a core wider than ``max_core_radius`` is no candidate at all. A wide lamp or a
+    diffuse reflection has a wide core even when it merges with the LED at the segmentation
+    threshold; a JPEG speck has a tiny height. A blob cut by the
     frame's edge (a lamp half outside the view) scores a quarter.
     """
     import cv2
@@ -360,10 +364,10 @@ def _segment_one(img, bg: float, thr: float, floor: float, s: DetectorSettings):
         mv = np.bincount(lab, wgt * vv, k) / wsum
         var = (np.bincount(lab, wgt * uu * uu, k) + np.bincount(lab, wgt * vv * vv, k)) / wsum
         radius = np.sqrt(np.maximum(var - mu * mu - mv * mv, 0.0))
-    cand = np.flatnonzero(top - bg >= floor)
+    cand = np.flatnonzero((top - bg >= floor) & ~(radius > s.max_core_radius))
     cand = cand[cand > 0]
     if not len(cand):
-        cand = np.arange(1, k)
+        return None
     score = (top[cand] - bg) / (1.0 + (np.nan_to_num(radius[cand]) / s.led_radius) ** 2)
     x0, y0, bw, bh = stats[cand, 0], stats[cand, 1], stats[cand, 2], stats[cand, 3]
     cut = (x0 == 0) | (y0 == 0) | (x0 + bw == w) | (y0 + bh == h)
@@ -510,7 +514,9 @@ def _detect_blob(stack, s: DetectorSettings) -> SpotBatch:
         floor = max(s.min_contrast, s.min_snr * sigma[i])
         found = _segment_one(img, fbg, fbg + max(s.threshold * (peak[i] - fbg), 3 * sigma[i]),
                              floor, s)
-        if found is not None:
+        if found is None:  # nothing point-like: a lamp alone, or noise
+            code[i] = _REASON_CODE[NO_SPOT]
+        else:
             r[i], c[i], top[i], blobs[i] = found
     u, v, _, area, edge = _core_centroid(stack, r, c, s)
     code[(code == 0) & edge] = _REASON_CODE[AT_EDGE]

@@ -272,7 +272,7 @@ class Camera:
         return P @ self.R
 
 
-def paper_camera(id: str = "C1", position=(0.6, 0.9, 2.3), rotation=NADIR) -> Camera:
+def paper_camera(id: str = "C1", position=(1.2, 0.9, 2.3), rotation=NADIR) -> Camera:
     """The paper's camera (160 × 120 px, fx = fy = 153.3 px, centred principal point, nadir)."""
     return Camera(
         id=id, width=PAPER_WIDTH, height=PAPER_HEIGHT, fx=PAPER_F, fy=PAPER_F,
@@ -281,5 +281,11 @@ def paper_camera(id: str = "C1", position=(0.6, 0.9, 2.3), rotation=NADIR) -> Ca
 
 
 def paper_rig() -> list[Camera]:
-    """The paper's three cameras in a line 1.2 m apart at 2.3 m over a 3.6 × 1.8 m area."""
-    return [paper_camera(f"C{i + 1}", (x, 0.9, 2.3)) for i, x in enumerate((0.6, 1.8, 3.0))]
+    """The paper's three cameras in a line at 2.3 m over its 3.6 × 1.8 m area.
+
+    Read from section 3: C1 and C3 form the first pair and C2 is "placed in the middle"; one
+    camera sees 240 cm and a pair shares 120 × 180 cm (Table 2's experimental area), and Table
+    4 has a C1C3 pair. So C1 and C3 are 1.2 m apart (x = 1.2 and 2.4 m) with C2 at 1.8 m, all
+    three see the experimental area x ∈ [1.2, 2.4] m on the floor.
+    """
+    return [paper_camera(f"C{i + 1}", (x, 0.9, 2.3)) for i, x in enumerate((1.2, 1.8, 2.4))]

@@ -15,7 +15,7 @@ from math import erf, sqrt
 import numpy as np
 from scipy.special import erf as _erf
 
-from .geometry import Camera
+from ..geometry import Camera
 
 
 @dataclass(frozen=True)

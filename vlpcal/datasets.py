@@ -1,0 +1,267 @@
+"""Folders of frames on disk (DESIGN.md): survey bundles and ``locate`` frame folders.
+
+The one module that knows both layouts::
+
+    survey bundle                         locate frames folder
+    points.csv   point_id,x,y,z (m)       <frame_id>/<camera_id>.jpg
+    frames/<point_id>/<camera_id>.jpg     (observations: frame_id,camera_id,u,v)
+    observations.csv  point_id,camera_id,u,v   (optional)
+
+A missing JPEG means the camera did not see the LED there. Writers build the whole folder
+beside the target and rename it into place, so a crash leaves no half-written folder. Readers
+check what they read and raise :class:`DatasetError` with a one-line message that names the file,
+the row or item, and what was expected.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+POINTS_COLUMNS = ("point_id", "x", "y", "z")
+OBSERVATION_COLUMNS = ("camera_id", "u", "v")
+
+
+class DatasetError(ValueError):
+    """A survey bundle or frames folder that does not follow the layout (one-line message)."""
+
+
+def natural_key(text: str):
+    """Sort key that orders ``P2`` before ``P10`` (ids sorted as text lose their order)."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
+
+
+def _check_id(value: str, where: str) -> str:
+    if not value or value in (".", "..") or "/" in value or "\\" in value:
+        raise DatasetError(f"{where}: expected an id usable as a folder name, got {value!r}")
+    return value
+
+
+def _finite(text: str, where: str) -> float:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise DatasetError(f"{where}: expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise DatasetError(f"{where}: expected a finite number, got {text!r}")
+    return value
+
+
+def _read_csv(path: Path, columns: tuple) -> list[dict]:
+    try:
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            header = [h.strip() for h in (reader.fieldnames or [])]
+            reader.fieldnames = header
+            rows = list(reader)
+    except OSError as e:
+        raise DatasetError(f"{path}: cannot read ({e.strerror})") from None
+    except (csv.Error, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: not a readable CSV ({e})") from None
+    missing = [c for c in columns if c not in (header or [])]
+    if missing:
+        raise DatasetError(f"{path}: missing column {missing[0]!r} (expected columns "
+                           f"{','.join(columns)})")
+    return rows
+
+
+def _write_csv(path: Path, columns, rows) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(columns)
+        w.writerows(rows)
+
+
+def _publish(tmp: Path, root: Path, overwrite: bool) -> None:
+    """Move the finished temporary folder into place (replacing ``root`` if allowed)."""
+    if root.exists():
+        if not overwrite:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise DatasetError(f"{root}: already exists (choose another folder or overwrite)")
+        old = root.with_name(f".{root.name}.old-{os.getpid()}")
+        os.replace(root, old)
+        os.replace(tmp, root)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, root)
+
+
+def _staging(root: Path) -> Path:
+    root.parent.mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
+
+
+def _fmt(x: float) -> str:
+    return repr(round(float(x), 9))
+
+
+# -- survey bundles ------------------------------------------------------------------------------
+
+@dataclass
+class SurveyBundle:
+    """A survey read from disk: measured LED positions and what each camera saw there."""
+
+    root: Path
+    point_ids: list[str]
+    xyz: np.ndarray  # N×3 measured positions, m
+    frames: dict = field(default_factory=dict)  # (point_id, camera_id) → Path
+    observations: dict = field(default_factory=dict)  # (point_id, camera_id) → (u, v)
+
+    def camera_ids(self) -> list[str]:
+        ids = {c for _, c in self.frames} | {c for _, c in self.observations}
+        return sorted(ids, key=natural_key)
+
+    def frame(self, point_id: str, camera_id: str) -> bytes | None:
+        """The JPEG bytes the camera took at the point (None: not seen)."""
+        path = self.frames.get((point_id, camera_id))
+        return path.read_bytes() if path else None
+
+
+def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
+                        observations: dict | None = None, overwrite: bool = False) -> Path:
+    """Write a survey bundle.
+
+    ``frames``: camera id → one JPEG (bytes, or None when not seen) per point;
+    ``observations``: camera id → ``N×2`` pixels (NaN when not seen).
+    """
+    root = Path(root)
+    xyz = np.asarray(xyz, dtype=float)
+    ids = [_check_id(str(p), f"point {i}") for i, p in enumerate(point_ids)]
+    if len(set(ids)) != len(ids):
+        raise DatasetError("point ids must be unique")
+    tmp = _staging(root)
+    try:
+        _write_csv(tmp / "points.csv", POINTS_COLUMNS,
+                   [[p, *map(_fmt, xyz[i])] for i, p in enumerate(ids)])
+        for cam, jpegs in (frames or {}).items():
+            for p, data in zip(ids, jpegs):
+                if data is not None:
+                    d = tmp / "frames" / p
+                    d.mkdir(parents=True, exist_ok=True)
+                    (d / f"{_check_id(str(cam), 'camera id')}.jpg").write_bytes(data)
+        if observations:
+            rows = [[p, cam, _fmt(uv[i, 0]), _fmt(uv[i, 1])]
+                    for cam, uv in observations.items() for i, p in enumerate(ids)
+                    if np.isfinite(uv[i]).all()]
+            _write_csv(tmp / "observations.csv", ("point_id", *OBSERVATION_COLUMNS), rows)
+        _publish(tmp, root, overwrite)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return root
+
+
+def read_survey_bundle(root) -> SurveyBundle:
+    """Read and check a survey bundle folder."""
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: not a folder (expected a survey bundle with points.csv)")
+    path = root / "points.csv"
+    if not path.is_file():
+        raise DatasetError(f"{path}: missing (a survey bundle needs points.csv)")
+    ids, xyz = [], []
+    for n, row in enumerate(_read_csv(path, POINTS_COLUMNS), start=2):
+        where = f"{path} line {n}"
+        pid = _check_id((row["point_id"] or "").strip(), f"{where} point_id")
+        if pid in ids:
+            raise DatasetError(f"{where}: duplicate point_id {pid!r}")
+        ids.append(pid)
+        xyz.append([_finite(row[c], f"{where} {c}") for c in ("x", "y", "z")])
+    if not ids:
+        raise DatasetError(f"{path}: no points")
+    known = set(ids)
+    frames = {}
+    fdir = root / "frames"
+    if fdir.is_dir():
+        for d in sorted(fdir.iterdir()):
+            if not d.is_dir():
+                continue
+            if d.name not in known:
+                raise DatasetError(f"{d}: point {d.name!r} is not in points.csv")
+            for f in sorted(d.glob("*.jpg")):
+                frames[(d.name, f.stem)] = f
+    observations = {}
+    opath = root / "observations.csv"
+    if opath.is_file():
+        for n, row in enumerate(_read_csv(opath, ("point_id", *OBSERVATION_COLUMNS)), start=2):
+            where = f"{opath} line {n}"
+            pid = (row["point_id"] or "").strip()
+            if pid not in known:
+                raise DatasetError(f"{where}: point {pid!r} is not in points.csv")
+            cid = _check_id((row["camera_id"] or "").strip(), f"{where} camera_id")
+            observations[(pid, cid)] = (_finite(row["u"], f"{where} u"),
+                                        _finite(row["v"], f"{where} v"))
+    return SurveyBundle(root, ids, np.array(xyz, dtype=float), frames, observations)
+
+
+# -- locate frames folders -------------------------------------------------------------------------
+
+@dataclass
+class FramesFolder:
+    """A ``locate`` input folder: frame ids in natural order, cameras, and the files."""
+
+    root: Path
+    frame_ids: list[str]
+    camera_ids: list[str]
+    files: dict  # (frame_id, camera_id) → Path
+
+    def frame(self, frame_id: str, camera_id: str) -> bytes | None:
+        path = self.files.get((frame_id, camera_id))
+        return path.read_bytes() if path else None
+
+
+def write_frames_folder(root, frame_ids, frames: dict, overwrite: bool = False) -> Path:
+    """Write ``<root>/<frame_id>/<camera_id>.jpg``; ``frames``: camera id → JPEG or None per
+    frame (None: no file, the camera sent nothing)."""
+    root = Path(root)
+    ids = [_check_id(str(f), f"frame {i}") for i, f in enumerate(frame_ids)]
+    if len(set(ids)) != len(ids):
+        raise DatasetError("frame ids must be unique")
+    tmp = _staging(root)
+    try:
+        for fid in ids:
+            (tmp / fid).mkdir()
+        for cam, jpegs in frames.items():
+            for fid, data in zip(ids, jpegs):
+                if data is not None:
+                    (tmp / fid / f"{_check_id(str(cam), 'camera id')}.jpg").write_bytes(data)
+        _publish(tmp, root, overwrite)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return root
+
+
+def read_frames_folder(root) -> FramesFolder:
+    """List a ``locate`` frames folder (files are read on demand)."""
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: not a folder (expected <frame_id>/<camera_id>.jpg inside)")
+    ids, cams, files = [], set(), {}
+    for d in root.iterdir():
+        if d.is_dir() and not d.name.startswith("."):
+            ids.append(d.name)
+            for f in d.glob("*.jpg"):
+                files[(d.name, f.stem)] = f
+                cams.add(f.stem)
+    if not ids:
+        raise DatasetError(f"{root}: no frame folders (expected <frame_id>/<camera_id>.jpg)")
+    return FramesFolder(root, sorted(ids, key=natural_key), sorted(cams, key=natural_key), files)
+
+
+def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:
+    """Ground truth beside simulated frames: ``<id_column>,x,y,z`` in metres."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    os.close(fd)
+    _write_csv(Path(tmp), (id_column, "x", "y", "z"),
+               [[i, *map(_fmt, p)] for i, p in zip(ids, np.asarray(xyz, float))])
+    os.replace(tmp, path)

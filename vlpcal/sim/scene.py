@@ -1,0 +1,211 @@
+"""Simulated installs: *true* cameras (what hangs on the ceiling) vs *nominal* cameras (what the
+installer believes), and the frames the true cameras take of an LED anywhere in the room.
+
+Everything is drawn from a seed: the same profile, seed and points give the same bytes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..geometry import Camera, rodrigues, rotation_vector
+from .render import _pixel_integrals, encode_jpeg
+
+
+@dataclass(frozen=True)
+class InstallErrors:
+    """How far a real install is from the nominal one: 1-sigma per camera unless noted."""
+
+    position: float = 0.0  #: m, horizontal mounting offset per axis
+    height: float = 0.0  #: m, mounting height
+    tilt: float = 0.0  #: rad, about each horizontal axis (levelling)
+    yaw: float = 0.0  #: rad, about the vertical
+    focal: float = 0.0  #: relative error of the true focal length against the nominal one
+    aspect: float = 0.0  #: fy / fx − 1, the same for every camera (sensor window scaling)
+    principal: float = 0.0  #: px, principal point offset per axis
+    k1: tuple[float, float] = (0.0, 0.0)  #: radial distortion, (mean, sd)
+    k2: tuple[float, float] = (0.0, 0.0)  #: (mean, sd)
+    tangential: float = 0.0  #: sd of p1 and p2
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """How the LED and the room look in a frame (digital numbers, DN, of an 8-bit image)."""
+
+    #: DN of a spot centred on a pixel, LED seen on the optical axis from ``reference_distance``
+    led_peak: float = 220.0
+    reference_distance: float = 2.3  #: m
+    emission_order: float = 1.0  #: the LED faces up and radiates as cosᵐ (1 = Lambertian)
+    psf_sigma: float = 0.8  #: px, point-spread function on the optical axis
+    psf_growth: float = 0.0  #: relative PSF growth at the image corner (cheap lenses blur there)
+    vignetting: float = 0.0  #: 0–1: share of the natural cos⁴ fall-off the lens shows
+    background: float = 18.0  #: DN
+    gradient: tuple[float, float] = (0.03, 0.02)  #: DN per px along u and v
+    read_noise: float = 1.5  #: DN
+    shot_gain: float = 0.05  #: DN² of shot-noise variance per DN of signal
+    jpeg_quality: int = 80
+    led_colour: tuple[float, float, float] = (1.0, 1.0, 1.0)  #: B, G, R gains of the LED
+    background_colour: tuple[float, float, float] = (1.0, 1.0, 1.0)  #: B, G, R of the floor
+    #: floor reflection: its peak as a share of the LED's (0: none) and its blur (× PSF sigma)
+    reflection: float = 0.0
+    reflection_blur: float = 2.5
+    #: a fixed bright light in the room: (x, y, z m, peak DN, sigma px), or None
+    lamp: tuple | None = None
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A named simulated deployment: nominal layout, install errors, appearance, survey noise."""
+
+    name: str
+    description: str
+    nominal: tuple[Camera, ...]
+    room: tuple
+    ceiling_height: float
+    errors: InstallErrors = InstallErrors()
+    look: Appearance = Appearance()
+    #: m, 1-sigma of a tape-measured survey position per axis
+    tape: float = 0.003
+    #: where each value comes from (parameter → source), shown by ``vlpcal simulate --describe``
+    sources: dict = field(default_factory=dict, compare=False, hash=False)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One simulated install: what is really there and what the installer believes."""
+
+    profile: Profile
+    true: tuple[Camera, ...]
+    nominal: tuple[Camera, ...]
+    seed: int
+
+
+def perturb(cam: Camera, e: InstallErrors, rng: np.random.Generator) -> Camera:
+    """The camera as really installed: the nominal one with errors drawn from ``e``."""
+    dx, dy = rng.normal(0.0, e.position, 2)
+    dz = rng.normal(0.0, e.height)
+    tx, ty = rng.normal(0.0, e.tilt, 2)
+    yaw = rng.normal(0.0, e.yaw)
+    # small rotations applied in the world frame, after the nominal orientation
+    R = cam.R @ rodrigues((tx, ty, yaw)).T
+    f = cam.fx * (1.0 + rng.normal(0.0, e.focal))
+    pc = rng.normal(0.0, e.principal, 2)
+    k1 = rng.normal(*e.k1)
+    k2 = rng.normal(*e.k2)
+    p1, p2 = rng.normal(0.0, e.tangential, 2)
+    return replace(cam, fx=f, fy=f * (1.0 + e.aspect) * cam.fy / cam.fx,
+                   cx=cam.cx + pc[0], cy=cam.cy + pc[1], dist=(k1, k2, p1, p2, 0.0),
+                   position=(cam.position[0] + dx, cam.position[1] + dy, cam.position[2] + dz),
+                   rotation=rotation_vector(R))
+
+
+def make_scene(profile: Profile, seed: int = 0) -> Scene:
+    """Draw a true install of ``profile`` (deterministic for ``seed``)."""
+    rng = np.random.default_rng([seed, 1])
+    true = tuple(perturb(c, profile.errors, rng) for c in profile.nominal)
+    return Scene(profile, true, tuple(profile.nominal), seed)
+
+
+# -- rendering -------------------------------------------------------------------------------------
+
+def _vignette(cam: Camera, strength: float) -> np.ndarray:
+    """H×W factor 1 − strength · (1 − cos⁴θ), θ each pixel's angle off the optical axis."""
+    if strength == 0:
+        return np.ones((cam.height, cam.width))
+    v, u = np.mgrid[0:cam.height, 0:cam.width]
+    r2 = ((u - cam.cx) / cam.fx) ** 2 + ((v - cam.cy) / cam.fy) ** 2
+    return 1.0 - strength * (1.0 - 1.0 / (1.0 + r2) ** 2)
+
+
+def _spots(n, h, w, u, v, sigma, amp) -> np.ndarray:
+    """``n×h×w`` pixel-integrated Gaussian spots (amplitude = a centred pixel's value)."""
+    img = np.zeros((n, h, w))
+    ok = np.isfinite(u) & np.isfinite(v) & (amp > 0)
+    if ok.any():
+        ix = _pixel_integrals(u[ok], w, sigma[ok])
+        iy = _pixel_integrals(v[ok], h, sigma[ok])
+        from scipy.special import erf
+
+        share = erf(0.5 / (math.sqrt(2.0) * sigma[ok])) ** 2
+        img[ok] = (amp[ok] / share)[:, None, None] * iy[:, :, None] * ix[:, None, :]
+    return img
+
+
+def led_brightness(cam: Camera, points: np.ndarray, look: Appearance) -> np.ndarray:
+    """Peak DN of the LED at each point: inverse square, cosᵐ emission, cos⁴ vignetting."""
+    d = cam.center - points
+    dist = np.linalg.norm(d, axis=1)
+    cos_emit = np.clip(d[:, 2] / dist, 0.0, 1.0)
+    cos_cam = np.clip(-(d @ cam.axis) / dist, 0.0, 1.0)
+    vig = 1.0 - look.vignetting * (1.0 - cos_cam ** 4)
+    return look.led_peak * (look.reference_distance / dist) ** 2 \
+        * cos_emit ** look.emission_order * vig
+
+
+def render_camera(cam: Camera, points, look: Appearance, rng: np.random.Generator,
+                  distractors: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Colour frames (``N×H×W×3`` uint8, BGR) of the LED at each point as ``cam`` sees it.
+
+    Returns the frames and whether the LED's centre is in the image. The LED is a pixel-
+    integrated Gaussian (so the sub-pixel position shows); an LED outside the view leaves its
+    tail at the edge, as a real one does.
+    """
+    points = np.atleast_2d(np.asarray(points, float))
+    n, h, w = len(points), cam.height, cam.width
+    uv, front, inside = cam.project(points)
+    uv = np.where(front[:, None], uv, np.nan)
+    r2 = ((uv[:, 0] - cam.cx) / (w / 2)) ** 2 + ((uv[:, 1] - cam.cy) / (h / 2)) ** 2
+    sigma = look.psf_sigma * (1.0 + look.psf_growth * np.clip(r2, 0, 2) / 2)
+    amp = np.where(front, led_brightness(cam, points, look), 0.0)
+    near = front & (uv[:, 0] > -4 * sigma) & (uv[:, 0] < w - 1 + 4 * sigma) \
+        & (uv[:, 1] > -4 * sigma) & (uv[:, 1] < h - 1 + 4 * sigma)
+    amp = np.where(near, amp, 0.0)
+    led = _spots(n, h, w, uv[:, 0], uv[:, 1], sigma, amp)
+    extra = np.zeros((n, h, w))
+    if distractors and look.reflection > 0:
+        # the LED's mirror image in the floor, dimmer and blurred by the floor's roughness
+        mirror = points * [1.0, 1.0, -1.0]
+        muv, mfront, _ = cam.project(mirror)
+        mamp = np.where(mfront, led_brightness(cam, points, look) * look.reflection, 0.0)
+        extra += _spots(n, h, w, muv[:, 0], muv[:, 1], sigma * look.reflection_blur, mamp)
+    if distractors and look.lamp is not None:
+        x, y, z, peak, lsig = look.lamp
+        luv, lfront, _ = cam.project([[x, y, z]])
+        if lfront[0]:
+            extra += _spots(n, h, w, np.full(n, luv[0, 0]), np.full(n, luv[0, 1]),
+                            np.full(n, float(lsig)), np.full(n, float(peak)))
+    v, u = np.mgrid[0:h, 0:w]
+    base = (look.background + look.gradient[0] * (u - w / 2) + look.gradient[1] * (v - h / 2)) \
+        * _vignette(cam, look.vignetting)
+    frames = np.empty((n, h, w, 3), np.uint8)
+    for c in range(3):
+        signal = base[None] * look.background_colour[c] + (led + extra) * look.led_colour[c]
+        noise_sd = np.sqrt(look.read_noise ** 2 + look.shot_gain * np.maximum(signal, 0.0))
+        signal = signal + rng.standard_normal(signal.shape) * noise_sd
+        frames[..., c] = np.clip(np.rint(signal), 0, 255)
+    return frames, inside
+
+
+def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
+                 chunk: int = 256) -> tuple[dict, np.ndarray]:
+    """JPEG frames of an LED at each world point ``N×3`` from every true camera.
+
+    Returns ``(frames, seen)``: camera id → one JPEG per point, and ``C×N`` whether the LED's
+    centre was inside each camera's image. Deterministic for (scene, points, seed).
+    """
+    points = np.atleast_2d(np.asarray(points, float))
+    look = scene.profile.look
+    frames, seen = {}, []
+    for k, cam in enumerate(scene.true):
+        rng = np.random.default_rng([scene.seed, seed, k])
+        jpegs, inside = [], []
+        for s in range(0, len(points), chunk):
+            imgs, ins = render_camera(cam, points[s:s + chunk], look, rng, distractors)
+            jpegs += [encode_jpeg(f, look.jpeg_quality) for f in imgs]
+            inside.append(ins)
+        frames[cam.id] = jpegs
+        seen.append(np.concatenate(inside) if inside else np.zeros(0, bool))
+    return frames, np.array(seen)
