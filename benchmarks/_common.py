@@ -28,9 +28,14 @@ def best_time(fn, repeat: int = 5) -> float:
 def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
     """Format rows as a text table; ``columns`` are (key, header, format)."""
     cells = [[h for _, h, _ in columns]]
+
+    def cell(value, fmt):
+        if value is None or (isinstance(value, float) and value != value):
+            return "–"
+        return format(value, fmt) if isinstance(value, (int, float)) else str(value)
+
     for r in rows:
-        cells.append([format(r[k], f) if isinstance(r[k], (int, float)) else str(r[k])
-                      for k, _, f in columns])
+        cells.append([cell(r.get(k), f) for k, _, f in columns])
     widths = [max(len(c[i]) for c in cells) for i in range(len(columns))]
     lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w)
                        for i, (c, w) in enumerate(zip(row, widths))) for row in cells]

@@ -63,8 +63,10 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
         grid_points,
         simulate_frames,
         simulate_survey,
-        trajectory as path_of,
         write_deployments,
+    )
+    from .sim.writers import (
+        trajectory as path_of,
     )
 
     try:

@@ -430,8 +430,8 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     before the centroid; weights are ``I − plane − T`` with T at ``threshold`` of the remaining
     peak, so pixels enter at zero.
 
-    Returns u, v, the peak over the plane, the pixel count above T, and whether the window
-    left the frame (``at_edge``).
+    Returns u, v, the peak over the plane, the pixel count above T, and whether the spot sits
+    on the frame's border (``at_edge``).
     """
     n, h, w = stack.shape
     look, r0, c0 = _windows(stack, r, c, 5)
@@ -469,7 +469,9 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     v = np.full(n, np.nan)
     height = np.zeros(n)
     area = np.zeros(n, int)
-    edge = (rc - half < 0) | (cc - half < 0) | (rc + half >= h) | (cc + half >= w)
+    # near the frame's edge the window slides inside the frame (the ring then lies to one
+    # side); a spot whose centre pixel is on the border row or column cannot be measured
+    edge = (rc < 1) | (cc < 1) | (rc > h - 2) | (cc > w - 2)
     for H in np.unique(half):
         idx = np.flatnonzero((half == H) & ~edge)
         if not len(idx):
