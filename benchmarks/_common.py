@@ -12,7 +12,8 @@ from pathlib import Path
 for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(var, "1")
 
-OUT = Path(__file__).resolve().parent / "out"
+#: where tables' JSON and figures go (VLPCAL_BENCH_OUT overrides, e.g. for the smoke tests)
+OUT = Path(os.environ.get("VLPCAL_BENCH_OUT", Path(__file__).resolve().parent / "out"))
 
 
 def best_time(fn, repeat: int = 5) -> float:
@@ -48,7 +49,7 @@ def write_json(name: str, payload: dict) -> Path:
     import cv2
     import numpy as np
 
-    OUT.mkdir(exist_ok=True)
+    OUT.mkdir(parents=True, exist_ok=True)
     payload = {"machine": {"python": platform.python_version(), "numpy": np.__version__,
                            "opencv": cv2.__version__, "cpu": platform.processor() or
                            platform.machine()}, **payload}

@@ -333,7 +333,8 @@ def _error_maps(path, title, panels, cams):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.6 * len(panels), 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.4 * len(panels), 3.6), squeeze=False,
+                             sharey=True, constrained_layout=True)
     vmax = max(np.nanpercentile(e * CM, 98) for _, _, e in panels)
     for ax, (label, pts, err) in zip(axes[0], panels):
         xy, e = pts[:, :2], err * CM
@@ -350,8 +351,8 @@ def _error_maps(path, title, panels, cams):
         ax.set_aspect("equal")
     axes[0][0].set_ylabel("y (m)")
     fig.colorbar(sc, ax=axes[0].tolist(), label="error (cm)", shrink=0.85)
-    fig.suptitle(title, fontsize=10)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.suptitle(title + " (red circles: cameras)", fontsize=10)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
@@ -392,7 +393,7 @@ def main(argv=None) -> int:
     f15, maps15 = fig15(scenes, args)
     f16 = fig16(scenes, args)
     prof = every_profile(args)
-    OUT.mkdir(exist_ok=True)
+    OUT.mkdir(parents=True, exist_ok=True)
     cam2 = [scene.nominal[1]]
     _error_maps(OUT / "paper_fig9.png", "Fig. 9 — 2D error per floor point, one camera",
                 [(k, *maps3[k]) for k in ("highest", "mean2", "nip", "vlpcal: blob")], cam2)
