@@ -112,7 +112,9 @@ def table3(scenes, args):
     cam_idx = 1
     nominal = scenes[0].nominal[cam_idx]
     cx, cy = nominal.position[:2]
-    gx, gy = np.meshgrid(cx + np.linspace(-0.9, 0.9, 7), cy + np.array([-0.6, 0.0, 0.6]))
+    # 0.283 m = 18.9 px: the points fall at varied sub-pixel phases (a 0.3 m grid is exactly
+    # 20 px here and would put every point at the same phase)
+    gx, gy = np.meshgrid(cx + np.linspace(-0.85, 0.85, 7), cy + np.array([-0.55, 0.02, 0.58]))
     pts = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
     tiled, _, _, frames, _ = observe(scenes, pts, "blob", args.seed + 3, args.repeats)
     rows, maps = [], {}

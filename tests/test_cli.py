@@ -18,11 +18,14 @@ def test_version_and_help():
 def test_demo_prints_the_comparison_table():
     out = CliRunner().invoke(main, ["demo", "--step", "0.3"])
     assert out.exit_code == 0, out.output
-    assert "paper: NI-P + pairs (a) mean" in out.output
-    assert "vlpcal: blob + all-camera LS" in out.output
-    row = [line for line in out.output.splitlines() if "all-camera LS" in line][0]
-    mean_cm = float(row.split()[-5])
-    assert mean_cm < 0.5  # exact cameras, 0.1 px spots: millimetres, not centimetres
+    lines = out.output.splitlines()
+
+    def mean_cm(label):
+        return float(next(line for line in lines if line.startswith(label)).split()[-5])
+
+    paper = mean_cm("paper: NI-P + pairs (a) mean")
+    exact = mean_cm("vlpcal, cameras known exactly")
+    assert exact < 0.5 < paper  # the install's errors, not the detector, cost centimetres
 
 
 def test_bad_option_is_one_line_not_a_traceback():

@@ -109,7 +109,7 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
 @click.option("--step", default=0.15, show_default=True, type=click.FloatRange(0.03, 1.0),
               help="Spacing of the LED test grid, m.")
 def demo(seed: int, step: float):
-    """Run the built-in demo: simulated frames of the paper's three-camera rig, the paper's
+    """Run the built-in demo: a simulated install of the paper's three-camera rig, the paper's
     pipeline beside vlpcal's on the same frames.
 
     Example: vlpcal demo --seed 1
@@ -117,11 +117,11 @@ def demo(seed: int, step: float):
     from .demo import format_table, run_demo
 
     rows, n = run_demo(seed=seed, step=step)
-    click.echo(f"The paper's rig: 3 cameras 1.2 m apart at 2.3 m, 160 × 120 px; {n} LED "
-               f"positions at h = 0 and 0.35 m; simulated JPEG frames (seed {seed}).")
-    click.echo("3D error in cm over the same frames:\n")
+    click.echo(f"A simulated install of the paper's rig (profile paper-2024, seed {seed}): 3 "
+               f"cameras at 2.3 m, 160 × 120 px,\nhung a little off the plan; {n} LED "
+               "positions at h = 0 and 0.35 m seen by ≥ 2 cameras; JPEG frames.")
+    click.echo("3D error in cm over the same frames, with the cameras as planned (nominal):\n")
     click.echo(format_table(rows))
-    click.echo("\nfixed: share of positions with a fix. Some positions at 0.35 m are seen by one "
-               "camera only;\nthe paper's pair method is also undefined within 3° of the "
-               "cameras' line in top view.\nThe cameras are known exactly here: calibration "
-               "from a survey is a later step.")
+    click.echo("\nfixed: share of positions with a fix (the paper's pair method is undefined "
+               "within 3° of\nthe cameras' line in top view). The last row is what "
+               "calibrating from a survey aims for.")

@@ -1,9 +1,10 @@
-"""The built-in demo: the paper's three-camera rig, simulated frames, every pipeline compared.
+"""The built-in demo: a simulated install of the paper's rig, every pipeline on the same frames.
 
-A first version of ``vlpcal demo``: renders JPEG frames of an LED at a grid of points and
-heights as the paper's three cameras would see them, then runs the paper's pipeline (NI-P spots,
-pair method, fusion (a) and (b)) beside vlpcal's (blob detector, all-camera least squares) on the
-same frames and prints one table. The cameras are known exactly here; calibration comes later.
+A first version of ``vlpcal demo``: simulates the paper's lab (``paper-2024`` profile: the
+cameras as really hung differ slightly from the plan), renders JPEG frames of an LED at a grid
+of positions and two heights, and runs the paper's pipeline (NI-P spots, pair method, fusion
+(a) and (b)) beside vlpcal's (blob spots, robust all-camera least squares) with the *nominal*
+cameras, plus vlpcal given the true cameras — what calibrating from a survey aims for.
 """
 
 from __future__ import annotations
@@ -15,15 +16,16 @@ import numpy as np
 
 from .detection import detect_spots
 from .fusion import fuse
-from .geometry import paper_rig
-from .sim import Sensor, SpotLook, render_views
+from .sim.profiles import get_profile
+from .sim.scene import make_scene, render_scene
+from .sim.writers import grid_points
 
-#: (label, detector, fusion, pair method)
+#: (label, detector, fusion, which cameras)
 PIPELINES = (
-    ("paper: NI-P + pairs (a) mean", "nip", "mean", "paper"),
-    ("paper: NI-P + pairs (b) nearest", "nip", "nearest", "paper"),
-    ("vlpcal: blob + pairs (b) nearest", "blob", "nearest", "paper"),
-    ("vlpcal: blob + all-camera LS", "blob", "all", "paper"),
+    ("paper: NI-P + pairs (a) mean", "nip", "mean", "nominal"),
+    ("paper: NI-P + pairs (b) nearest", "nip", "nearest", "nominal"),
+    ("vlpcal: blob + robust LS", "blob", "robust", "nominal"),
+    ("vlpcal, cameras known exactly", "blob", "robust", "true"),
 )
 
 
@@ -37,25 +39,17 @@ class Row:
     us_per_fix: float
 
 
-def demo_points(step: float = 0.15, heights=(0.0, 0.35)) -> np.ndarray:
-    """LED test points: a grid over the area the paper's pairs share, at each height."""
-    xs = np.arange(0.75, 2.85 + 1e-9, step)
-    ys = np.arange(0.30, 1.50 + 1e-9, step)
-    gx, gy = np.meshgrid(xs, ys)
-    return np.concatenate([np.c_[gx.ravel(), gy.ravel(), np.full(gx.size, h)] for h in heights])
-
-
 def run_demo(seed: int = 0, step: float = 0.15) -> tuple[list[Row], int]:
-    """Render the frames once, run every pipeline on them; returns the table rows and N."""
-    cams = paper_rig()
-    X = demo_points(step)
-    frames = render_views(cams, X, look=SpotLook(0.9, 170.0), sensor=Sensor(), seed=seed)
+    """Simulate, render once, run every pipeline; returns the table rows and N positions."""
+    scene = make_scene(get_profile("paper-2024"), seed)
+    X = grid_points(scene, step, (0.0, 0.35), min_cameras=2)
+    frames, _ = render_scene(scene, X, seed=seed)
+    cams = {"nominal": list(scene.nominal), "true": list(scene.true)}
     rows = []
-    for label, detector, fusion, pair_method in PIPELINES:
+    for label, detector, fusion, which in PIPELINES:
         t0 = time.perf_counter()
-        spots = [detect_spots(frames[c.id], detector) for c in cams]
-        uv = np.stack([s.uv for s in spots])
-        res = fuse(cams, uv, fusion, pair_method=pair_method)
+        uv = np.stack([detect_spots(frames[c.id], detector).uv for c in scene.nominal])
+        res = fuse(cams[which], uv, fusion)
         dt = time.perf_counter() - t0
         err = np.linalg.norm(res.X - X, axis=1) * 100
         ok = np.isfinite(err)
