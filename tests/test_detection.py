@@ -11,6 +11,7 @@ from vlpcal.detection import (
     DETECTORS,
     NO_SPOT,
     TOO_DIM,
+    WRONG_SIZE,
     detect_spot,
     detect_spots,
 )
@@ -127,7 +128,7 @@ def test_batch_matches_single_and_handles_mixed_inputs(rng):
         single = detect_spot(data)
         assert batch[i].u == pytest.approx(single.u, abs=1e-9)
         assert batch[i].blobs == single.blobs
-    assert batch.reasons[-2:] == [CORRUPT, CORRUPT]  # empty bytes; a frame of another size
+    assert batch.reasons[-2:] == [CORRUPT, WRONG_SIZE]  # empty bytes; a frame of another size
 
 
 def test_colour_frames_are_converted():

@@ -191,15 +191,31 @@ def read_survey_bundle(root) -> SurveyBundle:
     observations = {}
     opath = root / "observations.csv"
     if opath.is_file():
-        for n, row in enumerate(_read_csv(opath, ("point_id", *OBSERVATION_COLUMNS)), start=2):
-            where = f"{opath} line {n}"
-            pid = (row["point_id"] or "").strip()
+        observations, _ = read_observations(opath, "point_id")
+        for (pid, _cid) in observations:
             if pid not in known:
-                raise DatasetError(f"{where}: point {pid!r} is not in points.csv")
-            cid = _check_id((row["camera_id"] or "").strip(), f"{where} camera_id")
-            observations[(pid, cid)] = (_finite(row["u"], f"{where} u"),
-                                        _finite(row["v"], f"{where} v"))
+                raise DatasetError(f"{opath}: point {pid!r} is not in points.csv")
     return SurveyBundle(root, ids, np.array(xyz, dtype=float), frames, observations)
+
+
+def read_observations(path, id_column: str = "frame_id") -> tuple[dict, list[str]]:
+    """Spots reported by the cameras: ``<id_column>,camera_id,u,v`` (px).
+
+    Returns ``{(id, camera_id): (u, v)}`` and the ids in order of first appearance.
+    """
+    path = Path(path)
+    out, order, seen = {}, [], set()
+    for n, row in enumerate(_read_csv(path, (id_column, *OBSERVATION_COLUMNS)), start=2):
+        where = f"{path} line {n}"
+        key = _check_id((row[id_column] or "").strip(), f"{where} {id_column}")
+        cid = _check_id((row["camera_id"] or "").strip(), f"{where} camera_id")
+        if (key, cid) in out:
+            raise DatasetError(f"{where}: a second spot for {id_column} {key!r}, camera {cid!r}")
+        out[(key, cid)] = (_finite(row["u"], f"{where} u"), _finite(row["v"], f"{where} v"))
+        if key not in seen:
+            seen.add(key)
+            order.append(key)
+    return out, order
 
 
 # -- locate frames folders -------------------------------------------------------------------------

@@ -15,10 +15,24 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
+from .fusion import FUSIONS, PAIR_METHODS, RegionMap
 from .geometry import Camera
 
 FORMAT, VERSION = "vlpcal-deployment", 1
 CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
+SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
+#: the optional top-level blocks; a missing block means the defaults
+OPTIONAL_BLOCKS = ("detector", "fusion", "corrections", "uncertainty", "provenance")
+DETECTOR_SETTINGS = tuple(DetectorSettings.__dataclass_fields__)
+DEFAULT_FUSION = "robust"
+#: px, the spot noise behind a fix's predicted uncertainty when the file states none (the blob
+#: detector's RMS error per axis on simulated frames is ~0.04 px; benchmarks/detectors.py)
+DEFAULT_PIXEL_NOISE = 0.05
+
+
+#: the JSON Schema of the format, for editors (``# yaml-language-server: $schema=…``)
+SCHEMA_PATH = Path(__file__).resolve().parent / "schemas" / "deployment.schema.json"
 
 
 class DeploymentError(ValueError):
@@ -35,6 +49,49 @@ class Deployment:
     cameras: list[Camera]
     keep_out: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+
+    # -- the optional blocks, parsed (they were checked when the file was read) ---------------
+    @property
+    def detector(self) -> str:
+        """Spot detector by name (``detector.method``; default ``blob``)."""
+        return self.extra.get("detector", {}).get("method", DEFAULT_DETECTOR)
+
+    @property
+    def detector_settings(self) -> DetectorSettings:
+        given = {k: float(v) for k, v in self.extra.get("detector", {}).items() if k != "method"}
+        if "window" in given:
+            given["window"] = int(given["window"])
+        return DetectorSettings(**given) if given else DEFAULTS
+
+    @property
+    def fusion(self) -> str:
+        """Fusion by name (``fusion.method``; default ``robust``)."""
+        return self.extra.get("fusion", {}).get("method", DEFAULT_FUSION)
+
+    @property
+    def pair_method(self) -> str:
+        return self.extra.get("fusion", {}).get("pair_method", "paper")
+
+    @property
+    def max_residual(self) -> float:
+        """px: the robust fusion's limit on an observation's reprojection error."""
+        return float(self.extra.get("fusion", {}).get("max_residual", 2.0))
+
+    @property
+    def region_map(self) -> RegionMap | None:
+        items = self.extra.get("fusion", {}).get("region_map")
+        return RegionMap.from_dict(items) if items else None
+
+    @property
+    def pixel_offsets(self) -> dict:
+        """Camera id → (du, dv) px subtracted from every detected spot (``corrections``)."""
+        return {cid: tuple(map(float, c.get("pixel_offset", (0.0, 0.0))))
+                for cid, c in self.extra.get("corrections", {}).items()}
+
+    @property
+    def pixel_noise(self) -> float:
+        """px, the spot noise behind the predicted uncertainty (``uncertainty.pixel_noise``)."""
+        return float(self.extra.get("uncertainty", {}).get("pixel_noise", DEFAULT_PIXEL_NOISE))
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:
@@ -67,7 +124,8 @@ def _number(value, where: str, *, positive: bool = False, integer: bool = False)
 
 
 def _vector(value, n: int, where: str) -> list:
-    if not isinstance(value, (list, tuple)) or len(value) != n:
+    if not isinstance(value, (list, tuple)) or len(value) != n \
+            or any(isinstance(v, (list, tuple, dict)) for v in value):
         raise DeploymentError(f"{where}: expected a list of {n} numbers, got {value!r}")
     return [_number(v, f"{where}[{i}]") for i, v in enumerate(value)]
 
@@ -143,12 +201,89 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             _vector(c["position"], 3, f"{where}.position")
             _vector(c["rotation"], 3, f"{where}.rotation")
             cameras.append(Camera.from_dict(c))
+        unknown = sorted(set(site) - set(SITE_KEYS))
+        if unknown:
+            fail(f"site.{unknown[0]}: unknown key (expected {', '.join(SITE_KEYS)})")
+        extra = {k: v for k, v in doc.items() if k not in ("format", "version", "site", "cameras")}
+        for key in extra:
+            if key not in OPTIONAL_BLOCKS:
+                fail(f"{key}: unknown key (expected format, version, site, cameras, or the "
+                     f"optional {', '.join(OPTIONAL_BLOCKS)})")
+        _check_blocks(extra, {c.id for c in cameras})
     except DeploymentError as e:
         if str(e).startswith(source):
             raise
         raise DeploymentError(f"{source}: {e}") from None
-    extra = {k: v for k, v in doc.items() if k not in ("format", "version", "site", "cameras")}
     return Deployment(str(site["name"]), float(height), room, cameras, keep_out, extra)
+
+
+def _mapping(value, where: str) -> dict:
+    if not isinstance(value, dict):
+        raise DeploymentError(f"{where}: expected a mapping, got {value!r}")
+    return value
+
+
+def _choice(value, options, where: str) -> str:
+    if value not in options:
+        raise DeploymentError(f"{where}: expected one of {', '.join(options)}, got {value!r}")
+    return value
+
+
+def _check_blocks(extra: dict, camera_ids: set) -> None:
+    """Check the optional blocks (see :data:`OPTIONAL_BLOCKS`)."""
+    if "detector" in extra:
+        det = _mapping(extra["detector"], "detector")
+        for key, value in det.items():
+            if key == "method":
+                _choice(value, DETECTORS, "detector.method")
+            elif key in DETECTOR_SETTINGS:
+                _number(value, f"detector.{key}", positive=key not in ("threshold",))
+            else:
+                raise DeploymentError(f"detector.{key}: unknown key (expected method, "
+                                      f"{', '.join(DETECTOR_SETTINGS)})")
+    if "fusion" in extra:
+        fus = _mapping(extra["fusion"], "fusion")
+        for key, value in fus.items():
+            if key == "method":
+                _choice(value, FUSIONS, "fusion.method")
+            elif key == "pair_method":
+                _choice(value, PAIR_METHODS, "fusion.pair_method")
+            elif key == "max_residual":
+                _number(value, "fusion.max_residual", positive=True)
+            elif key == "region_map":
+                if not isinstance(value, list):
+                    raise DeploymentError("fusion.region_map: expected a list of "
+                                          "{polygon, cameras} regions")
+                for i, region in enumerate(value):
+                    where = f"fusion.region_map[{i}]"
+                    _mapping(region, where)
+                    _polygon(region.get("polygon"), f"{where}.polygon")
+                    ids = region.get("cameras")
+                    if not isinstance(ids, list) or len(set(map(str, ids))) < 2:
+                        raise DeploymentError(f"{where}.cameras: expected a list of at least 2 "
+                                              f"camera ids, got {ids!r}")
+                    for cid in ids:
+                        if str(cid) not in camera_ids:
+                            raise DeploymentError(f"{where}.cameras: unknown camera {cid!r}")
+            else:
+                raise DeploymentError(f"fusion.{key}: unknown key (expected method, "
+                                      "pair_method, max_residual, region_map)")
+    if "corrections" in extra:
+        for cid, corr in _mapping(extra["corrections"], "corrections").items():
+            where = f"corrections.{cid}"
+            if str(cid) not in camera_ids:
+                raise DeploymentError(f"{where}: unknown camera {cid!r}")
+            for key, value in _mapping(corr, where).items():
+                if key != "pixel_offset":
+                    raise DeploymentError(f"{where}.{key}: unknown key (expected pixel_offset)")
+                _vector(value, 2, f"{where}.pixel_offset")
+    if "uncertainty" in extra:
+        for key, value in _mapping(extra["uncertainty"], "uncertainty").items():
+            if key != "pixel_noise":
+                raise DeploymentError(f"uncertainty.{key}: unknown key (expected pixel_noise)")
+            _number(value, "uncertainty.pixel_noise", positive=True)
+    if "provenance" in extra:
+        _mapping(extra["provenance"], "provenance")
 
 
 def load(path) -> Deployment:

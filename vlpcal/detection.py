@@ -32,8 +32,11 @@ import numpy as np
 
 #: Reasons a frame gives no spot.
 NO_SPOT, TOO_DIM, AT_EDGE, CORRUPT = "no_spot", "too_dim", "at_edge", "corrupt_frame"
-REASONS = (NO_SPOT, TOO_DIM, AT_EDGE, CORRUPT)
-_REASON_CODE = {None: 0, NO_SPOT: 1, TOO_DIM: 2, AT_EDGE: 3, CORRUPT: 4}
+#: a frame of another size than the camera's, and no frame at all (None in a batch)
+WRONG_SIZE, MISSING = "wrong_size", "missing"
+REASONS = (NO_SPOT, TOO_DIM, AT_EDGE, CORRUPT, WRONG_SIZE, MISSING)
+_REASON_CODE = {None: 0, NO_SPOT: 1, TOO_DIM: 2, AT_EDGE: 3, CORRUPT: 4, WRONG_SIZE: 5,
+                MISSING: 6}
 _CODE_REASON = {v: k for k, v in _REASON_CODE.items()}
 
 DEFAULT_DETECTOR = "blob"
@@ -529,34 +532,49 @@ def _detect_blob(stack, s: DetectorSettings) -> SpotBatch:
 DETECTORS = ("highest", "mean2", "nip", "nip_eq5", "gauss", "centroid", "blob")
 
 
-def _to_stack(frames):
-    """``(stack, good)``: the frames that can be measured as one ``N×H×W`` array, and which."""
+def _to_stack(frames, shape=None):
+    """``(stack, codes)``: the frames that can be measured as one ``N×H×W`` array, and a reason
+    code per frame (0 for the measurable ones). ``shape`` (H, W) is the size expected; without
+    it, the first measurable frame's size is."""
     if isinstance(frames, np.ndarray) and frames.ndim == 3:
-        good = np.full(len(frames), min(frames.shape[1:], default=0) >= MIN_SIZE)
-        if frames.dtype.kind == "f":
-            good &= np.isfinite(frames).all(axis=(1, 2))
-        return (frames if good.all() else frames[good]), good
-    images = [as_gray(f) for f in frames]
-    shapes = [im.shape for im in images if im is not None]
-    good = np.array([im is not None and im.shape == shapes[0] for im in images], bool)
+        codes = np.zeros(len(frames), np.int8)
+        if shape is not None and frames.shape[1:] != tuple(shape):
+            codes[:] = _REASON_CODE[WRONG_SIZE]
+        elif min(frames.shape[1:], default=0) < MIN_SIZE:
+            codes[:] = _REASON_CODE[CORRUPT]
+        elif frames.dtype.kind == "f":
+            codes[~np.isfinite(frames).all(axis=(1, 2))] = _REASON_CODE[CORRUPT]
+        good = codes == 0
+        return (frames if good.all() else frames[good]), codes
+    images = [None if f is None else as_gray(f) for f in frames]
+    codes = np.array([_REASON_CODE[MISSING] if f is None else
+                      _REASON_CODE[CORRUPT] if im is None else 0
+                      for f, im in zip(frames, images)], np.int8)
+    if shape is None:
+        shape = next((im.shape for im in images if im is not None), None)
+    for i, im in enumerate(images):
+        if codes[i] == 0 and im.shape != tuple(shape):
+            codes[i] = _REASON_CODE[WRONG_SIZE]
+    good = codes == 0
     stack = np.stack([im for im, g in zip(images, good) if g]) if good.any() else None
-    return stack, good
+    return stack, codes
 
 
 def detect_spots(frames, method: str = DEFAULT_DETECTOR,
-                 settings: DetectorSettings = DEFAULTS) -> SpotBatch:
+                 settings: DetectorSettings = DEFAULTS, shape=None) -> SpotBatch:
     """Detect the spot in every frame.
 
-    ``frames``: an ``N×H×W`` array, or a sequence of JPEG bytes / image arrays. A frame that
-    does not decode, is too small, holds a NaN, or differs in size from the first good frame
-    gets ``corrupt_frame``; the others are measured (a colour image counts as one frame only
-    inside a sequence).
+    ``frames``: an ``N×H×W`` array, or a sequence of JPEG bytes / image arrays / None. A frame
+    that does not decode, is too small or holds a NaN gets ``corrupt_frame``; one whose size is
+    not ``shape`` (H, W; default: the first good frame's) ``wrong_size``; None ``missing``.
+    (A colour image counts as one frame only inside a sequence.)
     """
     if method not in DETECTORS:
         raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
-    stack, good = _to_stack(frames)
+    stack, codes = _to_stack(frames, shape)
+    good = codes == 0
     out = SpotBatch.empty(len(good))
-    out.reason_code[:] = _REASON_CODE[CORRUPT]
+    out.reason_code[:] = codes
     if not good.any():
         return out
     if method == "centroid":

@@ -313,3 +313,31 @@ def triangulate_cv2(cam1: Camera, cam2: Camera, uv1, uv2) -> np.ndarray:
     x2 = cam2.normalise(uv2).T.astype(np.float64)
     H = cv2.triangulatePoints(P1, P2, x1, x2)
     return (H[:3] / H[3]).T
+
+
+def predicted_rms_error(cameras: list[Camera], X, used, pixel_noise: float) -> np.ndarray:
+    """Predicted RMS 3D error (m) of points ``X`` (N×3) solved from the observations ``used``
+    (C×N): ``sqrt(trace(F⁻¹))`` with ``F = Σᵢ JᵢᵀJᵢ / σ²`` over the cameras used, Jᵢ the 2×3
+    pixel Jacobian and σ = ``pixel_noise`` px (the Cramér–Rao bound for Gaussian spot noise;
+    DESIGN.md's reference accuracy model). NaN where fewer than two cameras were used.
+    """
+    X = np.asarray(X, dtype=float)
+    F = np.zeros((len(X), 6))
+    pairs = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+    for cam, w in zip(cameras, np.asarray(used, bool)):
+        if not w.any():
+            continue
+        J = cam.jacobian(np.where(w[:, None], X, cam.center + cam.axis))  # dummy where unused
+        for k, (i, j) in enumerate(pairs):
+            F[:, k] += np.where(w, (J[:, :, i] * J[:, :, j]).sum(axis=1), 0.0)
+    F /= pixel_noise ** 2
+    A = _full(F)
+    a00, a01, a02 = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
+    a11, a12, a22 = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
+    det = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a02 * a12) \
+        + a02 * (a01 * a12 - a02 * a11)
+    trace_inv = ((a11 * a22 - a12 * a12) + (a00 * a22 - a02 * a02) + (a00 * a11 - a01 * a01))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.sqrt(trace_inv / det)
+    out[(np.asarray(used, bool).sum(axis=0) < 2) | ~np.isfinite(X).all(axis=1)] = np.nan
+    return out

@@ -1,0 +1,183 @@
+"""Live camera sources: MJPEG over HTTP (what an ESP32-CAM serves at ``http://IP:81/stream``) or
+a V4L2 device, one per camera, grouped into frame sets by arrival time.
+
+Each source runs in its own thread and never raises into the caller: a source that stops
+(connection closed, timeout, device gone) is reported once as an event and the others go on.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+
+#: how long a read may block before the source is declared stalled, s
+READ_TIMEOUT = 5.0
+
+
+def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
+    """JPEG frames from a ``multipart/x-mixed-replace`` HTTP stream.
+
+    Parts are read by their ``Content-Length`` when the server gives one (the ESP32 camera
+    server does), otherwise by scanning for the JPEG end-of-image marker.
+    """
+    import urllib.request
+
+    with urllib.request.urlopen(url, timeout=timeout) as resp:
+        ctype = resp.headers.get("Content-Type", "")
+        if "multipart" not in ctype and "jpeg" in ctype:
+            yield resp.read()  # a single snapshot
+            return
+        buf = b""
+        while True:
+            # headers of the next part
+            while b"\r\n\r\n" not in buf:
+                chunk = resp.read1(65536)
+                if not chunk:
+                    return
+                buf += chunk
+            head, buf = buf.split(b"\r\n\r\n", 1)
+            length = None
+            for line in head.split(b"\r\n"):
+                name, _, value = line.partition(b":")
+                if name.strip().lower() == b"content-length":
+                    length = int(value.strip())
+            if length is not None:
+                while len(buf) < length:
+                    chunk = resp.read1(65536)
+                    if not chunk:
+                        return
+                    buf += chunk
+                frame, buf = buf[:length], buf[length:]
+            else:
+                start = buf.find(b"\xff\xd8")
+                while (end := buf.find(b"\xff\xd9", max(start, 0))) < 0:
+                    chunk = resp.read1(65536)
+                    if not chunk:
+                        return
+                    buf += chunk
+                    start = buf.find(b"\xff\xd8")
+                frame, buf = buf[start:end + 2], buf[end + 2:]
+            yield frame
+
+
+def device_frames(device: str) -> Iterator:
+    """Frames (BGR arrays) from a V4L2 device (``/dev/video0`` or its number) via OpenCV."""
+    import cv2
+
+    cap = cv2.VideoCapture(int(device) if device.isdigit() else device)
+    if not cap.isOpened():
+        raise OSError(f"cannot open video device {device}")
+    try:
+        while True:
+            ok, frame = cap.read()
+            if not ok:
+                return
+            yield frame
+    finally:
+        cap.release()
+
+
+def open_source(spec: str) -> Callable[[], Iterator]:
+    """A factory of frames for a ``--camera`` value: an http(s) URL or a video device."""
+    if spec.startswith(("http://", "https://")):
+        return lambda: mjpeg_frames(spec)
+    return lambda: device_frames(spec)
+
+
+@dataclass
+class FrameSet:
+    """Frames of one instant: camera id → frame (missing cameras absent), and when."""
+
+    index: int
+    t: float  # s since the grouper started
+    frames: dict
+
+
+@dataclass
+class LiveStats:
+    frames: Counter = field(default_factory=Counter)  #: frames received per camera
+    sets: int = 0
+    missing: Counter = field(default_factory=Counter)  #: sets each camera was absent from
+    ended: dict = field(default_factory=dict)  #: camera id → why its source stopped
+
+
+class LiveGrouper:
+    """Group frames from several live sources into frame sets by arrival time.
+
+    A set closes when every live camera has sent a frame, when a camera sends its second frame
+    (it runs faster than another), or when ``tolerance`` s have passed since the set's first
+    frame. ``on_event`` receives one-line messages (a camera stopped, went stale).
+    """
+
+    def __init__(self, sources: dict, tolerance: float = 0.05,
+                 on_event: Callable[[str], None] | None = None):
+        self.sources = sources  # camera id → factory of a frame iterator
+        self.tolerance = tolerance
+        self.on_event = on_event or (lambda msg: None)
+        self.stats = LiveStats()
+        self._queue: queue.Queue = queue.Queue(maxsize=256)
+        self._stop = threading.Event()
+
+    def _reader(self, cid: str, factory) -> None:
+        why = "stream ended"
+        try:
+            for frame in factory():
+                if self._stop.is_set():
+                    return
+                self._queue.put((time.monotonic(), cid, frame))
+        except Exception as e:  # a camera's failure is a status, never a crash
+            why = f"{type(e).__name__}: {e}".strip().rstrip(":")
+        self._queue.put((time.monotonic(), cid, StopIteration(why)))
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def __iter__(self) -> Iterator[FrameSet]:
+        t0 = time.monotonic()
+        threads = [threading.Thread(target=self._reader, args=(cid, f), daemon=True)
+                   for cid, f in self.sources.items()]
+        for th in threads:
+            th.start()
+        live = set(self.sources)
+        pending: dict = {}
+        started = 0.0
+
+        def close():
+            nonlocal pending
+            fs = FrameSet(self.stats.sets, started - t0, pending)
+            for cid in live | set(pending):
+                if cid not in pending:
+                    self.stats.missing[cid] += 1
+            self.stats.sets += 1
+            pending = {}
+            return fs
+
+        while live and not self._stop.is_set():
+            try:
+                t, cid, item = self._queue.get(timeout=self.tolerance)
+            except queue.Empty:
+                if pending and time.monotonic() - started > self.tolerance:
+                    yield close()
+                continue
+            if isinstance(item, StopIteration):
+                live.discard(cid)
+                self.stats.ended[cid] = str(item) or "stream ended"
+                self.on_event(f"camera {cid}: {self.stats.ended[cid]} after "
+                              f"{self.stats.frames[cid]} frames; going on without it"
+                              if live else f"camera {cid}: {self.stats.ended[cid]} after "
+                              f"{self.stats.frames[cid]} frames; no camera left")
+                continue
+            self.stats.frames[cid] += 1
+            if pending and (cid in pending or t - started > self.tolerance):
+                yield close()
+            if not pending:
+                started = t
+            pending[cid] = item
+            if live <= set(pending):
+                yield close()
+        if pending:
+            yield close()

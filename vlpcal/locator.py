@@ -1,0 +1,222 @@
+"""The runtime locator: a deployment's cameras and frames in, 3D fixes out.
+
+Built from a :class:`~vlpcal.deployment.Deployment`: its cameras, its detector (and settings),
+its fusion policy (region map, robust limit), its per-camera pixel corrections and its spot
+noise for the predicted uncertainty. Camera data never raises: a frame that is missing,
+corrupt, of the wrong size, dark or ambiguous becomes a status, per camera and per fix.
+
+Batch first: :meth:`Locator.locate_batch` decodes and detects every camera's frames as one
+stack and fuses all fixes at once; :meth:`Locator.locate` is the one-fix convenience.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from .deployment import Deployment
+from .detection import detect_spots
+from .fusion import OK, fuse
+from .triangulation import predicted_rms_error
+
+#: fix statuses beyond the fusion's (ok, one_camera, degenerate, no_spot): the most telling
+#: per-camera reason when no fix was possible
+FIX_STATUSES = ("ok", "one_camera", "degenerate", "corrupt_frame", "wrong_size", "too_dim",
+                "at_edge", "no_spot", "no_frames")
+#: per-camera statuses: ``ok`` or a detection reason (``no_spot``, ``too_dim``, ``at_edge``,
+#: ``corrupt_frame``, ``wrong_size``, ``missing``), or ``dropped`` (robust fusion rejected it)
+
+
+@dataclass
+class Fix:
+    """One 3D fix (metres; NaN when there is none) and why."""
+
+    frame_id: str | None
+    x: float
+    y: float
+    z: float
+    status: str
+    cameras: tuple[str, ...]  #: cameras whose spots made the fix
+    residual: dict  #: camera id → reprojection error (px, undistorted) of the fix
+    sigma: float  #: predicted RMS 3D error, m (from the spot noise and the geometry)
+    camera_status: dict  #: camera id → ok or why that camera gave nothing
+
+    @property
+    def ok(self) -> bool:
+        return self.status == OK
+
+    def row(self) -> dict:
+        """The output row: DESIGN.md's columns first."""
+        def num(v, nd):
+            return "" if not np.isfinite(v) else round(float(v), nd)
+
+        return {"frame_id": self.frame_id, "x": num(self.x, 5), "y": num(self.y, 5),
+                "z": num(self.z, 5), "status": self.status, "cameras": "+".join(self.cameras),
+                "sigma_m": num(self.sigma, 5),
+                "residual_px": num(max(self.residual.values(), default=np.nan), 3),
+                "camera_status": " ".join(f"{c}:{s}" for c, s in self.camera_status.items())}
+
+
+ROW_COLUMNS = ("frame_id", "x", "y", "z", "status", "cameras", "sigma_m", "residual_px",
+               "camera_status")
+
+
+@dataclass
+class FixBatch:
+    """Fixes for N frame sets as arrays; ``batch[i]`` gives a :class:`Fix`."""
+
+    camera_ids: list[str]
+    frame_ids: list
+    X: np.ndarray  # N×3
+    status: np.ndarray  # N (object)
+    used: np.ndarray  # C×N
+    residual: np.ndarray  # C×N px
+    sigma: np.ndarray  # N m
+    camera_status: np.ndarray  # C×N (object)
+
+    def __len__(self) -> int:
+        return len(self.X)
+
+    def __getitem__(self, i: int) -> Fix:
+        ids = self.camera_ids
+        return Fix(self.frame_ids[i], *map(float, self.X[i]), str(self.status[i]),
+                   tuple(c for k, c in enumerate(ids) if self.used[k, i]),
+                   {c: float(self.residual[k, i]) for k, c in enumerate(ids) if self.used[k, i]},
+                   float(self.sigma[i]),
+                   {c: str(self.camera_status[k, i]) for k, c in enumerate(ids)})
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))
+
+    def counts(self) -> Counter:
+        return Counter(self.status.tolist())
+
+
+class Locator:
+    """Turns frames from a deployment's cameras into 3D fixes."""
+
+    def __init__(self, deployment: Deployment):
+        self.deployment = deployment
+        self.cameras = list(deployment.cameras)
+        self.camera_ids = [c.id for c in self.cameras]
+        self.detector = deployment.detector
+        self.settings = deployment.detector_settings
+        self.fusion = deployment.fusion
+        self.pair_method = deployment.pair_method
+        self.region_map = deployment.region_map
+        self.pixel_noise = deployment.pixel_noise
+        offsets = deployment.pixel_offsets
+        self._offset = np.array([offsets.get(c, (0.0, 0.0)) for c in self.camera_ids])
+
+    @classmethod
+    def from_file(cls, path) -> Locator:
+        from .deployment import load
+
+        return cls(load(path))
+
+    def locate(self, frames: dict, frame_id=None) -> Fix:
+        """One fix from ``frames``: camera id → JPEG bytes, an image array, or None."""
+        return self.locate_batch([frames], [frame_id])[0]
+
+    def locate_batch(self, framesets, frame_ids=None) -> FixBatch:
+        """Fixes for a sequence of frame sets (each: camera id → JPEG bytes / array / None).
+
+        Camera ids the deployment does not know are ignored (count them with
+        :func:`unknown_cameras`); a camera absent from a set is ``missing``.
+        """
+        framesets = list(framesets)
+        uv = np.full((len(self.cameras), len(framesets), 2), np.nan)
+        status = np.empty((len(self.cameras), len(framesets)), object)
+        for k, cam in enumerate(self.cameras):
+            frames = [fs.get(cam.id) for fs in framesets]
+            spots = detect_spots(frames, self.detector, self.settings,
+                                 shape=(cam.height, cam.width))
+            uv[k] = spots.uv
+            status[k] = [r or OK for r in spots.reasons]
+        return self.locate_pixels(uv, status, frame_ids)
+
+    def locate_pixels(self, uv, camera_status=None, frame_ids=None) -> FixBatch:
+        """Fixes from spots already found: ``uv`` C×N×2 px in the deployment's camera order
+        (NaN: not seen), e.g. from cameras that report spots themselves."""
+        uv = np.asarray(uv, dtype=float) - self._offset[:, None, :]
+        C, N = uv.shape[:2]
+        if camera_status is None:
+            camera_status = np.where(np.isfinite(uv).all(axis=2), OK, "no_spot").astype(object)
+        res = fuse(self.cameras, uv, self.fusion, region_map=self.region_map,
+                   pair_method=self.pair_method)
+        sigma = predicted_rms_error(self.cameras, res.X, res.used, self.pixel_noise)
+        status = res.status.copy()
+        seen = np.isfinite(uv).all(axis=2)
+        dropped = seen & ~res.used & np.isfinite(res.X).all(axis=1)[None, :]
+        if self.fusion == "robust":
+            camera_status = np.where(dropped, "dropped", camera_status)
+        # without a fix, say the most telling reason the cameras gave
+        for reason in ("too_dim", "at_edge", "wrong_size", "corrupt_frame"):
+            hit = (status == "no_spot") & (camera_status == reason).any(axis=0)
+            status[hit] = reason
+        status[(status == "no_spot") & (camera_status == "missing").all(axis=0)] = "no_frames"
+        ids = list(frame_ids) if frame_ids is not None else [None] * N
+        return FixBatch(self.camera_ids, ids, res.X, status, res.used, res.residual, sigma,
+                        camera_status)
+
+    def unknown_cameras(self, framesets) -> Counter:
+        """How often each camera id the deployment does not know appears in ``framesets``."""
+        known = set(self.camera_ids)
+        return Counter(c for fs in framesets for c in fs if c not in known)
+
+
+class FixWriter:
+    """Fix rows to CSV or JSON lines, to a file (atomically: a temporary file, renamed on
+    :meth:`close`) or to stdout (``-``, flushed row by row so it pipes into other tools)."""
+
+    def __init__(self, path: str, fmt: str | None = None, extra_columns=()):
+        import os
+        import sys
+        import tempfile
+
+        self.fmt = fmt or ("jsonl" if str(path).endswith((".jsonl", ".json")) else "csv")
+        self.columns = ROW_COLUMNS + tuple(extra_columns)
+        self.path = path
+        if path == "-":
+            self._tmp, self._f = None, sys.stdout
+        else:
+            folder = os.path.dirname(os.path.abspath(path))
+            fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", dir=folder)
+            self._f = os.fdopen(fd, "w", newline="")
+        if self.fmt == "csv":
+            import csv
+
+            self._csv = csv.DictWriter(self._f, fieldnames=self.columns, extrasaction="ignore")
+            self._csv.writeheader()
+
+    def write(self, fixes, extra: dict | None = None) -> None:
+        import json
+
+        for fix in fixes:
+            row = {**fix.row(), **(extra or {})}
+            if self.fmt == "csv":
+                self._csv.writerow(row)
+            else:
+                self._f.write(json.dumps({k: (None if row.get(k) == "" else row.get(k))
+                                          for k in self.columns}) + "\n")
+        self._f.flush()
+
+    def close(self) -> None:
+        """Finish the file and move it into place (also after an interruption: what was
+        located so far is kept)."""
+        import os
+
+        if self._tmp is None:
+            self._f.flush()
+            return
+        self._f.close()
+        os.replace(self._tmp, self.path)
+
+    def abort(self) -> None:
+        import os
+
+        if self._tmp is not None:
+            self._f.close()
+            os.unlink(self._tmp)
