@@ -44,6 +44,21 @@ def table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
     return "\n".join(lines)
 
 
+def _plain(value):
+    """JSON-safe: NaN and infinities become null (strict JSON has no NaN), numpy → Python."""
+    import math
+
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def write_json(name: str, payload: dict) -> Path:
     """Write ``benchmarks/out/<name>.json`` atomically, with the machine it ran on."""
     import cv2
@@ -55,6 +70,6 @@ def write_json(name: str, payload: dict) -> Path:
                            platform.machine()}, **payload}
     path = OUT / f"{name}.json"
     tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(payload, indent=2))
+    tmp.write_text(json.dumps(_plain(payload), indent=2, allow_nan=False))
     tmp.replace(path)
     return path

@@ -45,7 +45,8 @@ def _floats(text: str) -> list[float]:
 @main.command()
 @click.option("--profile", "profile_name", default="paper-2024", show_default=True,
               help="Simulation profile: paper-2024, cheap-wide or qvga.")
-@click.option("--seed", default=0, show_default=True, help="Seed of the install and frames.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0),
+              help="Seed of the install and frames.")
 @click.option("--out", type=click.Path(file_okay=False), required=False,
               help="Folder to write (created; must not exist unless --overwrite).")
 @click.option("--survey-step", default=0.3, show_default=True, type=click.FloatRange(0.05, 2.0),
@@ -99,10 +100,24 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise click.UsageError(f"{out} exists and is not empty (use --overwrite to replace)")
     heights = _floats(survey_heights)
+    top = profile.ceiling_height - 0.5
+    if not heights or any(not 0 <= h <= top for h in heights):
+        raise click.BadParameter(f"expected LED heights from 0 to {top:g} m (0.5 m under the "
+                                 f"ceiling), got {survey_heights!r}",
+                                 param_hint="--survey-heights")
     scene = make_scene(profile, seed)
-    out.mkdir(parents=True, exist_ok=True)
-    nominal, truth = write_deployments(scene, out)
     pts = grid_points(scene, survey_step, heights)
+    if not len(pts):
+        raise click.BadParameter("no camera sees any point of that survey grid",
+                                 param_hint="--survey-step")
+    out.mkdir(parents=True, exist_ok=True)
+    # --overwrite replaces what this command writes, all of it (never anything else)
+    import shutil
+
+    for name in ("survey", "frames"):
+        shutil.rmtree(out / name, ignore_errors=True)
+    (out / "frames.truth.csv").unlink(missing_ok=True)
+    nominal, truth = write_deployments(scene, out)
     simulate_survey(scene, out / "survey", pts, seed=seed, overwrite=True)
     click.echo(f"{profile.name} (seed {seed}): {nominal}, {truth}")
     click.echo(f"survey: {len(pts)} points at h = {', '.join(map(str, heights))} m "

@@ -36,12 +36,15 @@ class DatasetError(ValueError):
 
 def natural_key(text: str):
     """Sort key that orders ``P2`` before ``P10`` (ids sorted as text lose their order)."""
-    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
+    return [int(t) if t.isdigit() and t.isascii() else t for t in re.split(r"([0-9]+)", text)]
 
 
 def _check_id(value: str, where: str) -> str:
-    if not value or value in (".", "..") or "/" in value or "\\" in value:
-        raise DatasetError(f"{where}: expected an id usable as a folder name, got {value!r}")
+    """An id that can name a folder or file: no slashes, no leading dot, no edge spaces."""
+    if not value or value.startswith(".") or value != value.strip() or "/" in value \
+            or "\\" in value:
+        raise DatasetError(f"{where}: expected an id usable as a folder name (no slashes, no "
+                           f"leading dot or spaces), got {value!r}")
     return value
 
 
@@ -57,7 +60,7 @@ def _finite(text: str, where: str) -> float:
 
 def _read_csv(path: Path, columns: tuple) -> list[dict]:
     try:
-        with open(path, newline="") as f:
+        with open(path, newline="", encoding="utf-8-sig") as f:  # -sig: Excel's BOM
             reader = csv.DictReader(f)
             header = [h.strip() for h in (reader.fieldnames or [])]
             reader.fieldnames = header
@@ -70,6 +73,12 @@ def _read_csv(path: Path, columns: tuple) -> list[dict]:
     if missing:
         raise DatasetError(f"{path}: missing column {missing[0]!r} (expected columns "
                            f"{','.join(columns)})")
+    twice = sorted({h for h in header if header.count(h) > 1})
+    if twice:
+        raise DatasetError(f"{path}: column {twice[0]!r} appears twice")
+    for n, row in enumerate(rows, start=2):
+        if None in row:
+            raise DatasetError(f"{path} line {n}: more cells than columns")
     return rows
 
 
@@ -88,7 +97,11 @@ def _publish(tmp: Path, root: Path, overwrite: bool) -> None:
             raise DatasetError(f"{root}: already exists (choose another folder or overwrite)")
         old = root.with_name(f".{root.name}.old-{os.getpid()}")
         os.replace(root, old)
-        os.replace(tmp, root)
+        try:
+            os.replace(tmp, root)
+        except BaseException:
+            os.replace(old, root)  # put the previous folder back
+            raise
         shutil.rmtree(old, ignore_errors=True)
     else:
         os.replace(tmp, root)
@@ -96,11 +109,25 @@ def _publish(tmp: Path, root: Path, overwrite: bool) -> None:
 
 def _staging(root: Path) -> Path:
     root.parent.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
+    tmp.chmod(0o755)  # mkdtemp makes it private; the result is an ordinary folder
+    return tmp
 
 
 def _fmt(x: float) -> str:
     return repr(round(float(x), 9))
+
+
+def _check_lengths(per_camera: dict | None, n: int, what: str) -> None:
+    if not per_camera:
+        return
+    names = [str(c) for c in per_camera]
+    if len(set(names)) != len(names):
+        raise DatasetError(f"{what}: camera ids collide as text ({', '.join(names)})")
+    for cam, items in per_camera.items():
+        _check_id(str(cam), f"{what} camera id")
+        if len(items) != n:
+            raise DatasetError(f"{what} of camera {cam}: {len(items)} entries for {n} ids")
 
 
 # -- survey bundles ------------------------------------------------------------------------------
@@ -137,6 +164,11 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
     ids = [_check_id(str(p), f"point {i}") for i, p in enumerate(point_ids)]
     if len(set(ids)) != len(ids):
         raise DatasetError("point ids must be unique")
+    if not ids or xyz.shape != (len(ids), 3) or not np.isfinite(xyz).all():
+        raise DatasetError(f"a survey needs N ≥ 1 finite positions N×3 for its {len(ids)} "
+                           f"point ids, got {xyz.shape}")
+    _check_lengths(frames, len(ids), "frames")
+    _check_lengths(observations, len(ids), "observations")
     tmp = _staging(root)
     try:
         _write_csv(tmp / "points.csv", POINTS_COLUMNS,
@@ -241,6 +273,7 @@ def write_frames_folder(root, frame_ids, frames: dict, overwrite: bool = False) 
     ids = [_check_id(str(f), f"frame {i}") for i, f in enumerate(frame_ids)]
     if len(set(ids)) != len(ids):
         raise DatasetError("frame ids must be unique")
+    _check_lengths(frames, len(ids), "frames")
     tmp = _staging(root)
     try:
         for fid in ids:
@@ -270,7 +303,8 @@ def read_frames_folder(root) -> FramesFolder:
                 cams.add(f.stem)
     if not ids:
         raise DatasetError(f"{root}: no frame folders (expected <frame_id>/<camera_id>.jpg)")
-    return FramesFolder(root, sorted(ids, key=natural_key), sorted(cams, key=natural_key), files)
+    order = lambda t: (natural_key(t), t)  # noqa: E731  (ties such as 1 and 01: by text)
+    return FramesFolder(root, sorted(ids, key=order), sorted(cams, key=order), files)
 
 
 def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:
@@ -278,6 +312,11 @@ def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     os.close(fd)
-    _write_csv(Path(tmp), (id_column, "x", "y", "z"),
-               [[i, *map(_fmt, p)] for i, p in zip(ids, np.asarray(xyz, float))])
-    os.replace(tmp, path)
+    try:
+        _write_csv(Path(tmp), (id_column, "x", "y", "z"),
+                   [[i, *map(_fmt, p)] for i, p in zip(ids, np.asarray(xyz, float))])
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -100,22 +100,27 @@ class Deployment:
         raise KeyError(camera_id)
 
     def to_dict(self) -> dict:
-        return {
+        doc = {
             "format": FORMAT, "version": VERSION,
             "site": {"name": self.name, "ceiling_height": float(self.ceiling_height),
                      "room": [[float(x), float(y)] for x, y in self.room],
                      "keep_out": [[[float(x), float(y)] for x, y in poly]
                                   for poly in self.keep_out]},
             "cameras": [c.to_dict() for c in self.cameras],
-            **self.extra,
         }
+        doc.update({k: v for k, v in self.extra.items() if k not in doc})
+        return doc
 
 
 def _number(value, where: str, *, positive: bool = False, integer: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise DeploymentError(f"{where}: expected a number, got {value!r}")
-    if not math.isfinite(value):
-        raise DeploymentError(f"{where}: expected a finite number, got {value!r}")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:
+        finite = False
+    if not finite:
+        raise DeploymentError(f"{where}: expected a finite number, got {str(value)[:20]}")
     if integer and int(value) != value:
         raise DeploymentError(f"{where}: expected a whole number, got {value!r}")
     if positive and value <= 0:
@@ -155,7 +160,7 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             fail(f"expected a mapping with format: {FORMAT}, got {type(doc).__name__}")
         if doc.get("format") != FORMAT:
             fail(f"format: expected {FORMAT!r}, got {doc.get('format')!r}")
-        if doc.get("version") != VERSION:
+        if type(doc.get("version")) is not int or doc.get("version") != VERSION:
             fail(f"version: expected {VERSION}, got {doc.get('version')!r} (this vlpcal reads "
                  f"version {VERSION})")
         for key in ("site", "cameras"):
@@ -167,9 +172,12 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
         for key in ("name", "ceiling_height", "room"):
             if key not in site:
                 fail(f"site.{key}: missing")
+        if not isinstance(site["name"], str) or not site["name"].strip():
+            fail(f"site.name: expected a non-empty text, got {site['name']!r}")
         height = _number(site["ceiling_height"], "site.ceiling_height", positive=True)
         room = _polygon(site["room"], "site.room")
-        keep_out = site.get("keep_out") or []
+        keep_out = site.get("keep_out")
+        keep_out = [] if keep_out is None else keep_out
         if not isinstance(keep_out, list):
             fail("site.keep_out: expected a list of polygons")
         keep_out = [_polygon(p, f"site.keep_out[{i}]") for i, p in enumerate(keep_out)]
@@ -187,7 +195,13 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             unknown = sorted(set(c) - set(CAMERA_KEYS))
             if unknown:
                 fail(f"{where}.{unknown[0]}: unknown key (expected {', '.join(CAMERA_KEYS)})")
-            cid = str(c["id"])
+            cid = c["id"]
+            if isinstance(cid, bool) or not isinstance(cid, (str, int)) or not str(cid).strip() \
+                    or str(cid) != str(cid).strip() or str(cid).startswith(".") \
+                    or any(ch in str(cid) for ch in "/\\"):
+                fail(f"{where}.id: expected a camera name usable as a file name (no slashes, "
+                     f"no leading dot or spaces), got {cid!r}")
+            cid = str(cid)
             if cid in seen:
                 fail(f"{where}.id: duplicate camera id {cid!r}")
             seen.add(cid)
@@ -292,9 +306,11 @@ def load(path) -> Deployment:
 
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise DeploymentError(f"{path}: cannot read ({e.strerror})") from None
+    except UnicodeDecodeError:
+        raise DeploymentError(f"{path}: not UTF-8 text (expected a YAML file)") from None
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as e:
@@ -309,10 +325,11 @@ def atomic_write_text(path, text: str) -> None:
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
     try:
-        with os.fdopen(fd, "w") as f:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -324,13 +341,13 @@ def save(deployment: Deployment, path, header: str = "") -> None:
     import yaml
 
     doc = deployment.to_dict()
+    from_dict(doc, f"{path} (not written)")  # never write a file that would not load
     cams = doc.pop("cameras")
     text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
     lines = ["cameras:"] + [
         "  - " + yaml.safe_dump(c, sort_keys=False, default_flow_style=True, width=10_000).strip()
         for c in cams]
-    body = text.split("\n", 2)  # format, version first
-    out = "\n".join(body[:2]) + "\n" + body[2] + "\n".join(lines) + "\n"
+    out = text + "\n".join(lines) + "\n"
     if header:
         out = "".join(f"# {line}\n" for line in header.splitlines()) + out
     atomic_write_text(path, out)

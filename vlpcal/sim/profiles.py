@@ -95,8 +95,8 @@ def cheap_wide() -> Profile:
         errors=InstallErrors(position=0.02, height=0.015, tilt=1.2 * DEG, yaw=1.0 * DEG,
                              focal=0.03, aspect=0.0135, principal=4.0, k1=(-0.28, 0.04),
                              k2=(0.08, 0.02), tangential=0.001),
-        look=Appearance(led_peak=260.0, reference_distance=2.8, psf_sigma=0.9, psf_growth=1.0,
-                        vignetting=0.8, background=24.0, gradient=(0.05, -0.03),
+        look=Appearance(led_peak=500.0, reference_distance=2.8, psf_sigma=0.9, psf_growth=0.6,
+                        vignetting=0.6, background=24.0, gradient=(0.05, -0.03),
                         read_noise=2.5, shot_gain=0.1, jpeg_quality=60, reflection=0.25,
                         reflection_blur=2.0, lamp=(4.6, 3.7, 0.0, 320.0, 5.0)),
         tape=0.005,
@@ -106,9 +106,12 @@ def cheap_wide() -> Profile:
             "k1, k2": "FIELD-NOTES: cheap wide lenses k1 ≈ −0.1 to −0.3 (OpenCV sample −0.27); "
                       "k2 +0.08 as in OpenCV's sample",
             "tilt": "the issue: 1–2° of tilt when hung without care: 1.2° per axis "
-                    "(1.7° in total on average)",
+                    "(1.5° in total on average, 1.7° RMS)",
             "position, height, yaw": "hung from a ceiling grid: ±2 cm, ±1.5 cm, ±1°",
             "principal": "FIELD-NOTES: 1–7 % of the image size: 4 px",
+            "led_peak, psf, vignetting": "a bright LED (500 DN on the axis from 2.8 m, so that "
+                                         "it still shows ~50 DN in the corners of a 77° view); "
+                                         "blur 1.6× and vignetting 60 % at the corners",
             "reflection, lamp": "a polished floor mirroring 25 % of the LED (a stress test: an "
                                 "up-facing LED sends little light down) and a desk lamp in a "
                                 "corner: a 20 cm "
@@ -134,7 +137,8 @@ def qvga() -> Profile:
                         background=20.0, read_noise=2.0, shot_gain=0.08, jpeg_quality=70),
         tape=0.003,
         sources={**PAPER_SOURCES,
-                 "f, principal": "twice the paper's in pixels (same lens, twice the pixels)",
+                 "f": "twice the paper's: 306.6 px (same lens, twice the pixels)",
+                 "focal, principal": "0.5 %, 0.3 px: the paper's install, in twice the pixels",
                  "psf_sigma": "1.2 px: the same optical blur over twice the pixels, less "
                               "binning (400 × 296 → 320 × 240)"},
     )

@@ -15,6 +15,11 @@ from ..geometry import Camera, rodrigues, rotation_vector
 from .render import _pixel_integrals, encode_jpeg
 
 
+#: tags of the random streams, so that no two draw the same numbers (numpy drops a trailing
+#: 0 of a seed sequence: every tag is non-zero)
+STREAM_INSTALL, STREAM_FRAMES, STREAM_TAPE, STREAM_PATH = 101, 202, 303, 404
+
+
 @dataclass(frozen=True)
 class InstallErrors:
     """How far a real install is from the nominal one: 1-sigma per camera unless noted."""
@@ -93,18 +98,18 @@ def perturb(cam: Camera, e: InstallErrors, rng: np.random.Generator) -> Camera:
     R = cam.R @ rodrigues((tx, ty, yaw)).T
     f = cam.fx * (1.0 + rng.normal(0.0, e.focal))
     pc = rng.normal(0.0, e.principal, 2)
-    k1 = rng.normal(*e.k1)
-    k2 = rng.normal(*e.k2)
-    p1, p2 = rng.normal(0.0, e.tangential, 2)
+    # the lens's distortion: the nominal coefficients plus the drawn ones
+    drawn = (rng.normal(*e.k1), rng.normal(*e.k2), *rng.normal(0.0, e.tangential, 2), 0.0)
+    dist = tuple(a + b for a, b in zip(cam.dist, drawn))
     return replace(cam, fx=f, fy=f * (1.0 + e.aspect) * cam.fy / cam.fx,
-                   cx=cam.cx + pc[0], cy=cam.cy + pc[1], dist=(k1, k2, p1, p2, 0.0),
+                   cx=cam.cx + pc[0], cy=cam.cy + pc[1], dist=dist,
                    position=(cam.position[0] + dx, cam.position[1] + dy, cam.position[2] + dz),
                    rotation=rotation_vector(R))
 
 
 def make_scene(profile: Profile, seed: int = 0) -> Scene:
     """Draw a true install of ``profile`` (deterministic for ``seed``)."""
-    rng = np.random.default_rng([seed, 1])
+    rng = np.random.default_rng([seed, STREAM_INSTALL])
     true = tuple(perturb(c, profile.errors, rng) for c in profile.nominal)
     return Scene(profile, true, tuple(profile.nominal), seed)
 
@@ -135,18 +140,20 @@ def _spots(n, h, w, u, v, sigma, amp) -> np.ndarray:
 
 
 def led_brightness(cam: Camera, points: np.ndarray, look: Appearance) -> np.ndarray:
-    """Peak DN of the LED at each point: inverse square, cosᵐ emission, cos⁴ vignetting."""
+    """Light the LED at each point sends into the camera, as the peak DN of an in-focus spot:
+    inverse square of the distance, cosᵐ of the emission angle (the LED faces up), cos of the
+    angle off the optical axis (the aperture seen obliquely) and the lens's vignetting."""
     d = cam.center - points
     dist = np.linalg.norm(d, axis=1)
     cos_emit = np.clip(d[:, 2] / dist, 0.0, 1.0)
     cos_cam = np.clip(-(d @ cam.axis) / dist, 0.0, 1.0)
     vig = 1.0 - look.vignetting * (1.0 - cos_cam ** 4)
     return look.led_peak * (look.reference_distance / dist) ** 2 \
-        * cos_emit ** look.emission_order * vig
+        * cos_emit ** look.emission_order * cos_cam * vig
 
 
-def render_camera(cam: Camera, points, look: Appearance, rng: np.random.Generator,
-                  distractors: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Colour frames (``N×H×W×3`` uint8, BGR) of the LED at each point as ``cam`` sees it.
 
     Returns the frames and whether the LED's centre is in the image. The LED is a pixel-
@@ -159,8 +166,12 @@ def render_camera(cam: Camera, points, look: Appearance, rng: np.random.Generato
     uv = np.where(front[:, None], uv, np.nan)
     r2 = ((uv[:, 0] - cam.cx) / (w / 2)) ** 2 + ((uv[:, 1] - cam.cy) / (h / 2)) ** 2
     sigma = look.psf_sigma * (1.0 + look.psf_growth * np.clip(r2, 0, 2) / 2)
-    amp = np.where(front, led_brightness(cam, points, look), 0.0)
-    near = front & (uv[:, 0] > -4 * sigma) & (uv[:, 0] < w - 1 + 4 * sigma) \
+    # a blurred spot spreads the same light: its peak falls as 1/σ²
+    amp = np.where(front, led_brightness(cam, points, look), 0.0) * (look.psf_sigma / sigma) ** 2
+    xc = cam.to_camera(points)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        in_lens = (xc[:, 0] ** 2 + xc[:, 1] ** 2) / xc[:, 2] ** 2 < cam.max_radius2
+    near = front & in_lens & (uv[:, 0] > -4 * sigma) & (uv[:, 0] < w - 1 + 4 * sigma) \
         & (uv[:, 1] > -4 * sigma) & (uv[:, 1] < h - 1 + 4 * sigma)
     amp = np.where(near, amp, 0.0)
     led = _spots(n, h, w, uv[:, 0], uv[:, 1], sigma, amp)
@@ -169,7 +180,7 @@ def render_camera(cam: Camera, points, look: Appearance, rng: np.random.Generato
         # the LED's mirror image in the floor, dimmer and blurred by the floor's roughness
         mirror = points * [1.0, 1.0, -1.0]
         muv, mfront, _ = cam.project(mirror)
-        mamp = np.where(mfront, led_brightness(cam, points, look) * look.reflection, 0.0)
+        mamp = np.where(mfront, amp * look.reflection, 0.0)
         extra += _spots(n, h, w, muv[:, 0], muv[:, 1], sigma * look.reflection_blur, mamp)
     if distractors and look.lamp is not None:
         x, y, z, peak, lsig = look.lamp
@@ -181,10 +192,12 @@ def render_camera(cam: Camera, points, look: Appearance, rng: np.random.Generato
     base = (look.background + look.gradient[0] * (u - w / 2) + look.gradient[1] * (v - h / 2)) \
         * _vignette(cam, look.vignetting)
     frames = np.empty((n, h, w, 3), np.uint8)
+    # each frame's noise from its own stream: a frame does not depend on its neighbours
+    normal = np.stack([g.standard_normal((h, w, 3)) for g in rngs])
     for c in range(3):
         signal = base[None] * look.background_colour[c] + (led + extra) * look.led_colour[c]
         noise_sd = np.sqrt(look.read_noise ** 2 + look.shot_gain * np.maximum(signal, 0.0))
-        signal = signal + rng.standard_normal(signal.shape) * noise_sd
+        signal = signal + normal[..., c] * noise_sd
         frames[..., c] = np.clip(np.rint(signal), 0, 255)
     return frames, inside
 
@@ -194,16 +207,18 @@ def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
     """JPEG frames of an LED at each world point ``N×3`` from every true camera.
 
     Returns ``(frames, seen)``: camera id → one JPEG per point, and ``C×N`` whether the LED's
-    centre was inside each camera's image. Deterministic for (scene, points, seed).
+    centre was inside each camera's image. Deterministic for (scene, points, seed); frame i
+    depends only on point i, its index and the seed.
     """
     points = np.atleast_2d(np.asarray(points, float))
     look = scene.profile.look
     frames, seen = {}, []
     for k, cam in enumerate(scene.true):
-        rng = np.random.default_rng([scene.seed, seed, k])
         jpegs, inside = [], []
         for s in range(0, len(points), chunk):
-            imgs, ins = render_camera(cam, points[s:s + chunk], look, rng, distractors)
+            rngs = [np.random.default_rng([scene.seed, seed, STREAM_FRAMES, k + 1, i + 1])
+                    for i in range(s, min(s + chunk, len(points)))]
+            imgs, ins = render_camera(cam, points[s:s + chunk], look, rngs, distractors)
             jpegs += [encode_jpeg(f, look.jpeg_quality) for f in imgs]
             inside.append(ins)
         frames[cam.id] = jpegs

@@ -11,7 +11,7 @@ import numpy as np
 from .. import __version__
 from ..datasets import write_frames_folder, write_survey_bundle, write_truth_csv
 from ..deployment import Deployment, save
-from .scene import Scene, render_scene
+from .scene import STREAM_PATH, STREAM_TAPE, Scene, render_scene
 
 
 def grid_points(scene: Scene, step: float, heights, margin: float = 0.05,
@@ -35,7 +35,7 @@ def trajectory(scene: Scene, n: int, height: float = 0.15, seed: int = 0) -> np.
     """A robot's LED path: a smooth closed loop inside the room at ``height`` (``n×3``)."""
     from shapely.geometry import Polygon
 
-    rng = np.random.default_rng([scene.seed, seed, 7])
+    rng = np.random.default_rng([scene.seed, seed, STREAM_PATH])
     x0, y0, x1, y1 = Polygon(scene.profile.room).buffer(-0.3).bounds
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)
     a, b = rng.uniform(1, 3, 2).round()
@@ -76,7 +76,7 @@ def simulate_survey(scene: Scene, root, points, seed: int = 0, overwrite: bool =
     Returns the measured positions."""
     points = np.asarray(points, float)
     frames, seen = render_scene(scene, points, seed=seed)
-    rng = np.random.default_rng([scene.seed, seed, 3])
+    rng = np.random.default_rng([scene.seed, seed, STREAM_TAPE])
     measured = points + rng.normal(0.0, scene.profile.tape, points.shape)
     ids = [f"S{i + 1:04d}" for i in range(len(points))]
     kept = {cid: [f if s else None for f, s in zip(jpegs, seen[k])]
