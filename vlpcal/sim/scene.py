@@ -14,7 +14,6 @@ import numpy as np
 from ..geometry import Camera, rodrigues, rotation_vector
 from .render import _pixel_integrals, encode_jpeg
 
-
 #: tags of the random streams, so that no two draw the same numbers (numpy drops a trailing
 #: 0 of a seed sequence: every tag is non-zero)
 STREAM_INSTALL, STREAM_FRAMES, STREAM_TAPE, STREAM_PATH = 101, 202, 303, 404
