@@ -179,16 +179,13 @@ def as_gray(image) -> np.ndarray | None:
 
 # -- shared steps (vectorised over a stack) ----------------------------------------------------
 
-def _noise(stack: np.ndarray) -> np.ndarray:
-    """Per-frame noise sigma (DN) from a 1-in-16 pixel subsample.
-
-    The median absolute difference of horizontally adjacent pixels (over √2): a smooth
-    background gradient does not inflate it. Floor of 1 DN (8-bit quantisation and JPEG
-    smoothing make smaller estimates meaningless).
-    """
-    a = stack[:, ::4, 0:-1:4].reshape(len(stack), -1).astype(np.float32)
-    b = stack[:, ::4, 1::4].reshape(len(stack), -1).astype(np.float32)
-    return np.maximum(1.4826 * np.median(np.abs(b - a), axis=1) / np.sqrt(2.0), 1.0).astype(float)
+def _noise(ring: np.ndarray) -> np.ndarray:
+    """Per-frame noise sigma (DN) from the ring of pixels around the spot (``N×K``, in order
+    around the ring): the median absolute difference of neighbours on the ring over √2, which
+    a smooth background gradient does not inflate. Floor of 1 DN (8-bit quantisation and JPEG
+    smoothing make smaller estimates meaningless)."""
+    diff = np.abs(np.diff(ring, axis=1))
+    return np.maximum(1.4826 * np.median(diff, axis=1) / np.sqrt(2.0), 1.0).astype(float)
 
 
 #: half size of the square ring (15×15) whose median is the background under the spot
@@ -202,10 +199,9 @@ def _peak(stack: np.ndarray, s: DetectorSettings):
     gradient or vignetting across the frame neither hides a spot nor invents one.
     """
     r, c, peak = _argmax(stack)
-    win, _, _ = _windows(stack, r, c, _RING)
-    ring = np.concatenate([win[:, 0, :], win[:, -1, :], win[:, 1:-1, 0], win[:, 1:-1, -1]], 1)
+    ring = _ring(stack, r, c, _RING)
     bg = np.median(ring, axis=1)
-    sigma = _noise(stack)
+    sigma = _noise(ring)
     return r, c, peak, bg, sigma, _classify(peak, bg, sigma, s)
 
 
@@ -221,9 +217,10 @@ def _neighbours(stack, r, c):
     """Brightest pixel's 4-neighbours (P1 left, P2 right, P3 up, P4 down), clamped at the edge."""
     n, h, w = stack.shape
     i = np.arange(n)
-    f = stack.astype(float) if stack.dtype != float else stack
-    return (f[i, r, np.maximum(c - 1, 0)], f[i, r, np.minimum(c + 1, w - 1)],
-            f[i, np.maximum(r - 1, 0), c], f[i, np.minimum(r + 1, h - 1), c])
+    return (stack[i, r, np.maximum(c - 1, 0)].astype(float),
+            stack[i, r, np.minimum(c + 1, w - 1)].astype(float),
+            stack[i, np.maximum(r - 1, 0), c].astype(float),
+            stack[i, np.minimum(r + 1, h - 1), c].astype(float))
 
 
 def _vertex(p1, p, p2, printed: bool = False):
@@ -239,6 +236,44 @@ def _vertex(p1, p, p2, printed: bool = False):
         off = np.where(den > 0, (p2 - p1) / den, 0.0)
     limit = 1.0 if printed else 0.5
     return np.clip(off, -limit, limit)
+
+
+@cache
+def _ring_offsets(half: int, h: int, w: int):
+    """Row and column offsets of the border of a (2h+1)² window from its top-left corner,
+    in order around it (neighbours on the ring are neighbours in the frame)."""
+    sy, sx = min(2 * half + 1, h), min(2 * half + 1, w)
+    top = [(0, x) for x in range(sx)]
+    right = [(y, sx - 1) for y in range(1, sy)]
+    bottom = [(sy - 1, x) for x in range(sx - 2, -1, -1)]
+    left = [(y, 0) for y in range(sy - 2, 0, -1)]
+    dy, dx = np.array(top + right + bottom + left).T
+    return dy, dx
+
+
+def _ring(stack: np.ndarray, r, c, half: int) -> np.ndarray:
+    """``N×K`` values on the border of the window :func:`_windows` would cut (as float)."""
+    n, h, w = stack.shape
+    size = 2 * half + 1
+    r0 = np.clip(r - half, 0, max(h - size, 0))
+    c0 = np.clip(c - half, 0, max(w - size, 0))
+    dy, dx = _ring_offsets(half, h, w)
+    return stack[np.arange(n)[:, None], r0[:, None] + dy, c0[:, None] + dx].astype(np.float32)
+
+
+def _outside_max(stack: np.ndarray, r, c, half: int) -> np.ndarray:
+    """Each frame's maximum outside the inner (2h−1)² of the window :func:`_windows` cuts
+    around (r, c): its rim and the rest of the frame (a copy, an index, a max: no threshold
+    image of the whole frame)."""
+    n, h, w = stack.shape
+    size = 2 * half + 1
+    r0 = np.clip(r - half, 0, max(h - size, 0)) + 1
+    c0 = np.clip(c - half, 0, max(w - size, 0)) + 1
+    inner = np.arange(max(min(size, h, w) - 2, 0))
+    rest = stack.copy()
+    rest[np.arange(n)[:, None, None], (r0[:, None] + inner)[:, :, None],
+         (c0[:, None] + inner)[:, None, :]] = 0
+    return rest.reshape(n, -1).max(axis=1).astype(float)
 
 
 def _windows(stack: np.ndarray, r, c, half: int):
@@ -437,33 +472,32 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     on the frame's border (``at_edge``).
     """
     n, h, w = stack.shape
-    look, r0, c0 = _windows(stack, r, c, 5)
     # an unsaturated spot's window reaches _REACH σ, σ from the log-curvature at its peak;
     # the sharper axis counts, as a reflection's flank flattens the curvature on its side only
     p1, p2, p3, p4 = _neighbours(stack, r, c)
-    lo = np.median(np.concatenate([look[:, 0], look[:, -1], look[:, :, 0], look[:, :, -1]], 1),
-                   axis=1)
+    lo = np.median(_ring(stack, r, c, 5), axis=1)  # the background around an 11×11 look
+    peak = stack[np.arange(n), r, c].astype(float)
 
     def lg(x):
         return np.log(np.maximum(x - lo, 0.5))
 
-    lp = lg(look.max(axis=(1, 2)))
+    lp = lg(peak)
     curv = np.maximum(2 * lp - lg(p1) - lg(p2), 2 * lp - lg(p3) - lg(p4))
     half = np.ceil(_REACH / np.sqrt(np.maximum(curv, 1e-3)) - 1e-9)
     rc, cc = r.copy(), c.copy()
     # a saturated spot: centre on its flat top, the pixels above 80 % of its height connected
     # to (r, c) (JPEG ringing leaves saturated pixels anywhere from ~210 to 255)
-    peak = look.max(axis=(1, 2))
     sat = np.flatnonzero(peak >= s.saturation)
     if len(sat):
+        look, r0, c0 = _windows(stack[sat], r[sat], c[sat], 5)
         level = (lo + 0.8 * (peak - lo))[sat, None, None]
-        flat = _grow(look[sat] >= level, r[sat] - r0[sat], c[sat] - c0[sat])
+        flat = _grow(look >= level, r[sat] - r0, c[sat] - c0)
         yy, xx = np.mgrid[0:look.shape[1], 0:look.shape[2]]
         cnt = flat.sum(axis=(1, 2))
-        cu = c0[sat] + (flat * xx).sum(axis=(1, 2)) / cnt
-        cv = r0[sat] + (flat * yy).sum(axis=(1, 2)) / cnt
-        du = np.abs(xx + c0[sat, None, None] - cu[:, None, None])
-        dv = np.abs(yy + r0[sat, None, None] - cv[:, None, None])
+        cu = c0 + (flat * xx).sum(axis=(1, 2)) / cnt
+        cv = r0 + (flat * yy).sum(axis=(1, 2)) / cnt
+        du = np.abs(xx + c0[:, None, None] - cu[:, None, None])
+        dv = np.abs(yy + r0[:, None, None] - cv[:, None, None])
         extent = np.max(np.where(flat, np.maximum(du, dv), 0.0), axis=(1, 2))
         half[sat] = np.ceil(extent) + 3
         rc[sat], cc[sat] = np.rint(cv).astype(int), np.rint(cu).astype(int)
@@ -505,10 +539,7 @@ def _detect_blob(stack, s: DetectorSettings) -> SpotBatch:
     n, h, w = stack.shape
     r, c, peak, bg, sigma, code = _peak(stack, s)
     thr = bg + np.maximum(s.threshold * (peak - bg), 3.0 * sigma)
-    above = stack > thr[:, None, None]
-    win, _, _ = _windows(above, r, c, s.window)
-    inner = win[:, 1:-1, 1:-1].sum(axis=(1, 2))
-    lone = above.sum(axis=(1, 2)) == inner  # nothing above T outside, nor on the window's rim
+    lone = _outside_max(stack, r, c, s.window) <= thr  # nothing above T but in the window
     blobs = np.ones(n, int)
     top = peak.copy()
     for i in np.flatnonzero((code == 0) & ~lone):

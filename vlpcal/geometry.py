@@ -96,7 +96,8 @@ def max_radius2(dist) -> float:
     return min(s) if s else math.inf
 
 
-def undistort(xy_d: np.ndarray, dist, iterations: int = 20, tol: float = 1e-15) -> np.ndarray:
+def undistort(xy_d: np.ndarray, dist, iterations: int = 20, tol: float = 1e-15,
+              max_r2: float | None = None) -> np.ndarray:
     """Invert :func:`distort` by Newton's method, to machine precision.
 
     ``cv2.undistortPoints`` runs a fixed few fixed-point steps and leaves ~1e-4 of error with
@@ -122,7 +123,7 @@ def undistort(xy_d: np.ndarray, dist, iterations: int = 20, tol: float = 1e-15) 
             break
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(distort(xy, dist) - xy_d).max(axis=-1) < 1e-9) \
-            | ~((xy * xy).sum(axis=-1) < max_radius2(dist))
+            | ~((xy * xy).sum(axis=-1) < (max_radius2(dist) if max_r2 is None else max_r2))
     xy[bad] = np.nan
     return xy
 
@@ -243,7 +244,7 @@ class Camera:
         """Pixels ``N×2`` → undistorted normalised coordinates ``N×2`` (x/z, y/z in the camera)."""
         uv = np.asarray(uv, dtype=float)
         xy_d = np.stack([(uv[..., 0] - self.cx) / self.fx, (uv[..., 1] - self.cy) / self.fy], -1)
-        return undistort(xy_d, self.dist)
+        return undistort(xy_d, self.dist, max_r2=self.max_radius2)
 
     def rays(self, uv) -> np.ndarray:
         """Pixels ``N×2`` → unit world directions ``N×3`` from :attr:`center` (NaN stays NaN)."""
