@@ -262,18 +262,23 @@ def _ring(stack: np.ndarray, r, c, half: int) -> np.ndarray:
 
 
 def _outside_max(stack: np.ndarray, r, c, half: int) -> np.ndarray:
-    """Each frame's maximum outside the inner (2h−1)² of the window :func:`_windows` cuts
-    around (r, c): its rim and the rest of the frame (a copy, an index, a max: no threshold
-    image of the whole frame)."""
+    """Each frame's maximum outside the window :func:`_windows` cuts around (r, c), and on the
+    window's rim except where the rim runs along the frame's border (a spot cut by the edge of
+    the image touches it there). A copy, an index, a max: no threshold image of the frames
+    (whose reductions cost more than this)."""
     n, h, w = stack.shape
     size = 2 * half + 1
-    r0 = np.clip(r - half, 0, max(h - size, 0)) + 1
-    c0 = np.clip(c - half, 0, max(w - size, 0)) + 1
-    inner = np.arange(max(min(size, h, w) - 2, 0))
+    r0 = np.clip(r - half, 0, max(h - size, 0))
+    c0 = np.clip(c - half, 0, max(w - size, 0))
+    rows = r0[:, None] + np.arange(min(size, h))
+    cols = c0[:, None] + np.arange(min(size, w))
     rest = stack.copy()
-    rest[np.arange(n)[:, None, None], (r0[:, None] + inner)[:, :, None],
-         (c0[:, None] + inner)[:, None, :]] = 0
-    return rest.reshape(n, -1).max(axis=1).astype(float)
+    rest[np.arange(n)[:, None, None], rows[:, :, None], cols[:, None, :]] = 0
+    dy, dx = _ring_offsets(half, h, w)
+    ry, rx = r0[:, None] + dy, c0[:, None] + dx
+    rim = stack[np.arange(n)[:, None], ry, rx].astype(float)
+    rim[(ry == 0) | (ry == h - 1) | (rx == 0) | (rx == w - 1)] = 0.0
+    return np.maximum(rest.reshape(n, -1).max(axis=1), rim.max(axis=1))
 
 
 def _windows(stack: np.ndarray, r, c, half: int):
@@ -539,7 +544,7 @@ def _detect_blob(stack, s: DetectorSettings) -> SpotBatch:
     n, h, w = stack.shape
     r, c, peak, bg, sigma, code = _peak(stack, s)
     thr = bg + np.maximum(s.threshold * (peak - bg), 3.0 * sigma)
-    lone = _outside_max(stack, r, c, s.window) <= thr  # nothing above T but in the window
+    lone = _outside_max(stack, r, c, s.window) <= thr  # nothing above T elsewhere
     blobs = np.ones(n, int)
     top = peak.copy()
     for i in np.flatnonzero((code == 0) & ~lone):
