@@ -127,9 +127,10 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
     views = seen.sum(axis=0)
     used = np.zeros((C, N), bool)
     X = np.full((N, 3), np.nan)
+    residual = None
     if method in ("all", "robust"):
         tri = triangulate(cameras, uv) if method == "all" else triangulate_robust(cameras, uv)
-        X, used = tri.X, tri.used & (views >= 2)
+        X, used, residual = tri.X, tri.used & (views >= 2), tri.residual
     else:
         pairs, Xp = pair_estimates(cameras, uv, pair_method)
         valid = np.isfinite(Xp).all(axis=2)
@@ -181,5 +182,7 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
     used &= fixed[None, :]
     status = np.where(fixed, OK, np.where(views == 0, NO_SPOT,
                                           np.where(views == 1, ONE_CAMERA, DEGENERATE)))
-    residual = np.where(used, reprojection_errors(cameras, uv, X), np.nan)
+    if residual is None:  # the pair methods: measure the fused point in every camera used
+        residual = reprojection_errors(cameras, uv, X)
+    residual = np.where(used, residual, np.nan)
     return Fused(np.where(fixed[:, None], X, np.nan), status.astype(object), used, residual)

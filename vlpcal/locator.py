@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .deployment import Deployment
-from .detection import detect_spots
+from .detection import REASONS, detect_spots
 from .fusion import OK, fuse
 from .triangulation import predicted_rms_error
 
@@ -58,6 +58,9 @@ class Fix:
                 "residual_px": num(max(self.residual.values(), default=np.nan), 3),
                 "camera_status": " ".join(f"{c}:{s}" for c, s in self.camera_status.items())}
 
+
+#: camera status by detection reason code (0: the spot was found)
+_CAMERA_STATUS = np.array([OK, *REASONS], dtype=object)
 
 ROW_COLUMNS = ("frame_id", "x", "y", "z", "status", "cameras", "sigma_m", "residual_px",
                "camera_status")
@@ -128,14 +131,14 @@ class Locator:
         """
         framesets = list(framesets)
         uv = np.full((len(self.cameras), len(framesets), 2), np.nan)
-        status = np.empty((len(self.cameras), len(framesets)), object)
+        codes = np.zeros((len(self.cameras), len(framesets)), np.int8)
         for k, cam in enumerate(self.cameras):
             frames = [fs.get(cam.id) for fs in framesets]
             spots = detect_spots(frames, self.detector, self.settings,
                                  shape=(cam.height, cam.width))
             uv[k] = spots.uv
-            status[k] = [r or OK for r in spots.reasons]
-        return self.locate_pixels(uv, status, frame_ids)
+            codes[k] = spots.reason_code
+        return self.locate_pixels(uv, _CAMERA_STATUS[codes], frame_ids)
 
     def locate_pixels(self, uv, camera_status=None, frame_ids=None) -> FixBatch:
         """Fixes from spots already found: ``uv`` C×N×2 px in the deployment's camera order
@@ -153,10 +156,12 @@ class Locator:
         if self.fusion == "robust":
             camera_status = np.where(dropped, "dropped", camera_status)
         # without a fix, say the most telling reason the cameras gave
-        for reason in ("too_dim", "at_edge", "wrong_size", "corrupt_frame"):
-            hit = (status == "no_spot") & (camera_status == reason).any(axis=0)
-            status[hit] = reason
-        status[(status == "no_spot") & (camera_status == "missing").all(axis=0)] = "no_frames"
+        none = status == "no_spot"
+        if none.any():
+            for reason in ("too_dim", "at_edge", "wrong_size", "corrupt_frame"):
+                hit = none & (camera_status == reason).any(axis=0)
+                status[hit] = reason
+            status[none & (camera_status == "missing").all(axis=0)] = "no_frames"
         ids = list(frame_ids) if frame_ids is not None else [None] * N
         return FixBatch(self.camera_ids, ids, res.X, status, res.used, res.residual, sigma,
                         camera_status)
