@@ -108,18 +108,27 @@ def undistort(xy_d: np.ndarray, dist, iterations: int = 20, tol: float = 1e-15,
     if not np.any(dist):
         return xy_d.copy()
     xy = xy_d.copy()
-    finite = np.isfinite(xy_d).all(axis=-1)
+    k1, k2, p1, p2, k3 = dist
     for _ in range(iterations):
-        r = distort(xy, dist) - xy_d
-        J = distortion_jacobian(xy, dist)
-        det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+        # distort() and distortion_jacobian() in one pass (they share r² and the radial term)
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        rx = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xy_d[..., 0]
+        ry = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - xy_d[..., 1]
+        cross = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+        jxx = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
+        jyy = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
+        det = jxx * jyy - cross * cross
         with np.errstate(divide="ignore", invalid="ignore"):
-            dx = (J[..., 1, 1] * r[..., 0] - J[..., 0, 1] * r[..., 1]) / det
-            dy = (J[..., 0, 0] * r[..., 1] - J[..., 1, 0] * r[..., 0]) / det
+            dx = (jyy * rx - cross * ry) / det
+            dy = (jxx * ry - cross * rx) / det
         xy[..., 0] -= dx
         xy[..., 1] -= dy
-        step = np.abs(np.stack([dx, dy], -1))[finite]
-        if not step.size or not step.max() > tol:
+        step = np.fmax.reduce(np.abs(dx), axis=None, initial=0.0)  # NaN-blind
+        step = np.fmax(step, np.fmax.reduce(np.abs(dy), axis=None, initial=0.0))
+        if not step > tol:
             break
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(distort(xy, dist) - xy_d).max(axis=-1) < 1e-9) \
@@ -260,17 +269,23 @@ class Camera:
         """
         Xc = self.to_camera(X)
         z = np.where(Xc[..., 2] > 1e-9, Xc[..., 2], np.nan)  # behind the camera: NaN
-        xy = Xc[..., :2] / z[..., None]
-        P = np.zeros(Xc.shape[:-1] + (2, 3))
-        P[..., 0, 0] = 1.0 / z
-        P[..., 1, 1] = 1.0 / z
-        P[..., 0, 2] = -xy[..., 0] / z
-        P[..., 1, 2] = -xy[..., 1] / z
+        iz = 1.0 / z
+        x, y = Xc[..., 0] * iz, Xc[..., 1] * iz
+        # d(x, y)/d(camera point) = (1/z) [[1, 0, −x], [0, 1, −y]], then the distortion's
+        # 2×2 Jacobian D and the focal lengths, then R: written out, no batched matmuls
         if any(self.dist):
-            P = distortion_jacobian(xy, self.dist) @ P
-        P[..., 0, :] *= self.fx
-        P[..., 1, :] *= self.fy
-        return P @ self.R
+            D = distortion_jacobian(np.stack([x, y], -1), self.dist)
+            a, b, c, d = D[..., 0, 0], D[..., 0, 1], D[..., 1, 0], D[..., 1, 1]
+        else:
+            a, b, c, d = 1.0, 0.0, 0.0, 1.0
+        R = self.R
+        # rows of (1/z)[[1,0,−x],[0,1,−y]] · R, as N×3
+        g0 = iz[..., None] * (R[0] - x[..., None] * R[2])
+        g1 = iz[..., None] * (R[1] - y[..., None] * R[2])
+        J = np.empty(Xc.shape[:-1] + (2, 3))
+        J[..., 0, :] = self.fx * (np.asarray(a)[..., None] * g0 + np.asarray(b)[..., None] * g1)
+        J[..., 1, :] = self.fy * (np.asarray(c)[..., None] * g0 + np.asarray(d)[..., None] * g1)
+        return J
 
 
 def paper_camera(id: str = "C1", position=(1.2, 0.9, 2.3), rotation=NADIR) -> Camera:
