@@ -54,8 +54,12 @@ def main(argv=None) -> int:
     jpegs = [j for s in sets for j in s.values()]
     loc = Locator(deployment_of(scene, "true"))
 
-    decode = best_time(lambda: [decode_gray(j) for j in jpegs], 3) / args.sets * 1e6
-    batch = best_time(lambda: loc.locate_batch(sets), 3) / args.sets * 1e6
+    # the floor and the API alternate, best of 5 each: both see the same machine
+    decode, batch = np.inf, np.inf
+    for _ in range(5):
+        decode = min(decode, best_time(lambda: [decode_gray(j) for j in jpegs], 1))
+        batch = min(batch, best_time(lambda: loc.locate_batch(sets), 1))
+    decode, batch = decode / args.sets * 1e6, batch / args.sets * 1e6
     few = sets[:300]
     single = best_time(lambda: [loc.locate(s) for s in few], 2) / len(few) * 1e6
     fixes = loc.locate_batch(sets)

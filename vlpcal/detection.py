@@ -609,25 +609,43 @@ def _to_stack(frames, shape=None):
         return (frames if good.all() else frames[good]), codes
     n = len(frames)
     codes = np.zeros(n, np.int8)
-    images = [None] * n
+    want = tuple(shape) if shape is not None else None
+    # with the size known, decoded frames go straight into the stack; else they are collected
+    stack = np.empty((n, *want), np.uint8) if want is not None else None
+    images = {}
     for i, f in enumerate(frames):
         if f is None:
             codes[i] = _REASON_CODE[MISSING]
             continue
-        im = decode_gray(f) if isinstance(f, bytes) else as_gray(f)
+        if type(f) is bytes and f[:2] == b"\xff\xd8" and f[-2:] == b"\xff\xd9":
+            try:  # a whole JPEG: decode it here (decode_gray's checks, inlined for speed)
+                im = _cv2.imdecode(np.frombuffer(f, np.uint8), _cv2.IMREAD_GRAYSCALE)
+            except _cv2.error:
+                im = None
+        else:
+            im = decode_gray(f) if isinstance(f, (bytes, bytearray, memoryview)) else as_gray(f)
+        if stack is not None and im is not None and im.shape == want \
+                and im.dtype == stack.dtype:
+            stack[i] = im  # the common case: a decoded JPEG of the camera's size
+            continue
         if im is None or im.ndim != 2 or min(im.shape) < MIN_SIZE or (
                 im.dtype.kind == "f" and not np.isfinite(im).all()):
             codes[i] = _REASON_CODE[CORRUPT]
             continue
-        if shape is None:
-            shape = im.shape
-        if im.shape != tuple(shape):
+        want = want or im.shape
+        if im.shape != want:
             codes[i] = _REASON_CODE[WRONG_SIZE]
-            continue
-        images[i] = im
+        elif stack is not None:  # another dtype (a float frame): widen the stack once
+            stack = stack.astype(np.result_type(stack.dtype, im.dtype))
+            stack[i] = im
+        else:
+            images[i] = im
     good = codes == 0
-    stack = np.stack([im for im in images if im is not None]) if good.any() else None
-    return stack, codes
+    if not good.any():
+        return None, codes
+    if stack is None:
+        return np.stack([images[i] for i in sorted(images)]), codes
+    return (stack if good.all() else stack[good]), codes
 
 
 def detect_spots(frames, method: str = DEFAULT_DETECTOR,
