@@ -1,11 +1,15 @@
 """Survey layer: what measured LED positions teach about an install.
 
-So far: learning the paper's approach (c) — for each floor region, the camera pair that was most
+Calibrating cameras from a survey (each camera's pose, optionally its lens, then a joint
+refinement that lets each surveyed position move within its tape-measure uncertainty), and
+learning the paper's approach (c) — for each floor region, the camera pair that was most
 accurate there on the survey (section 3.3 (c): "we select the pair known to perform better
 within the specific regions ... based on prior knowledge and experimental data").
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -46,3 +50,150 @@ def learn_region_map(cameras: list[Camera], uv, X, room, cell: float = 0.3,
             continue
         regions.append((poly, (cameras[pairs[best][0]].id, cameras[pairs[best][1]].id)))
     return RegionMap(regions)
+
+
+# -- camera calibration from a survey --------------------------------------------------------
+
+class SurveyError(ValueError):
+    """The survey cannot support what was asked (one line: which camera, what is missing)."""
+
+
+#: the fewest survey points a camera must see to be posed (6 unknowns, 2 equations a point,
+#: with room to spot a wrong one)
+MIN_POINTS_POSE = 6
+#: … and to also fit focal lengths, principal point and distortion (14 unknowns)
+MIN_POINTS_INTRINSICS = 12
+
+
+@dataclass
+class CameraFit:
+    """One camera's calibration: the camera, its reprojection RMS (px) and its outliers."""
+
+    camera: Camera
+    rms_px: float
+    used: int
+    outliers: list  # point ids whose spot was rejected for this camera
+
+
+def _params(cam: Camera, intrinsics: bool) -> np.ndarray:
+    p = [*cam.rotation, *cam.position]
+    if intrinsics:
+        p += [cam.fx, cam.fy, cam.cx, cam.cy, cam.dist[0], cam.dist[1], cam.dist[2],
+              cam.dist[3]]
+    return np.array(p, float)
+
+
+def _camera(base: Camera, p: np.ndarray, intrinsics: bool) -> Camera:
+    kw = {"rotation": p[0:3], "position": p[3:6]}
+    if intrinsics:
+        kw.update(fx=p[6], fy=p[7], cx=p[8], cy=p[9], dist=(p[10], p[11], p[12], p[13], 0.0))
+    return replace(base, **kw)
+
+
+def _coplanar(X: np.ndarray) -> bool:
+    """All points (nearly) on one plane: the smallest spread under 1 cm."""
+    if len(X) < 4:
+        return True
+    s = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
+    return s[-1] / np.sqrt(len(X)) < 0.01
+
+
+def fit_camera(nominal: Camera, X, uv, ids, intrinsics: bool = False,
+               outlier_px: float = 3.0) -> CameraFit:
+    """Pose (and with ``intrinsics`` the lens) of one camera from survey points it saw.
+
+    Starts from OpenCV's SQPnP on the nominal intrinsics (so a rough or tilted nominal guess
+    does not matter), then robust least squares on the reprojection error (soft-L1 loss, 1 px
+    scale); observations more than ``outlier_px`` off after the fit are dropped and the fit
+    repeated (a wrong spot, a mis-measured point), and reported by point id.
+    """
+    import cv2
+    from scipy.optimize import least_squares
+
+    X = np.asarray(X, float)
+    uv = np.asarray(uv, float)
+    need = MIN_POINTS_INTRINSICS if intrinsics else MIN_POINTS_POSE
+    if len(X) < need:
+        raise SurveyError(f"camera {nominal.id}: sees {len(X)} survey points, needs at least "
+                          f"{need}{' to fit its lens too' if intrinsics else ''}")
+    if intrinsics and _coplanar(X):
+        raise SurveyError(f"camera {nominal.id}: its survey points all lie on one plane; "
+                          "fitting the lens needs points at two or more heights")
+    xy = nominal.normalise(uv)
+    ok, rvec, tvec = cv2.solvePnP(X.reshape(-1, 1, 3), xy.reshape(-1, 1, 2), np.eye(3),
+                                  None, flags=cv2.SOLVEPNP_SQPNP)
+    start = nominal
+    if ok and np.isfinite(rvec).all():
+        R = cv2.Rodrigues(rvec)[0]
+        start = replace(nominal, rotation=rvec.ravel(), position=-R.T @ tvec.ravel())
+        if np.median(np.linalg.norm(start.project(X)[0] - uv, axis=1)) > \
+                np.median(np.linalg.norm(nominal.project(X)[0] - uv, axis=1)):
+            start = nominal  # PnP fell into a worse minimum than the plan: keep the plan
+    keep = np.ones(len(X), bool)
+
+    def solve(cam0, mask):
+        def resid(p):
+            cam = _camera(cam0, p, intrinsics)
+            r = cam.project(X[mask])[0] - uv[mask]
+            return np.nan_to_num(r, nan=1e3).ravel()
+
+        sol = least_squares(resid, _params(cam0, intrinsics), loss="soft_l1", f_scale=1.0,
+                            x_scale="jac", max_nfev=200)
+        return _camera(cam0, sol.x, intrinsics)
+
+    cam = solve(start, keep)
+    for _ in range(3):
+        err = np.linalg.norm(cam.project(X)[0] - uv, axis=1)
+        new = ~(err > outlier_px)
+        if new.sum() < need or np.array_equal(new, keep):
+            break
+        keep = new
+        cam = solve(cam, keep)
+    err = np.linalg.norm(cam.project(X)[0] - uv, axis=1)
+    rms = float(np.sqrt(np.mean(err[keep] ** 2)))
+    return CameraFit(cam, rms, int(keep.sum()), [i for i, k in zip(ids, keep) if not k])
+
+
+def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
+                   point_sigma: float = 0.003, pixel_sigma: float = 0.1):
+    """Bundle adjustment: every camera's pose (and lens) and every surveyed position together,
+    each position free within its measurement uncertainty (``point_sigma`` m, a tape measure).
+
+    ``obs``: list per camera of (point indices, uv K×2) — the observations kept by
+    :func:`fit_camera`. Returns (cameras, adjusted positions N×3).
+    """
+    from scipy.optimize import least_squares
+    from scipy.sparse import lil_matrix
+
+    X = np.asarray(X, float)
+    n_pts = len(X)
+    npar = len(_params(cameras[0], intrinsics))
+    p0 = np.concatenate([*(_params(c, intrinsics) for c in cameras), X.ravel()])
+    n_res = sum(2 * len(idx) for idx, _ in obs) + 3 * n_pts
+    sparsity = lil_matrix((n_res, len(p0)), dtype=int)
+    row = 0
+    for k, (idx, _) in enumerate(obs):
+        for j, i in enumerate(idx):
+            sparsity[row + 2 * j:row + 2 * j + 2, k * npar:(k + 1) * npar] = 1
+            base = len(cameras) * npar + 3 * i
+            sparsity[row + 2 * j:row + 2 * j + 2, base:base + 3] = 1
+        row += 2 * len(idx)
+    for i in range(n_pts):
+        base = len(cameras) * npar + 3 * i
+        sparsity[row + 3 * i:row + 3 * i + 3, base:base + 3] = np.eye(3, dtype=int)
+
+    def resid(p):
+        pts = p[len(cameras) * npar:].reshape(-1, 3)
+        out = []
+        for k, (idx, uv) in enumerate(obs):
+            cam = _camera(cameras[k], p[k * npar:(k + 1) * npar], intrinsics)
+            r = (cam.project(pts[idx])[0] - uv) / pixel_sigma
+            out.append(np.nan_to_num(r, nan=1e4).ravel())
+        out.append(((pts - X) / point_sigma).ravel())
+        return np.concatenate(out)
+
+    sol = least_squares(resid, p0, jac_sparsity=sparsity, loss="soft_l1", f_scale=3.0,
+                        x_scale="jac", max_nfev=100)
+    cams = [_camera(c, sol.x[k * npar:(k + 1) * npar], intrinsics)
+            for k, c in enumerate(cameras)]
+    return cams, sol.x[len(cameras) * npar:].reshape(-1, 3)

@@ -290,7 +290,10 @@ def triangulate_robust(cameras: list[Camera], uv, max_residual: float = 2.0,
             trial[k] = False
             Xk = _solve(sub, trial, iterations)
             rk = _residuals(sub, Xk)
-            rms = np.sqrt(np.nanmean(np.where(trial, rk, np.nan) ** 2, axis=0))
+            sq = np.where(trial & np.isfinite(rk), rk, 0.0) ** 2
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rms = np.sqrt(sq.sum(axis=0) / (trial & np.isfinite(rk)).sum(axis=0))
+            rms = np.where(np.isfinite(rms), rms, np.inf)
             better = can & (rms < best_rms)
             best_rms[better] = rms[better]
             best_X[better] = Xk[better]
