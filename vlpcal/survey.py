@@ -197,3 +197,126 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
     cams = [_camera(c, sol.x[k * npar:(k + 1) * npar], intrinsics)
             for k, c in enumerate(cameras)]
     return cams, sol.x[len(cameras) * npar:].reshape(-1, 3)
+
+
+@dataclass
+class Calibration:
+    """The cameras fitted to a survey, and what the fit found."""
+
+    cameras: list[Camera]
+    fits: list[CameraFit]
+    adjusted: np.ndarray  # N×3 survey positions after the joint refinement
+    mismeasured: list  # (point id, how far the fit moved it, m)
+
+
+def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
+              point_sigma: float = 0.003, outlier_px: float = 3.0) -> Calibration:
+    """Calibrate every camera from the survey: ``X`` N×3 measured positions, ``uv`` C×N×2 spots
+    (NaN: not seen), ``ids`` the point ids. Per camera (:func:`fit_camera`), then jointly
+    (:func:`refine_jointly`). A point rejected by two or more of the cameras that saw it is
+    reported as mis-measured (a wrong tape reading moves it in every view)."""
+    X = np.asarray(X, float)
+    uv = np.asarray(uv, float)
+    fits, obs = [], []
+    rejected: dict = {}
+    for k, cam in enumerate(nominal):
+        seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
+        if not len(seen):
+            raise SurveyError(f"camera {cam.id}: saw none of the {len(X)} survey points "
+                              "(check its frames, its id, or where it looks)")
+        fit = fit_camera(cam, X[seen], uv[k, seen], [ids[i] for i in seen], intrinsics,
+                         outlier_px)
+        fits.append(fit)
+        out = set(fit.outliers)
+        for pid in out:
+            rejected[pid] = rejected.get(pid, 0) + 1
+        keep = np.array([i for i in seen if ids[i] not in out], int)
+        obs.append((keep, uv[k, keep]))
+    cams, adjusted = refine_jointly([f.camera for f in fits], X, obs, intrinsics, point_sigma)
+    moved = np.linalg.norm(adjusted - X, axis=1)
+    seen_by = np.isfinite(uv).all(axis=2).sum(axis=0)
+    bad = [(pid, float(moved[i])) for i, pid in enumerate(ids)
+           if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]
+    for k, (fit, cam) in enumerate(zip(fits, cams)):
+        idx, uvk = obs[k]
+        err = np.linalg.norm(cam.project(adjusted[idx])[0] - uvk, axis=1)
+        fit.camera, fit.rms_px = cam, float(np.sqrt(np.mean(err ** 2))) if len(err) else 0.0
+    return Calibration(cams, fits, adjusted, bad)
+
+
+def error_stats(err_m) -> dict:
+    """mean, median, p90, max (m) and the share of points with a fix."""
+    e = np.asarray(err_m, float)
+    ok = np.isfinite(e)
+    if not ok.any():
+        return {"mean": None, "median": None, "p90": None, "max": None, "fixed": 0.0}
+    e = e[ok]
+    return {"mean": float(e.mean()), "median": float(np.median(e)),
+            "p90": float(np.percentile(e, 90)), "max": float(e.max()), "fixed": float(ok.mean())}
+
+
+#: held-out comparisons: (label, cameras, fusion)
+HELD_OUT = (("nominal, (a) mean of pairs", "nominal", "mean"),
+            ("nominal, (b) nearest pair", "nominal", "nearest"),
+            ("nominal, all-camera LS", "nominal", "robust"),
+            ("calibrated, (a) mean of pairs", "calibrated", "mean"),
+            ("calibrated, (b) nearest pair", "calibrated", "nearest"),
+            ("calibrated, (c) region map", "calibrated", "region"),
+            ("calibrated, all-camera LS", "calibrated", "robust"))
+
+
+def held_out(nominal: list[Camera], X, uv, ids, room, intrinsics: bool = False, folds: int = 5,
+             point_sigma: float = 0.003, progress=None, seed: int = 0) -> dict:
+    """k-fold accuracy by survey point: calibrate on the other folds, locate this fold's points
+    from their spots, compare with their measured positions. Never the fitted points.
+
+    Returns label → :func:`error_stats` (metres) over all folds, for :data:`HELD_OUT`.
+    """
+    from .fusion import fuse
+
+    X = np.asarray(X, float)
+    uv = np.asarray(uv, float)
+    order = np.random.default_rng(seed).permutation(len(X))
+    parts = np.array_split(order, folds)
+    errors = {label: np.full(len(X), np.nan) for label, _, _ in HELD_OUT}
+    for f, test in enumerate(parts):
+        train = np.setdiff1d(order, test)
+        cal = calibrate(nominal, X[train], uv[:, train], [ids[i] for i in train], intrinsics,
+                        point_sigma)
+        rmap = learn_region_map(cal.cameras, uv[:, train], cal.adjusted, room)
+        for label, which, method in HELD_OUT:
+            cams = cal.cameras if which == "calibrated" else nominal
+            fixed = fuse(cams, uv[:, test], method, region_map=rmap).X
+            errors[label][test] = np.linalg.norm(fixed - X[test], axis=1)
+        if progress:
+            progress(f + 1, folds)
+    return {label: error_stats(e) for label, e in errors.items()}
+
+
+def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
+    """The survey's spots ``C×N×2`` in the deployment's camera order, and notes: from the
+    bundle's frames (the deployment's detector) or, without frames, its observations.csv."""
+    from .detection import detect_spots
+
+    ids = bundle.point_ids
+    uv = np.full((len(deployment.cameras), len(ids), 2), np.nan)
+    notes = []
+    known = {c.id for c in deployment.cameras}
+    strangers = sorted(set(bundle.camera_ids()) - known)
+    if strangers:
+        notes.append(f"ignored camera(s) {', '.join(strangers)} that the deployment lacks")
+    for k, cam in enumerate(deployment.cameras):
+        if bundle.frames:
+            frames = [bundle.frame(p, cam.id) for p in ids]
+            spots = detect_spots(frames, deployment.detector, deployment.detector_settings,
+                                 shape=(cam.height, cam.width))
+            uv[k] = spots.uv
+            bad = sum(1 for r in spots.reasons if r not in (None, "missing", "no_spot"))
+            if bad:
+                notes.append(f"camera {cam.id}: {bad} frames unusable "
+                             "(corrupt, wrong size, too dim or at the edge)")
+        else:
+            for i, p in enumerate(ids):
+                if (p, cam.id) in bundle.observations:
+                    uv[k, i] = bundle.observations[(p, cam.id)]
+    return uv, notes
