@@ -1,0 +1,125 @@
+"""Survey calibration on every simulator profile: calibrated vs true cameras vs the paper.
+
+For each profile: a simulated install; a survey (grid at h = 0, 0.35, 0.7 m, tape-measure
+noise, rendered frames) calibrated with ``vlpcal survey calibrate --intrinsics``; then test
+positions that are not survey points (another grid, offset, four heights) rendered as a frames
+folder and located three ways on the same frames: with the calibrated deployment, with the
+true cameras (the same locator), and with the paper's method on the nominal cameras (NI-P,
+pair method, the better of fusions (a) and (b)). Also the time of a 400-point calibration.
+
+Prints a table; writes benchmarks/out/survey.json.
+
+    python benchmarks/survey.py [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import _common  # noqa: F401  (one-core setup before numpy)
+import numpy as np
+from _common import table, write_json
+from click.testing import CliRunner
+
+from vlpcal import deployment
+from vlpcal.cli import main as cli
+from vlpcal.detection import detect_spots
+from vlpcal.fusion import fuse
+from vlpcal.locator import Locator
+from vlpcal.sim.profiles import PROFILES, get_profile
+from vlpcal.sim.scene import make_scene, render_scene
+from vlpcal.sim.writers import grid_points, simulate_survey, write_deployments
+
+STEP = {"paper-2024": 0.2, "cheap-wide": 0.4, "qvga": 0.2}
+
+
+def run_profile(name: str, seed: int, tmp: Path) -> dict:
+    scene = make_scene(get_profile(name), seed)
+    write_deployments(scene, tmp)
+    survey = grid_points(scene, STEP[name], (0.0, 0.35, 0.7))
+    simulate_survey(scene, tmp / "survey", survey, seed=seed)
+    t0 = time.perf_counter()
+    res = CliRunner().invoke(cli, ["survey", "calibrate", "-d", str(tmp / "nominal.yaml"),
+                                   "--survey", str(tmp / "survey"), "--out",
+                                   str(tmp / "calibrated.yaml"), "--intrinsics", "-q"])
+    secs = time.perf_counter() - t0
+    if res.exit_code != 0:
+        raise RuntimeError(res.output)
+    # test positions: another grid, offset from the survey's, four heights, ≥ 2 cameras
+    cand = grid_points(scene, 0.11, (0.0, 0.15, 0.35, 0.7), min_cameras=2) + [0.013, 0.017, 0]
+    rng = np.random.default_rng(seed)
+    test = cand[rng.choice(len(cand), min(400, len(cand)), replace=False)]
+    gap = np.min(np.linalg.norm(test[:, None, :] - survey[None], axis=2), axis=1)
+    frames, _ = render_scene(scene, test, seed=seed + 77)
+    sets = [{c: frames[c][i] for c in frames} for i in range(len(test))]
+
+    def err(loc):
+        return np.linalg.norm(loc.locate_batch(sets).X - test, axis=1)
+
+    calibrated = err(Locator(deployment.load(tmp / "calibrated.yaml")))
+    true = err(Locator(deployment.load(tmp / "truth.yaml")))
+    uv = np.stack([detect_spots(frames[c.id], "nip").uv for c in scene.nominal])
+    paper = min((np.linalg.norm(fuse(list(scene.nominal), uv, m).X - test, axis=1)
+                 for m in ("mean", "nearest")), key=np.nanmean)
+    row = {"profile": name, "survey_points": len(survey), "test_points": len(test),
+           "min_gap_cm": float(gap.min() * 100), "calibrate_s": secs,
+           "calibrated_cm": float(np.nanmean(calibrated) * 100),
+           "true_cm": float(np.nanmean(true) * 100),
+           "paper_nominal_cm": float(np.nanmean(paper) * 100),
+           "calibrated_fixed": float(np.isfinite(calibrated).mean()),
+           "true_fixed": float(np.isfinite(true).mean())}
+    row["vs_true"] = row["calibrated_cm"] / row["true_cm"]
+    row["vs_paper"] = row["calibrated_cm"] / row["paper_nominal_cm"]
+    return row
+
+
+def timing_400(seed: int, tmp: Path) -> float:
+    """Seconds for `vlpcal survey calibrate --intrinsics` on 400 points × 3 cameras."""
+    scene = make_scene(get_profile("paper-2024"), seed)
+    write_deployments(scene, tmp)
+    pts = grid_points(scene, 0.1, (0.0, 0.35, 0.7))
+    pts = pts[np.random.default_rng(seed).choice(len(pts), 400, replace=False)]
+    simulate_survey(scene, tmp / "survey", pts, seed=seed)
+    t0 = time.perf_counter()
+    res = CliRunner().invoke(cli, ["survey", "calibrate", "-d", str(tmp / "nominal.yaml"),
+                                   "--survey", str(tmp / "survey"), "--out",
+                                   str(tmp / "cal.yaml"), "--intrinsics", "-q"])
+    assert res.exit_code == 0, res.output
+    return time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    rows = []
+    for name in PROFILES:
+        with tempfile.TemporaryDirectory() as tmp:
+            rows.append(run_profile(name, args.seed, Path(tmp)))
+    with tempfile.TemporaryDirectory() as tmp:
+        secs400 = timing_400(args.seed, Path(tmp))
+    print("Survey calibration (--intrinsics), then vlpcal's locator on test frames that are "
+          "not survey points; mean 3D error, cm")
+    print(table(rows, [("profile", "profile", ""), ("survey_points", "survey pts", "d"),
+                       ("test_points", "test pts", "d"), ("min_gap_cm", "gap cm", ".1f"),
+                       ("calibrate_s", "calibrate s", ".1f"),
+                       ("calibrated_cm", "calibrated", ".3f"), ("true_cm", "true cams", ".3f"),
+                       ("vs_true", "÷ true", ".2f"), ("paper_nominal_cm", "paper nominal", ".2f"),
+                       ("vs_paper", "÷ paper", ".3f"), ("calibrated_fixed", "fixed", ".0%")]))
+    ok_true = all(r["vs_true"] <= 1.5 for r in rows)
+    ok_paper = all(r["vs_paper"] <= 0.2 for r in rows)
+    print(f"\ncalibrated ≤ 1.5 × true cameras on every profile: {'yes' if ok_true else 'NO'}; "
+          f"≤ 1/5 of the paper's method with nominal cameras: {'yes' if ok_paper else 'NO'}")
+    print(f"400 survey points × 3 cameras (paper-2024, with 5-fold held-out report): "
+          f"{secs400:.1f} s ({'meets' if secs400 < 20 else 'MISSES'} < 20 s)")
+    path = write_json("survey", {"seed": args.seed, "rows": rows, "seconds_400": secs400})
+    print(f"wrote {path}")
+    return 0 if ok_true and ok_paper and secs400 < 20 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
