@@ -167,3 +167,33 @@ def test_cli_calibrates_from_observations_alone_and_refuses_clearly(tmp_path, rn
                                     "--intrinsics", "-q"])
     assert res.exit_code == 2 and "lie on one plane" in res.output
     assert "Traceback" not in res.output and not bad.exists()
+
+
+def test_survey_plan_covers_every_camera_and_pair_and_prints_a_map(tmp_path):
+    from shapely.geometry import Point, Polygon
+
+    from vlpcal.datasets import read_survey_bundle
+    from vlpcal.geometry import paper_rig
+
+    keep_out = [[1.6, 0.2], [2.0, 0.2], [2.0, 0.6], [1.6, 0.6]]
+    dep = deployment.Deployment("lab", 2.3, [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]],
+                                paper_rig(), keep_out=[keep_out])
+    deployment.save(dep, tmp_path / "d.yaml")
+    res = CliRunner().invoke(main, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--out",
+                                    str(tmp_path / "plan" / "points.csv")])
+    assert res.exit_code == 0, res.output
+    plan = read_survey_bundle(tmp_path / "plan")
+    assert plan.point_ids[0] == "S0001" and len(set(plan.point_ids)) == len(plan.point_ids)
+    assert len(set(plan.xyz[:, 2])) >= 2
+    block = Polygon(keep_out)
+    assert not any(block.contains(Point(x, y)) for x, y, _ in plan.xyz)
+    for cam in dep.cameras:
+        assert cam.project(plan.xyz, margin=5.0)[2].sum() >= 12
+    seen = np.stack([c.project(plan.xyz, margin=5.0)[2] for c in dep.cameras])
+    for i in range(3):
+        for j in range(i + 1, 3):
+            assert (seen[i] & seen[j]).sum() >= 6
+    assert (tmp_path / "plan" / "points.png").is_file()
+    bad = CliRunner().invoke(main, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--out",
+                                    str(tmp_path / "x.csv"), "--heights", "0"])
+    assert bad.exit_code == 2 and "two or more heights" in bad.output

@@ -345,6 +345,90 @@ def survey():
     """Survey calibration: cameras (and region maps) from LED measurements at known points."""
 
 
+@survey.command("plan")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="The deployment (room, cameras).")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="points.csv to write; a printable map (.png) goes beside it.")
+@click.option("--step", default=0.3, show_default=True, type=click.FloatRange(0.05, 2.0),
+              help="Grid spacing, m (made finer where a camera or pair needs more points).")
+@click.option("--heights", default="0,0.35,0.7", show_default=True,
+              help="LED heights to survey, m, comma-separated (two or more).")
+@click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6),
+              help="Points each camera must see (12 lets --intrinsics fit the lens).")
+def survey_plan(deployment_path, out, step, heights, min_per_camera):
+    """Plan the survey: where to put the LED, with ids, and a map to print.
+
+    Example: vlpcal survey plan -d nominal.yaml --out survey/points.csv
+    """
+    from pathlib import Path
+
+    from .datasets import POINTS_COLUMNS, write_truth_csv
+    from .survey import SurveyError, plan_survey
+
+    dep = _load_deployment(deployment_path)
+    hs = _floats(heights)
+    if len(hs) < 2 or any(not 0 <= h < dep.ceiling_height - 0.3 for h in hs):
+        raise click.BadParameter(f"expected two or more heights from 0 to "
+                                 f"{dep.ceiling_height - 0.3:g} m, got {heights!r}",
+                                 param_hint="--heights")
+    try:
+        plan = plan_survey(dep, step, hs, min_per_camera)
+    except SurveyError as e:
+        raise UserError(f"{deployment_path}: {e}") from None
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_truth_csv(out, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
+    _plan_figure(out.with_suffix(".png"), dep, plan)
+    click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
+               f"→ {out}, map {out.with_suffix('.png')}")
+    ids = plan.camera_ids
+    for k, cid in enumerate(ids):
+        shared = [(ids[j], int((plan.seen[k] & plan.seen[j]).sum())) for j in range(len(ids))
+                  if j != k]
+        pairs = ", ".join(f"{cj} {n}" for cj, n in shared if n)
+        click.echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
+
+
+def _plan_figure(path, dep, plan) -> None:
+    """One panel per height: room, keep-out areas, cameras, points with their ids."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    heights = sorted(set(plan.xyz[:, 2].round(6)))
+    room = np.array(dep.room + dep.room[:1])
+    fig, axes = plt.subplots(1, len(heights), figsize=(5.5 * len(heights), 5.0),
+                             squeeze=False, constrained_layout=True)
+    for ax, h in zip(axes[0], heights):
+        ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
+        for poly in dep.keep_out:
+            ax.fill(*np.array(poly).T, color="0.85", hatch="//", ec="0.5")
+        for c in dep.cameras:
+            ax.plot(*c.position[:2], "rs", ms=7)
+            ax.annotate(c.id, c.position[:2], color="r", fontsize=8, xytext=(4, 4),
+                        textcoords="offset points")
+        sel = np.flatnonzero(np.isclose(plan.xyz[:, 2], h))
+        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "-", color="0.8", lw=0.6)  # walking order
+        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "o", color="#2a7ab0", ms=4)
+        for i in sel:
+            ax.annotate(plan.ids[i][1:].lstrip("0"), plan.xyz[i, :2], fontsize=5,
+                        xytext=(2, 2), textcoords="offset points")
+        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points (S{plan.ids[sel[0]][1:]}…)",
+                     fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+    axes[0][0].set_ylabel("y (m)")
+    fig.suptitle(f"Survey plan for {dep.name}: place the LED at each point, measure, record",
+                 fontsize=10)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(tmp, dpi=130)
+    plt.close(fig)
+    tmp.replace(path)
+
+
 @survey.command("calibrate")
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The nominal deployment (as installed).")
@@ -398,8 +482,9 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     try:
         with click.progressbar(length=folds + 1, label="calibrating (k-fold, then all)",
                                file=None if not quiet else open("/dev/null", "w")) as bar:
+            per_point: dict = {}
             stats = held_out(cams, X, uv, ids, dep.room, intrinsics, folds, point_sigma,
-                             progress=lambda i, n: bar.update(1))
+                             progress=lambda i, n: bar.update(1), per_point=per_point)
             cal = calibrate(cams, X, uv, ids, intrinsics, point_sigma)
             bar.update(1)
     except SurveyError as e:
@@ -467,32 +552,42 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     from .deployment import atomic_write_text
 
     atomic_write_text(out.with_suffix(".report.json"), json.dumps(report, indent=2))
-    _survey_figure(out.with_suffix(".png"), stats)
+    _survey_figure(out.with_suffix(".png"), stats, per_point, X, cal.cameras)
     click.echo(f"\nwrote {out} (fusion: {choice[best]}), {out.with_suffix('.report.json')}, "
                f"{out.with_suffix('.png')}")
 
 
-def _survey_figure(path, stats) -> None:
-    """Held-out mean error per pipeline, nominal vs calibrated (a bar chart, PNG)."""
+def _survey_figure(path, stats, per_point, X, cameras) -> None:
+    """Held-out errors: map over the floor (nominal vs calibrated, all-camera LS) and CDF."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
-    labels = [k for k, v in stats.items() if v["mean"] is not None]
-    means = [stats[k]["mean"] * 100 for k in labels]
-    p90 = [stats[k]["p90"] * 100 for k in labels]
-    fig, ax = plt.subplots(figsize=(7, 3.6), constrained_layout=True)
-    y = range(len(labels))
-    ax.barh(y, p90, color="#cfd8e3", label="p90")
-    ax.barh(y, means, color=["#d9534f" if k.startswith("nominal") else "#2a7ab0"
-                             for k in labels], label="mean")
-    ax.set_yticks(list(y), labels, fontsize=8)
-    ax.invert_yaxis()
-    ax.set_xscale("log")
-    ax.set_xlabel("held-out 3D error (cm, log scale)")
-    ax.legend(fontsize=8)
-    ax.set_title("Survey calibration: nominal vs calibrated cameras", fontsize=10)
+    nom = per_point["nominal, all-camera LS"] * 100
+    cal = per_point["calibrated, all-camera LS"] * 100
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), constrained_layout=True)
+    vmax = np.nanpercentile(nom, 95) if np.isfinite(nom).any() else 1.0
+    for ax, err, title in ((axes[0], nom, "nominal cameras"), (axes[1], cal, "calibrated")):
+        ok = np.isfinite(err)
+        sc = ax.scatter(X[ok, 0], X[ok, 1], c=err[ok], cmap="viridis", vmin=0, vmax=vmax, s=18)
+        for c in cameras:
+            ax.plot(*c.position[:2], "rs", ms=6)
+        ax.set_title(f"held-out error, {title}: mean {np.nanmean(err):.2f} cm", fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+    fig.colorbar(sc, ax=axes[:2].tolist(), label="3D error (cm)", shrink=0.8)
+    for label, err in per_point.items():
+        e = np.sort(err[np.isfinite(err)] * 100)
+        if len(e):
+            axes[2].plot(e, np.arange(1, len(e) + 1) / len(e), label=label,
+                         ls="--" if label.startswith("nominal") else "-")
+    axes[2].set_xscale("log")
+    axes[2].set_xlabel("held-out 3D error (cm)")
+    axes[2].set_ylabel("CDF")
+    axes[2].grid(alpha=0.3)
+    axes[2].legend(fontsize=6)
     tmp = path.with_name(f".{path.name}.tmp.png")
     fig.savefig(tmp, dpi=110)
     plt.close(fig)

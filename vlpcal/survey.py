@@ -266,11 +266,13 @@ HELD_OUT = (("nominal, (a) mean of pairs", "nominal", "mean"),
 
 
 def held_out(nominal: list[Camera], X, uv, ids, room, intrinsics: bool = False, folds: int = 5,
-             point_sigma: float = 0.003, progress=None, seed: int = 0) -> dict:
+             point_sigma: float = 0.003, progress=None, seed: int = 0,
+             per_point: dict | None = None) -> dict:
     """k-fold accuracy by survey point: calibrate on the other folds, locate this fold's points
     from their spots, compare with their measured positions. Never the fitted points.
 
-    Returns label → :func:`error_stats` (metres) over all folds, for :data:`HELD_OUT`.
+    Returns label → :func:`error_stats` (metres) over all folds, for :data:`HELD_OUT`; the
+    per-point errors go into ``per_point`` (label → N errors, m) when given.
     """
     from .fusion import fuse
 
@@ -290,6 +292,8 @@ def held_out(nominal: list[Camera], X, uv, ids, room, intrinsics: bool = False, 
             errors[label][test] = np.linalg.norm(fixed - X[test], axis=1)
         if progress:
             progress(f + 1, folds)
+    if per_point is not None:
+        per_point.update(errors)
     return {label: error_stats(e) for label, e in errors.items()}
 
 
@@ -320,3 +324,79 @@ def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
                 if (p, cam.id) in bundle.observations:
                     uv[k, i] = bundle.observations[(p, cam.id)]
     return uv, notes
+
+
+# -- planning a survey ----------------------------------------------------------------------
+
+@dataclass
+class SurveyPlan:
+    """Points to measure: ids in walking order, planned positions N×3, who sees what."""
+
+    ids: list[str]
+    xyz: np.ndarray
+    seen: np.ndarray  # C×N: each camera sees the point (nominal cameras, 5 px margin)
+    camera_ids: list[str]
+
+
+def plan_survey(deployment, step: float = 0.3, heights=(0.0, 0.35, 0.7),
+                min_per_camera: int = MIN_POINTS_INTRINSICS, min_per_pair: int = 6,
+                margin_px: float = 5.0) -> SurveyPlan:
+    """The points to measure: a grid over the room (minus keep-out areas) at each height, kept
+    where a camera sees them, made finer where a camera or an overlapping pair of cameras would
+    otherwise get fewer than ``min_per_camera`` / ``min_per_pair`` points. Two heights or more:
+    a floor-only survey cannot separate a camera's height from its focal length.
+
+    Ids follow the order an installer walks: height by height, rows in a serpentine.
+    """
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    heights = sorted(set(float(h) for h in heights))
+    if len(heights) < 2:
+        raise SurveyError("a survey needs points at two or more heights (a floor-only survey "
+                          "cannot separate height from scale)")
+    room = Polygon(deployment.room)
+    for poly in deployment.keep_out:
+        room = room.difference(Polygon(poly))
+    cams = deployment.cameras
+
+    def grid(s, offset=0.0):
+        x0, y0, x1, y1 = room.bounds
+        gx, gy = np.meshgrid(np.arange(x0 + s / 2 + offset, x1, s),
+                             np.arange(y0 + s / 2 + offset, y1, s))
+        xy = np.c_[gx.ravel(), gy.ravel()]
+        return xy[contains_xy(room, xy[:, 0], xy[:, 1])]
+
+    def seen_by(pts):
+        return np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
+
+    pts = np.concatenate([np.c_[grid(step), np.full(len(grid(step)), h)] for h in heights])
+    pts = pts[seen_by(pts).any(axis=0)]
+    # where a camera or an overlapping pair has too few points: add a finer grid there
+    for level in (2, 4):
+        seen = seen_by(pts)
+        fine_xy = grid(step / level, step / (2 * level))
+        fine = np.concatenate([np.c_[fine_xy, np.full(len(fine_xy), h)] for h in heights])
+        fine_seen = seen_by(fine)
+        want = np.zeros(len(fine), bool)
+        for k in range(len(cams)):
+            if seen[k].sum() < min_per_camera:
+                want |= fine_seen[k]
+            for j in range(k + 1, len(cams)):
+                both = fine_seen[k] & fine_seen[j]
+                if both.any() and (seen[k] & seen[j]).sum() < min_per_pair:
+                    want |= both
+        if not want.any():
+            break
+        pts = np.unique(np.concatenate([pts, fine[want]]).round(6), axis=0)
+    seen = seen_by(pts)
+    for k, cam in enumerate(cams):
+        if seen[k].sum() < MIN_POINTS_POSE:
+            raise SurveyError(f"camera {cam.id}: sees only {int(seen[k].sum())} points of the "
+                              "room at these heights (is it looking at the floor?)")
+    # walking order: by height, then rows (y) with x alternating direction
+    row = np.unique(np.round(pts[:, 1], 4), return_inverse=True)[1].ravel()  # row number
+    order = np.lexsort((np.where(row % 2 == 0, pts[:, 0], -pts[:, 0]), row, pts[:, 2]))
+    pts, seen = pts[order], seen[:, order]
+    ids = [f"S{i + 1:04d}" for i in range(len(pts))]
+    return SurveyPlan(ids, pts, seen, [c.id for c in cams])
