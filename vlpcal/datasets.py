@@ -21,6 +21,7 @@ import os
 import re
 import shutil
 import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -107,6 +108,30 @@ def _publish(tmp: Path, root: Path, overwrite: bool) -> None:
         os.replace(tmp, root)
 
 
+@contextmanager
+def _staged(root: Path, overwrite: bool):
+    """A temporary folder beside ``root`` to fill; moved into place when the block succeeds,
+    removed when it fails (no half-written folder is ever visible)."""
+    tmp = _staging(root)
+    try:
+        yield tmp
+        _publish(tmp, root, overwrite)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _write_jpegs(frames: dict, ids: list, folder_of) -> None:
+    """``frames``: camera id → JPEG bytes or None per id; written to ``folder_of(id)/cam.jpg``."""
+    for cam, jpegs in frames.items():
+        name = f"{_check_id(str(cam), 'camera id')}.jpg"
+        for i, data in zip(ids, jpegs):
+            if data is not None:
+                folder = folder_of(i)
+                folder.mkdir(parents=True, exist_ok=True)
+                (folder / name).write_bytes(data)
+
+
 def _staging(root: Path) -> Path:
     root.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
@@ -169,25 +194,15 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
                            f"point ids, got {xyz.shape}")
     _check_lengths(frames, len(ids), "frames")
     _check_lengths(observations, len(ids), "observations")
-    tmp = _staging(root)
-    try:
+    with _staged(root, overwrite) as tmp:
         _write_csv(tmp / "points.csv", POINTS_COLUMNS,
                    [[p, *map(_fmt, xyz[i])] for i, p in enumerate(ids)])
-        for cam, jpegs in (frames or {}).items():
-            for p, data in zip(ids, jpegs):
-                if data is not None:
-                    d = tmp / "frames" / p
-                    d.mkdir(parents=True, exist_ok=True)
-                    (d / f"{_check_id(str(cam), 'camera id')}.jpg").write_bytes(data)
+        _write_jpegs(frames or {}, ids, lambda p: tmp / "frames" / p)
         if observations:
             rows = [[p, cam, _fmt(uv[i, 0]), _fmt(uv[i, 1])]
                     for cam, uv in observations.items() for i, p in enumerate(ids)
                     if np.isfinite(uv[i]).all()]
             _write_csv(tmp / "observations.csv", ("point_id", *OBSERVATION_COLUMNS), rows)
-        _publish(tmp, root, overwrite)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return root
 
 
@@ -274,18 +289,10 @@ def write_frames_folder(root, frame_ids, frames: dict, overwrite: bool = False) 
     if len(set(ids)) != len(ids):
         raise DatasetError("frame ids must be unique")
     _check_lengths(frames, len(ids), "frames")
-    tmp = _staging(root)
-    try:
+    with _staged(root, overwrite) as tmp:
         for fid in ids:
             (tmp / fid).mkdir()
-        for cam, jpegs in frames.items():
-            for fid, data in zip(ids, jpegs):
-                if data is not None:
-                    (tmp / fid / f"{_check_id(str(cam), 'camera id')}.jpg").write_bytes(data)
-        _publish(tmp, root, overwrite)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        _write_jpegs(frames, ids, lambda f: tmp / f)
     return root
 
 
