@@ -1,0 +1,245 @@
+"""Layout planning: the site file, the reference accuracy/coverage model, the grid families.
+
+The site file (DESIGN.md ``format: vlpcal-site``, ``version: 1``) states a room, a camera model
+and requirements; the *reference model* (DESIGN.md, the contract) judges a layout: a sample
+point is seen by a camera when it projects inside the image (2 px margin) in front of it; the
+predicted error of a point seen by ≥ 2 cameras is ``sqrt(trace(F⁻¹))``, ``F = Σ JᵢᵀJᵢ / σ²``;
+a layout meets the requirements when at least ``coverage`` of the sample points are seen by
+``min_cameras`` cameras and the 95th percentile of their predicted error is within
+``max_error_p95``. Sample points: the room minus keep-out areas on a grid of at most 10 cm, at
+the lowest, middle and highest LED height.
+
+The optimiser that searches the families is the next step; :func:`evaluate` is the independent
+check every plan must pass.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .deployment import (
+    DeploymentError,
+    _mapping,
+    _number,
+    _polygon,
+    _vector,
+)
+from .geometry import NADIR, Camera, rodrigues, rotation_vector
+from .triangulation import predicted_rms_error
+
+FORMAT, VERSION = "vlpcal-site", 1
+FAMILIES = ("linear", "triangular", "square")
+REQUIREMENT_KEYS = ("heights", "min_cameras", "coverage", "max_error_p95", "pixel_noise")
+CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
+#: sample grid spacing of the reference model, m (DESIGN.md: at most 10 cm)
+SAMPLE_STEP = 0.10
+#: px: a point is seen when it projects at least this far inside the image
+MARGIN_PX = 2.0
+
+
+class SiteError(DeploymentError):
+    """A site file that does not follow the format (one line: file, key path, expectation)."""
+
+
+@dataclass
+class Requirements:
+    heights: tuple  #: LED heights served, m
+    min_cameras: int = 2
+    coverage: float = 0.99
+    max_error_p95: float = 0.02  #: m
+    pixel_noise: float = 0.3  #: px
+
+
+@dataclass
+class Site:
+    """A room to plan for, the camera model to hang, and what the plan must achieve."""
+
+    name: str
+    ceiling_height: float
+    room: list
+    camera: Camera  #: the model; id, position and rotation are placeholders
+    requirements: Requirements
+    keep_out: list = field(default_factory=list)
+    families: tuple = FAMILIES
+
+
+def site_from_dict(doc, source: str = "<site>") -> Site:
+    """Check a parsed site document (:class:`SiteError` names ``source`` and the key path)."""
+    try:
+        if not isinstance(doc, dict):
+            raise SiteError(f"expected a mapping with format: {FORMAT}")
+        if doc.get("format") != FORMAT:
+            raise SiteError(f"format: expected {FORMAT!r}, got {doc.get('format')!r}")
+        if type(doc.get("version")) is not int or doc.get("version") != VERSION:
+            raise SiteError(f"version: expected {VERSION}, got {doc.get('version')!r}")
+        unknown = sorted(set(doc) - {"format", "version", "site", "camera", "requirements",
+                                     "families"})
+        if unknown:
+            raise SiteError(f"{unknown[0]}: unknown key (expected format, version, site, "
+                            "camera, requirements, families)")
+        for key in ("site", "camera", "requirements"):
+            if key not in doc:
+                raise SiteError(f"{key}: missing")
+        site = _mapping(doc["site"], "site")
+        for key in ("name", "ceiling_height", "room"):
+            if key not in site:
+                raise SiteError(f"site.{key}: missing")
+        ceiling = _number(site["ceiling_height"], "site.ceiling_height", positive=True)
+        room = _polygon(site["room"], "site.room")
+        keep_out = [_polygon(p, f"site.keep_out[{i}]")
+                    for i, p in enumerate(site.get("keep_out") or [])]
+        cam = _mapping(doc["camera"], "camera")
+        for key in CAMERA_KEYS:
+            if key not in cam:
+                raise SiteError(f"camera.{key}: missing")
+        for key in ("width", "height"):
+            _number(cam[key], f"camera.{key}", positive=True, integer=True)
+        for key in ("fx", "fy"):
+            _number(cam[key], f"camera.{key}", positive=True)
+        for key in ("cx", "cy"):
+            _number(cam[key], f"camera.{key}")
+        _vector(cam["dist"], 5, "camera.dist")
+        req = _mapping(doc["requirements"], "requirements")
+        for key in REQUIREMENT_KEYS:
+            if key not in req:
+                raise SiteError(f"requirements.{key}: missing")
+        heights = req["heights"]
+        if not isinstance(heights, list) or not heights:
+            raise SiteError("requirements.heights: expected a list of LED heights, m")
+        heights = [_number(h, f"requirements.heights[{i}]") for i, h in enumerate(heights)]
+        if any(not 0 <= h < ceiling for h in heights):
+            raise SiteError(f"requirements.heights: expected heights from 0 to below the "
+                            f"ceiling ({ceiling:g} m), got {heights}")
+        min_cams = int(_number(req["min_cameras"], "requirements.min_cameras", positive=True,
+                               integer=True))
+        if min_cams < 2:
+            raise SiteError("requirements.min_cameras: expected 2 or more (one camera cannot "
+                            "give a 3D fix)")
+        coverage = _number(req["coverage"], "requirements.coverage", positive=True)
+        if coverage > 1:
+            raise SiteError(f"requirements.coverage: expected a share from 0 to 1, "
+                            f"got {coverage}")
+        families = doc.get("families", list(FAMILIES))
+        if not isinstance(families, list) or not families or \
+                any(f not in FAMILIES for f in families):
+            raise SiteError(f"families: expected a list of {', '.join(FAMILIES)}, "
+                            f"got {families!r}")
+    except DeploymentError as e:
+        raise SiteError(f"{source}: {e}") from None
+    camera = Camera("model", cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"],
+                    cam["cy"], cam["dist"], (0.0, 0.0, ceiling), NADIR)
+    requirements = Requirements(tuple(heights), min_cams, float(coverage),
+                                float(_number(req["max_error_p95"], "requirements.max_error_p95",
+                                              positive=True)),
+                                float(_number(req["pixel_noise"], "requirements.pixel_noise",
+                                              positive=True)))
+    return Site(str(site["name"]), float(ceiling), room, camera, requirements, keep_out,
+                tuple(families))
+
+
+def load_site(path) -> Site:
+    """Read and check a site file."""
+    import yaml
+
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise SiteError(f"{path}: cannot read ({e.strerror})") from None
+    except (UnicodeDecodeError, yaml.YAMLError):
+        raise SiteError(f"{path}: not a YAML text file") from None
+    return site_from_dict(doc, str(path))
+
+
+# -- the reference model ---------------------------------------------------------------------------
+
+def sample_points(site: Site, step: float = SAMPLE_STEP) -> np.ndarray:
+    """The reference model's sample points ``N×3``: the room minus keep-out areas on a square
+    grid (``step`` ≤ 10 cm, cell centres), at the lowest, middle (halfway between the lowest
+    and the highest) and highest LED height."""
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    area = Polygon(site.room)
+    for poly in site.keep_out:
+        area = area.difference(Polygon(poly))
+    x0, y0, x1, y1 = area.bounds
+    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = xy[contains_xy(area, xy[:, 0], xy[:, 1])]
+    hs = site.requirements.heights
+    levels = sorted({min(hs), (min(hs) + max(hs)) / 2, max(hs)})  # lowest, halfway, highest
+    return np.concatenate([np.c_[xy, np.full(len(xy), h)] for h in levels])
+
+
+@dataclass
+class Evaluation:
+    """A layout judged by the reference model."""
+
+    coverage: float  #: share of sample points seen by ≥ min_cameras cameras
+    p95: float  #: m, 95th percentile of the predicted error over those points
+    mean: float  #: m, mean predicted error over those points
+    meets: bool
+    points: np.ndarray  #: the sample points N×3
+    views: np.ndarray  #: N, cameras that see each point
+    error: np.ndarray  #: N, predicted RMS error (m; NaN where < 2 cameras)
+
+
+def evaluate(site: Site, cameras: list[Camera], step: float = SAMPLE_STEP) -> Evaluation:
+    """Judge a layout with the reference model (DESIGN.md), independently of any optimiser."""
+    pts = sample_points(site, step)
+    seen = np.stack([c.project(pts, margin=MARGIN_PX)[2] for c in cameras]) if cameras \
+        else np.zeros((0, len(pts)), bool)
+    views = seen.sum(axis=0)
+    err = predicted_rms_error(cameras, pts, seen, site.requirements.pixel_noise) if cameras \
+        else np.full(len(pts), np.nan)
+    ok = views >= site.requirements.min_cameras
+    coverage = float(ok.mean()) if len(pts) else 0.0
+    p95 = float(np.percentile(err[ok], 95)) if ok.any() else math.inf
+    mean = float(np.mean(err[ok])) if ok.any() else math.inf
+    r = site.requirements
+    return Evaluation(coverage, p95, mean, coverage >= r.coverage and p95 <= r.max_error_p95,
+                      pts, views, err)
+
+
+# -- grid families ---------------------------------------------------------------------------------
+
+def grid_cameras(site: Site, family: str, nx: int, ny: int, spacing: tuple, origin: tuple,
+                 rotation: float = 0.0, drop: float = 0.0, yaw: float = 0.0) -> list[Camera]:
+    """Cameras of a grid family, nadir, hung ``drop`` m below the ceiling.
+
+    ``linear``: one row of ``nx`` (``ny`` ignored); ``square``: ``nx × ny`` with spacings
+    (a, b) (a = b for a square lattice); ``triangular``: rows ``b = a·√3/2`` apart, every other
+    row shifted by a/2. The grid is rotated by ``rotation`` (rad) about ``origin`` (its first
+    camera); each camera also turns by ``yaw`` about the vertical (0 or 90° matters for a
+    160 × 120 image).
+    """
+    a = spacing[0]
+    b = spacing[1] if len(spacing) > 1 else a
+    pos = []
+    if family == "linear":
+        pos = [(i * a, 0.0) for i in range(nx)]
+    elif family == "square":
+        pos = [(i * a, j * b) for j in range(ny) for i in range(nx)]
+    elif family == "triangular":
+        b = a * math.sqrt(3) / 2
+        pos = [(i * a + (a / 2 if j % 2 else 0.0), j * b) for j in range(ny) for i in range(nx)]
+    else:
+        raise ValueError(f"unknown family {family!r}; expected one of {', '.join(FAMILIES)}")
+    c, s = math.cos(rotation), math.sin(rotation)
+    z = site.ceiling_height - drop
+    # the nadir camera turned by (rotation + yaw) about the world's vertical:
+    # x_cam = R_nadir · Rz(θ)ᵀ · (X − C), so image-right points along Rz(θ)·x
+    rvec = rotation_vector(rodrigues(NADIR) @ rodrigues((0.0, 0.0, rotation + yaw)).T)
+    out = []
+    for k, (px, py) in enumerate(pos):
+        x = origin[0] + c * px - s * py
+        y = origin[1] + s * px + c * py
+        out.append(Camera(f"C{k + 1}", site.camera.width, site.camera.height, site.camera.fx,
+                          site.camera.fy, site.camera.cx, site.camera.cy, site.camera.dist,
+                          (x, y, z), rvec))
+    return out
