@@ -25,7 +25,9 @@ def test_demo_prints_the_comparison_table():
 
     paper = mean_cm("paper: NI-P + pairs (a) mean")
     exact = mean_cm("vlpcal, cameras known exactly")
+    calibrated = mean_cm("vlpcal, calibrated from a survey")
     assert exact < 0.5 < paper  # the install's errors, not the detector, cost centimetres
+    assert calibrated < min(1.5 * exact, paper / 5)
 
 
 def test_bad_option_is_one_line_not_a_traceback():

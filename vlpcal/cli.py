@@ -153,8 +153,9 @@ def demo(seed: int, step: float):
     click.echo("3D error in cm over the same frames, with the cameras as planned (nominal):\n")
     click.echo(format_table(rows))
     click.echo("\nfixed: share of positions with a fix (the paper's pair method is undefined "
-               "within 3° of\nthe cameras' line in top view). The last row is what "
-               "calibrating from a survey aims for.")
+               "within 3° of\nthe cameras' line in top view). Calibrated: from a simulated "
+               "survey of other points\n(vlpcal survey calibrate --intrinsics); the last row "
+               "is the floor it aims for.")
 
 
 @main.command()
