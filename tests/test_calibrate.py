@@ -111,6 +111,7 @@ def test_mis_measured_point_is_reported_by_id(rng):
     measured[wrong, 0] += 0.06  # a 6 cm misreading of the tape
     cal = calibrate(true, measured, uv, ids)
     assert [pid for pid, _ in cal.mismeasured] == [ids[wrong]]
+    assert cal.mismeasured[0][1] == pytest.approx(0.06, abs=0.005)  # how far off the record is
     for got, want in zip(cal.cameras, true):
         assert pose_error(got, want)[0] < 0.01  # the bad point did not drag the cameras
 
@@ -167,6 +168,37 @@ def test_cli_calibrates_from_observations_alone_and_refuses_clearly(tmp_path, rn
                                     "--intrinsics", "-q"])
     assert res.exit_code == 2 and "lie on one plane" in res.output
     assert "Traceback" not in res.output and not bad.exists()
+    # positions in millimetres read as metres: refused, named by point
+    write_survey_bundle(tmp_path / "mm", ids, X * 1000,
+                        observations={c.id: uv[k] for k, c in enumerate(true)})
+    res = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(tmp_path / "nominal.yaml"),
+                                    "--survey", str(tmp_path / "mm"), "--out", str(bad), "-q"])
+    assert res.exit_code == 2 and "is not in the room" in res.output and "S000" in res.output
+
+
+def test_calibration_sees_the_spots_the_locator_sees(tmp_path, rng):
+    """A nominal deployment with a pixel correction: the calibrated cameras are fitted to the
+    corrected spots, so locating with the calibrated file lands on the survey points."""
+    from vlpcal.locator import Locator
+
+    true = [look_at(f"C{k + 1}", (x, 0.9, 2.3), (x, 0.9, 0.0)) for k, x in
+            enumerate((1.2, 1.8, 2.4))]
+    room = [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]
+    dep = deployment.Deployment("lab", 2.3, room, true,
+                                extra={"corrections": {"C2": {"pixel_offset": [3.0, 0.0]}}})
+    deployment.save(dep, tmp_path / "nominal.yaml")
+    X = survey_grid()
+    ids = [f"S{i:03d}" for i in range(len(X))]
+    uv = observe(true, X, rng)
+    write_survey_bundle(tmp_path / "survey", ids, X,
+                        observations={c.id: uv[k] for k, c in enumerate(true)})
+    out = tmp_path / "cal.yaml"
+    res = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(tmp_path / "nominal.yaml"),
+                                    "--survey", str(tmp_path / "survey"), "--out", str(out),
+                                    "-q"])
+    assert res.exit_code == 0, res.output
+    fixes = Locator(deployment.load(out)).locate_pixels(uv)
+    assert np.nanmean(np.linalg.norm(fixes.X - X, axis=1)) < 0.005
 
 
 def test_survey_plan_covers_every_camera_and_pair_and_prints_a_map(tmp_path):

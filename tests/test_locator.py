@@ -139,3 +139,34 @@ def test_bad_observations_and_missing_inputs_are_one_line_errors(site, tmp_path)
                                     "--out", str(out)])
     assert res.exit_code == 2 and "not a folder" in res.output
     assert not out.exists() and not list(tmp_path.glob(".fixes*"))  # no partial output
+
+
+def test_a_wild_spot_is_dropped_and_max_residual_is_the_deployments(site):
+    scene, path, pts, _ = site
+    dep = deployment.load(path)
+    X = pts
+    uv = np.stack([c.project(X)[0] for c in dep.cameras])
+    seen = np.stack([c.project(X, margin=3.0)[2] for c in dep.cameras]).sum(axis=0)
+    i = int(np.flatnonzero(seen == 3)[0])
+    wild = uv.copy()
+    wild[0, i] = [10000.0, 60.0]  # far outside the image: no spot can be there
+    fix = Locator(dep).locate_pixels(wild)[i]
+    assert fix.ok and "C1" not in fix.cameras
+    assert np.linalg.norm([fix.x - X[i, 0], fix.y - X[i, 1], fix.z - X[i, 2]]) < 0.01
+    off = uv.copy()
+    off[2, i] += [9.0, 0.0]  # C3 nine pixels off
+    strict = Locator(dep).locate_pixels(off)[i]
+    loose = Locator(deployment.Deployment(dep.name, dep.ceiling_height, dep.room, dep.cameras,
+                                          extra={"fusion": {"max_residual": 100.0}}))
+    lenient = loose.locate_pixels(off)[i]
+    assert strict.camera_status["C3"] == "dropped" and "C3" in lenient.cameras
+
+
+def test_out_to_a_folder_is_a_one_line_error_leaving_nothing(site, tmp_path):
+    _, path, _, frames = site
+    write_frames_folder(tmp_path / "frames", ["a"], {c: [frames[c][0]] for c in frames})
+    (tmp_path / "fixes").mkdir()
+    res = CliRunner().invoke(main, ["locate", "-d", str(path), "--frames",
+                                    str(tmp_path / "frames"), "--out", str(tmp_path / "fixes")])
+    assert res.exit_code == 2 and "cannot write the fixes there" in res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fixes", "frames"]

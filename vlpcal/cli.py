@@ -209,7 +209,7 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
     try:
         writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else ())
     except OSError as e:
-        raise UserError(f"{out}: cannot write ({e.strerror})") from None
+        raise UserError(f"{out}: cannot write the fixes there ({e.strerror})") from None
     t0 = time.perf_counter()
     statuses: Counter = Counter()
     notes = []
@@ -319,8 +319,8 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
             raise UserError(f"--camera {spec!r}: {loc.deployment.name} has no camera {cid!r} "
                             f"(it has {', '.join(loc.camera_ids)})")
         sources[cid] = open_source(src)
-    grouper = LiveGrouper(sources, tolerance, on_event=say)
     t_end = time.monotonic() + duration if duration else None
+    grouper = LiveGrouper(sources, tolerance, on_event=say, deadline=t_end)
     n = 0
     try:
         for fs in grouper:
@@ -337,6 +337,8 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
         if cid in sources:
             notes.append(f"camera {cid}: {st.frames[cid]} frames, absent from "
                          f"{st.missing[cid]} of {st.sets} sets"
+                         + (f"; {st.dropped[cid]} dropped (the locator fell behind)"
+                            if st.dropped[cid] else "")
                          + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
     return n
 
@@ -378,7 +380,12 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
     except SurveyError as e:
         raise UserError(f"{deployment_path}: {e}") from None
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"{out}: cannot make its folder ({e.strerror})") from None
+    if out.is_dir():
+        raise UserError(f"{out}: is a folder (expected a points.csv file to write)")
     write_truth_csv(out, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
     _plan_figure(out.with_suffix(".png"), dep, plan)
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
@@ -476,21 +483,26 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
         bundle = read_survey_bundle(survey_path)
     except DatasetError as e:
         raise UserError(str(e)) from None
+    out = Path(out)
+    if out.is_dir() or not out.parent.is_dir():
+        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
     uv, notes = survey_spots(dep, bundle)
     for note in notes:
         click.echo(note, err=True)
     X, ids, cams = bundle.xyz, bundle.point_ids, dep.cameras
+    _check_survey_positions(survey_path, dep, X, ids)
     try:
-        with click.progressbar(length=folds + 1, label="calibrating (k-fold, then all)",
+        with click.progressbar(length=folds + 1, label="calibrating (all, then k-fold)",
                                file=None if not quiet else open("/dev/null", "w")) as bar:
-            per_point: dict = {}
-            stats = held_out(cams, X, uv, ids, dep.room, intrinsics, folds, point_sigma,
-                             progress=lambda i, n: bar.update(1), per_point=per_point)
             cal = calibrate(cams, X, uv, ids, intrinsics, point_sigma)
             bar.update(1)
+            per_point: dict = {}
+            stats = held_out(cams, X, uv, ids, dep.room, intrinsics, folds, point_sigma,
+                             progress=lambda i, n: bar.update(1), per_point=per_point,
+                             pair_method=dep.pair_method, max_residual=dep.max_residual)
     except SurveyError as e:
         raise UserError(f"{survey_path}: {e}") from None
-    rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room)
+    rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
     choice = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest pair": "nearest",
               "calibrated, (c) region map": "region", "calibrated, all-camera LS": "robust"}
     best = min(choice, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
@@ -540,10 +552,10 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
         click.echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['moved_cm']:9.2f} "
                    f"{r['turned_deg']:9.2f}  {', '.join(r['outliers']) or '–'}")
     if cal.mismeasured:
-        click.echo("\nmis-measured survey points (rejected by ≥ 2 cameras; the fit moved them):")
-        for pid, moved in cal.mismeasured:
-            click.echo(f"  {pid}: {moved * 100:.1f} cm")
-    out = Path(out)
+        click.echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
+                   "from its record the calibrated cameras put the LED):")
+        for pid, off in cal.mismeasured:
+            click.echo(f"  {pid}: {off * 100:.1f} cm" if np.isfinite(off) else f"  {pid}: –")
     save(calibrated, out, header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
     report = {"held_out_m": stats, "cameras": cam_rows, "fusion": choice[best],
               "mismeasured": [{"point_id": p, "moved_m": m} for p, m in cal.mismeasured],
@@ -556,6 +568,22 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     _survey_figure(out.with_suffix(".png"), stats, per_point, X, cal.cameras)
     click.echo(f"\nwrote {out} (fusion: {choice[best]}), {out.with_suffix('.report.json')}, "
                f"{out.with_suffix('.png')}")
+
+
+def _check_survey_positions(survey_path, dep, X, ids) -> None:
+    """Refuse positions that cannot be in this room (millimetres read as metres, a typo)."""
+    import numpy as np
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    room = Polygon(dep.room).buffer(0.5)
+    inside = contains_xy(room, X[:, 0], X[:, 1]) & (X[:, 2] > -0.1) \
+        & (X[:, 2] < dep.ceiling_height)
+    if not inside.all():
+        i = int(np.flatnonzero(~inside)[0])
+        raise UserError(f"{survey_path}: point {ids[i]} at ({X[i, 0]:g}, {X[i, 1]:g}, "
+                        f"{X[i, 2]:g}) m is not in the room of {dep.name} (0.5 m margin) or "
+                        f"under its {dep.ceiling_height:g} m ceiling: metres expected")
 
 
 def _survey_figure(path, stats, per_point, X, cameras) -> None:

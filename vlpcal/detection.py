@@ -585,6 +585,9 @@ def _detect_blob(stack, s: DetectorSettings, scratch: bool = False) -> SpotBatch
         else:
             r[i], c[i], top[i], blobs[i] = found
     u, v, _, area, edge = _core_centroid(stack, r, c, s)
+    # a centre within a pixel of the border: part of the spot is off the sensor
+    with np.errstate(invalid="ignore"):
+        edge |= (u < 1.0) | (v < 1.0) | (u > w - 2.0) | (v > h - 2.0)
     code[(code == 0) & edge] = _REASON_CODE[AT_EDGE]
     code[(code == 0) & ~np.isfinite(u)] = _REASON_CODE[NO_SPOT]
     return _finish(u, v, top, area, top >= s.saturation, code, blobs)
@@ -660,6 +663,10 @@ def detect_spots(frames, method: str = DEFAULT_DETECTOR,
     if method not in DETECTORS:
         raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
     if not isinstance(frames, np.ndarray) and len(frames) > _CHUNK:
+        if shape is None:  # every chunk measures against the same size: the first good frame's
+            first = next((im for im in (as_gray(f) for f in frames if f is not None)
+                          if im is not None and im.ndim == 2), None)
+            shape = None if first is None else first.shape
         # decoded and measured a cache-sized chunk at a time (~25 % faster than one big stack)
         parts = [detect_spots(frames[k:k + _CHUNK], method, settings, shape)
                  for k in range(0, len(frames), _CHUNK)]

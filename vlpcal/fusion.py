@@ -115,13 +115,22 @@ def _nearest_pair(cameras, pairs, Xp, draft) -> np.ndarray:
 
 
 def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap | None = None,
-         pair_method: str = "paper") -> Fused:
-    """Fuse the cameras' pixels ``uv`` (``C×N×2``, NaN = not seen) into one fix per point."""
+         pair_method: str = "paper", max_residual: float = 2.0) -> Fused:
+    """Fuse the cameras' pixels ``uv`` (``C×N×2``, NaN = not seen) into one fix per point.
+
+    A pixel outside its camera's image cannot be a spot and counts as not seen;
+    ``max_residual`` (px) is the robust fusion's limit on an observation's reprojection error.
+    """
     if method not in FUSIONS:
         raise ValueError(f"unknown fusion {method!r}; expected one of {', '.join(FUSIONS)}")
-    uv = np.asarray(uv, dtype=float)
+    uv = np.array(uv, dtype=float)
     if uv.ndim != 3 or uv.shape[0] != len(cameras) or uv.shape[2] != 2:
         raise ValueError(f"uv must be C×N×2 with C = {len(cameras)} cameras, got {uv.shape}")
+    for k, cam in enumerate(cameras):
+        with np.errstate(invalid="ignore"):
+            outside = ~((uv[k, :, 0] >= -0.5) & (uv[k, :, 0] <= cam.width - 0.5)
+                        & (uv[k, :, 1] >= -0.5) & (uv[k, :, 1] <= cam.height - 0.5))
+        uv[k, outside] = np.nan
     C, N = uv.shape[:2]
     seen = np.isfinite(uv).all(axis=2)
     views = seen.sum(axis=0)
@@ -129,7 +138,8 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
     X = np.full((N, 3), np.nan)
     residual = None
     if method in ("all", "robust"):
-        tri = triangulate(cameras, uv) if method == "all" else triangulate_robust(cameras, uv)
+        tri = triangulate(cameras, uv) if method == "all" else \
+            triangulate_robust(cameras, uv, max_residual)
         X, used, residual = tri.X, tri.used & (views >= 2), tri.residual
     else:
         pairs, Xp = pair_estimates(cameras, uv, pair_method)

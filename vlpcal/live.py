@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 #: how long a read may block before the source is declared stalled, s
 READ_TIMEOUT = 5.0
+#: bytes read without finding a frame boundary before the stream is declared not MJPEG
+MAX_PART = 4 * 1024 * 1024
 
 
 def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
@@ -32,33 +34,39 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
             yield resp.read()  # a single snapshot
             return
         buf = b""
-        while True:
-            # headers of the next part
-            while b"\r\n\r\n" not in buf:
-                chunk = resp.read1(65536)
-                if not chunk:
-                    return
+
+        def more():
+            nonlocal buf
+            chunk = resp.read1(65536)
+            if chunk:
                 buf += chunk
-            head, buf = buf.split(b"\r\n\r\n", 1)
+            if len(buf) > MAX_PART:
+                raise ValueError(f"no MJPEG part boundary in {MAX_PART // 2**20} MB: "
+                                 "not a multipart JPEG stream")
+            return bool(chunk)
+
+        while True:
+            # headers of the next part (CRLF, or bare LF as some servers send)
+            while not (b"\r\n\r\n" in buf or b"\n\n" in buf):
+                if not more():
+                    return
+            sep = b"\r\n\r\n" if b"\r\n\r\n" in buf else b"\n\n"
+            head, buf = buf.split(sep, 1)
             length = None
-            for line in head.split(b"\r\n"):
+            for line in head.splitlines():
                 name, _, value = line.partition(b":")
-                if name.strip().lower() == b"content-length":
+                if name.strip().lower() == b"content-length" and value.strip().isdigit():
                     length = int(value.strip())
             if length is not None:
                 while len(buf) < length:
-                    chunk = resp.read1(65536)
-                    if not chunk:
+                    if not more():
                         return
-                    buf += chunk
                 frame, buf = buf[:length], buf[length:]
-            else:
+            else:  # no length: up to the end-of-image marker (a thumbnail's would cut early)
                 start = buf.find(b"\xff\xd8")
                 while (end := buf.find(b"\xff\xd9", max(start, 0))) < 0:
-                    chunk = resp.read1(65536)
-                    if not chunk:
+                    if not more():
                         return
-                    buf += chunk
                     start = buf.find(b"\xff\xd8")
                 frame, buf = buf[start:end + 2], buf[end + 2:]
             yield frame
@@ -103,6 +111,7 @@ class LiveStats:
     sets: int = 0
     missing: Counter = field(default_factory=Counter)  #: sets each camera was absent from
     ended: dict = field(default_factory=dict)  #: camera id → why its source stopped
+    dropped: Counter = field(default_factory=Counter)  #: frames dropped (the locator lagged)
 
 
 class LiveGrouper:
@@ -114,9 +123,10 @@ class LiveGrouper:
     """
 
     def __init__(self, sources: dict, tolerance: float = 0.05,
-                 on_event: Callable[[str], None] | None = None):
+                 on_event: Callable[[str], None] | None = None, deadline: float | None = None):
         self.sources = sources  # camera id → factory of a frame iterator
         self.tolerance = tolerance
+        self.deadline = deadline  # time.monotonic() at which to stop, whatever arrives
         self.on_event = on_event or (lambda msg: None)
         self.stats = LiveStats()
         self._queue: queue.Queue = queue.Queue(maxsize=256)
@@ -128,7 +138,16 @@ class LiveGrouper:
             for frame in factory():
                 if self._stop.is_set():
                     return
-                self._queue.put((time.monotonic(), cid, frame))
+                item = (time.monotonic(), cid, frame)
+                try:
+                    self._queue.put_nowait(item)
+                except queue.Full:  # the locator fell behind: drop the oldest, keep up
+                    try:
+                        self._queue.get_nowait()
+                        self.stats.dropped[cid] += 1
+                    except queue.Empty:
+                        pass
+                    self._queue.put(item)
         except Exception as e:  # a camera's failure is a status, never a crash
             why = f"{type(e).__name__}: {e}".strip().rstrip(":")
         self._queue.put((time.monotonic(), cid, StopIteration(why)))
@@ -157,6 +176,8 @@ class LiveGrouper:
             return fs
 
         while live and not self._stop.is_set():
+            if self.deadline is not None and time.monotonic() > self.deadline:
+                break
             try:
                 t, cid, item = self._queue.get(timeout=self.tolerance)
             except queue.Empty:

@@ -108,6 +108,7 @@ class Locator:
         self.settings = deployment.detector_settings
         self.fusion = deployment.fusion
         self.pair_method = deployment.pair_method
+        self.max_residual = deployment.max_residual
         self.region_map = deployment.region_map
         self.pixel_noise = deployment.pixel_noise
         offsets = deployment.pixel_offsets
@@ -148,7 +149,7 @@ class Locator:
         if camera_status is None:
             camera_status = np.where(np.isfinite(uv).all(axis=2), OK, "no_spot").astype(object)
         res = fuse(self.cameras, uv, self.fusion, region_map=self.region_map,
-                   pair_method=self.pair_method)
+                   pair_method=self.pair_method, max_residual=self.max_residual)
         sigma = predicted_rms_error(self.cameras, res.X, res.used, self.pixel_noise)
         status = res.status.copy()
         seen = np.isfinite(uv).all(axis=2)
@@ -187,8 +188,11 @@ class FixWriter:
         if path == "-":
             self._tmp, self._f = None, sys.stdout
         else:
+            if os.path.isdir(path):
+                raise IsADirectoryError(21, "is a folder", path)
             folder = os.path.dirname(os.path.abspath(path))
             fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", dir=folder)
+            os.chmod(self._tmp, 0o644)
             self._f = os.fdopen(fd, "w", newline="")
         if self.fmt == "csv":
             import csv

@@ -206,7 +206,7 @@ class Calibration:
     cameras: list[Camera]
     fits: list[CameraFit]
     adjusted: np.ndarray  # N×3 survey positions after the joint refinement
-    mismeasured: list  # (point id, how far the fit moved it, m)
+    mismeasured: list  # (point id, how far the cameras put it from its record, m)
 
 
 def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
@@ -214,7 +214,8 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     """Calibrate every camera from the survey: ``X`` N×3 measured positions, ``uv`` C×N×2 spots
     (NaN: not seen), ``ids`` the point ids. Per camera (:func:`fit_camera`), then jointly
     (:func:`refine_jointly`). A point rejected by two or more of the cameras that saw it is
-    reported as mis-measured (a wrong tape reading moves it in every view)."""
+    reported as mis-measured (a wrong tape reading moves it in every view), with how far from
+    its record the calibrated cameras put it (NaN when fewer than two cameras saw it)."""
     X = np.asarray(X, float)
     uv = np.asarray(uv, float)
     fits, obs = [], []
@@ -233,10 +234,14 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
         keep = np.array([i for i in seen if ids[i] not in out], int)
         obs.append((keep, uv[k, keep]))
     cams, adjusted = refine_jointly([f.camera for f in fits], X, obs, intrinsics, point_sigma)
-    moved = np.linalg.norm(adjusted - X, axis=1)
     seen_by = np.isfinite(uv).all(axis=2).sum(axis=0)
-    bad = [(pid, float(moved[i])) for i, pid in enumerate(ids)
-           if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]
+    suspects = [i for i, pid in enumerate(ids)
+                if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]
+    # how far off the record is: where the calibrated cameras see the LED, against it
+    from .triangulation import triangulate
+
+    where = triangulate(cams, uv[:, suspects]).X if suspects else np.zeros((0, 3))
+    bad = [(ids[i], float(np.linalg.norm(w - X[i]))) for i, w in zip(suspects, where)]
     for k, (fit, cam) in enumerate(zip(fits, cams)):
         idx, uvk = obs[k]
         err = np.linalg.norm(cam.project(adjusted[idx])[0] - uvk, axis=1)
@@ -267,7 +272,8 @@ HELD_OUT = (("nominal, (a) mean of pairs", "nominal", "mean"),
 
 def held_out(nominal: list[Camera], X, uv, ids, room, intrinsics: bool = False, folds: int = 5,
              point_sigma: float = 0.003, progress=None, seed: int = 0,
-             per_point: dict | None = None) -> dict:
+             per_point: dict | None = None, pair_method: str = "paper",
+             max_residual: float = 2.0) -> dict:
     """k-fold accuracy by survey point: calibrate on the other folds, locate this fold's points
     from their spots, compare with their measured positions. Never the fitted points.
 
@@ -283,12 +289,18 @@ def held_out(nominal: list[Camera], X, uv, ids, room, intrinsics: bool = False, 
     errors = {label: np.full(len(X), np.nan) for label, _, _ in HELD_OUT}
     for f, test in enumerate(parts):
         train = np.setdiff1d(order, test)
-        cal = calibrate(nominal, X[train], uv[:, train], [ids[i] for i in train], intrinsics,
-                        point_sigma)
-        rmap = learn_region_map(cal.cameras, uv[:, train], cal.adjusted, room)
+        try:
+            cal = calibrate(nominal, X[train], uv[:, train], [ids[i] for i in train],
+                            intrinsics, point_sigma)
+        except SurveyError as e:
+            raise SurveyError(f"too few points for a {folds}-fold held-out check ({e} in a "
+                              f"fold of {len(train)}); add points or use fewer folds") from None
+        rmap = learn_region_map(cal.cameras, uv[:, train], cal.adjusted, room,
+                                pair_method=pair_method)
         for label, which, method in HELD_OUT:
             cams = cal.cameras if which == "calibrated" else nominal
-            fixed = fuse(cams, uv[:, test], method, region_map=rmap).X
+            fixed = fuse(cams, uv[:, test], method, region_map=rmap, pair_method=pair_method,
+                         max_residual=max_residual).X
             errors[label][test] = np.linalg.norm(fixed - X[test], axis=1)
         if progress:
             progress(f + 1, folds)
@@ -323,6 +335,11 @@ def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
             for i, p in enumerate(ids):
                 if (p, cam.id) in bundle.observations:
                     uv[k, i] = bundle.observations[(p, cam.id)]
+    # the deployment's per-camera pixel corrections apply here exactly as in the locator, so
+    # that the cameras are fitted to the spots the locator will see
+    offsets = deployment.pixel_offsets
+    for k, cam in enumerate(deployment.cameras):
+        uv[k] -= offsets.get(cam.id, (0.0, 0.0))
     return uv, notes
 
 
@@ -358,6 +375,8 @@ def plan_survey(deployment, step: float = 0.3, heights=(0.0, 0.35, 0.7),
     room = Polygon(deployment.room)
     for poly in deployment.keep_out:
         room = room.difference(Polygon(poly))
+    if room.is_empty or room.area < (step / 2) ** 2:
+        raise SurveyError("the keep-out areas leave no floor to survey")
     cams = deployment.cameras
 
     def grid(s, offset=0.0):

@@ -274,7 +274,8 @@ def triangulate_robust(cameras: list[Camera], uv, max_residual: float = 2.0,
     C = len(cameras)
     for _ in range(max(C - 2, 0)):
         worst = np.nanmax(np.where(use, res, np.nan), axis=0, initial=0.0)
-        fail = (worst > max_residual) & (use.sum(axis=0) > 2)
+        # no solution at all (a wild spot threw it behind a camera) fails as well
+        fail = ((worst > max_residual) | ~np.isfinite(X).all(axis=1)) & (use.sum(axis=0) > 2)
         if not fail.any():
             break
         idx = np.flatnonzero(fail)
