@@ -205,13 +205,7 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             if cid in seen:
                 fail(f"{where}.id: duplicate camera id {cid!r}")
             seen.add(cid)
-            for key in ("width", "height"):
-                _number(c[key], f"{where}.{key}", positive=True, integer=True)
-            for key in ("fx", "fy"):
-                _number(c[key], f"{where}.{key}", positive=True)
-            for key in ("cx", "cy"):
-                _number(c[key], f"{where}.{key}")
-            _vector(c["dist"], 5, f"{where}.dist")
+            check_intrinsics(c, where)
             _vector(c["position"], 3, f"{where}.position")
             _vector(c["rotation"], 3, f"{where}.rotation")
             cameras.append(Camera.from_dict(c))
@@ -229,6 +223,18 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             raise
         raise DeploymentError(f"{source}: {e}") from None
     return Deployment(str(site["name"]), float(height), room, cameras, keep_out, extra)
+
+
+def check_intrinsics(c: dict, where: str) -> None:
+    """Image size, focal lengths, principal point and distortion of a camera mapping (also
+    the planner's camera model)."""
+    for key in ("width", "height"):
+        _number(c[key], f"{where}.{key}", positive=True, integer=True)
+    for key in ("fx", "fy"):
+        _number(c[key], f"{where}.{key}", positive=True)
+    for key in ("cx", "cy"):
+        _number(c[key], f"{where}.{key}")
+    _vector(c["dist"], 5, f"{where}.dist")
 
 
 def _mapping(value, where: str) -> dict:

@@ -26,7 +26,7 @@ from .deployment import (
     _mapping,
     _number,
     _polygon,
-    _vector,
+    check_intrinsics,
 )
 from .geometry import NADIR, Camera, rodrigues, rotation_vector
 from .triangulation import predicted_rms_error
@@ -96,13 +96,7 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         for key in CAMERA_KEYS:
             if key not in cam:
                 raise SiteError(f"camera.{key}: missing")
-        for key in ("width", "height"):
-            _number(cam[key], f"camera.{key}", positive=True, integer=True)
-        for key in ("fx", "fy"):
-            _number(cam[key], f"camera.{key}", positive=True)
-        for key in ("cx", "cy"):
-            _number(cam[key], f"camera.{key}")
-        _vector(cam["dist"], 5, "camera.dist")
+        check_intrinsics(cam, "camera")
         req = _mapping(doc["requirements"], "requirements")
         for key in REQUIREMENT_KEYS:
             if key not in req:
