@@ -106,3 +106,24 @@ def test_families_and_verdicts():
                                                      "max_error_p95": 0.05}})
     assert evaluate(loose, dense).meets
     assert not evaluate(loose, sparse).meets
+
+
+def test_exhaustive_search_finds_layouts_the_model_accepts():
+    from vlpcal.planning import exhaustive_search, shapes
+
+    small = site_from_dict({**SITE, "site": {**SITE["site"], "room": [[0, 0], [2.0, 0],
+                                                                       [2.0, 1.2], [0, 1.2]]},
+                            "requirements": {**SITE["requirements"], "heights": [0.0, 0.3],
+                                             "coverage": 0.9, "max_error_p95": 0.03}})
+    assert shapes("square", 6) == [(2, 3), (3, 2)] and shapes("linear", 3) == [(3, 1)]
+    assert exhaustive_search(small, 2, steps=4, offsets=3) == []  # two cameras cannot cover it
+    found = []
+    for n in (3, 4, 5, 6):
+        found = exhaustive_search(small, n, steps=5, offsets=3)
+        if found:
+            break
+    assert found, "some layout of up to 6 cameras covers a 2 × 1.2 m room"
+    best = found[0]
+    again = evaluate(small, best.cameras)  # the independent check
+    assert again.meets and again.coverage >= 0.9 and again.p95 <= 0.03
+    assert all(c.evaluation.p95 >= best.evaluation.p95 for c in found)

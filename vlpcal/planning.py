@@ -237,3 +237,78 @@ def grid_cameras(site: Site, family: str, nx: int, ny: int, spacing: tuple, orig
                           site.camera.fy, site.camera.cx, site.camera.cy, site.camera.dist,
                           (x, y, z), rvec))
     return out
+
+
+# -- exhaustive search (the baseline the optimiser must match) ------------------------------------
+
+@dataclass
+class Candidate:
+    """A layout of one family with its parameters and its verdict under the reference model."""
+
+    family: str
+    nx: int
+    ny: int
+    spacing: tuple  #: m, (a,) or (a, b)
+    origin: tuple  #: m, the first camera's floor position
+    yaw: float  #: rad
+    cameras: list
+    evaluation: Evaluation
+
+    @property
+    def count(self) -> int:
+        return len(self.cameras)
+
+
+def footprint(site: Site) -> tuple[float, float]:
+    """Width and depth (m) of a nadir camera's view at the highest LED height."""
+    z = site.ceiling_height - max(site.requirements.heights)
+    return site.camera.width / site.camera.fx * z, site.camera.height / site.camera.fy * z
+
+
+def shapes(family: str, n: int) -> list[tuple[int, int]]:
+    """The (nx, ny) arrangements of ``n`` cameras a family allows."""
+    if family == "linear":
+        return [(n, 1)]
+    return [(nx, n // nx) for nx in range(1, n + 1) if n % nx == 0 and n // nx >= 2 and nx >= 2]
+
+
+def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
+                      screen_step: float = 0.2) -> list[Candidate]:
+    """Every layout of ``n`` cameras over a grid of spacings (``steps`` values from 0.3 to 1.0
+    footprint) and offsets (``offsets`` × ``offsets`` shifts within a spacing), both yaws
+    (0°, 90°), for each of the site's families; screened on a coarse sample grid, the
+    promising ones judged by :func:`evaluate`. Returns the candidates that meet the
+    requirements, best predicted p95 first."""
+    from shapely.geometry import Polygon
+
+    x0, y0, x1, y1 = Polygon(site.room).bounds
+    found = []
+    for family in site.families:
+        for nx, ny in shapes(family, n):
+            for yaw in (0.0, math.pi / 2):
+                fw, fd = footprint(site)
+                if yaw:
+                    fw, fd = fd, fw
+                for fa in np.linspace(0.3, 1.0, steps):
+                    for fb in (np.linspace(0.3, 1.0, steps) if family == "square" else [None]):
+                        a = fa * fw
+                        b = fb * fd if fb is not None else (a * math.sqrt(3) / 2
+                                                             if family == "triangular" else 0.0)
+                        span_x = (nx - 1) * a + (a / 2 if family == "triangular" and ny > 1
+                                                 else 0.0)
+                        span_y = (ny - 1) * b
+                        cx0 = (x0 + x1 - span_x) / 2
+                        cy0 = (y0 + y1 - span_y) / 2
+                        for dx in np.linspace(-a / 2, a / 2, offsets) if nx > 1 else [0.0]:
+                            for dy in (np.linspace(-b / 2, b / 2, offsets) if ny > 1 and b
+                                       else [0.0]):
+                                spacing = (a, b) if family == "square" else (a,)
+                                cams = grid_cameras(site, family, nx, ny, spacing,
+                                                    (cx0 + dx, cy0 + dy), yaw=yaw)
+                                if not evaluate(site, cams, screen_step).meets:
+                                    continue
+                                ev = evaluate(site, cams)
+                                if ev.meets:
+                                    found.append(Candidate(family, nx, ny, spacing,
+                                                           (cx0 + dx, cy0 + dy), yaw, cams, ev))
+    return sorted(found, key=lambda c: c.evaluation.p95)
