@@ -127,3 +127,18 @@ def test_exhaustive_search_finds_layouts_the_model_accepts():
     again = evaluate(small, best.cameras)  # the independent check
     assert again.meets and again.coverage >= 0.9 and again.p95 <= 0.03
     assert all(c.evaluation.p95 >= best.evaluation.p95 for c in found)
+
+
+def test_optimiser_needs_no_more_cameras_than_the_exhaustive_search():
+    from vlpcal.planning import exhaustive_search, plan_site
+
+    small = site_from_dict({**SITE, "site": {**SITE["site"], "room": [[0, 0], [2.0, 0],
+                                                                       [2.0, 1.2], [0, 1.2]]},
+                            "requirements": {**SITE["requirements"], "heights": [0.0, 0.3],
+                                             "coverage": 0.9, "max_error_p95": 0.03}})
+    plan = plan_site(small, max_cameras=6, starts=2)
+    assert plan.candidates
+    best = plan.candidates[0]
+    assert evaluate(small, best.cameras).meets  # judged by the model, not the surrogate
+    exhaustive = next(n for n in range(2, 7) if exhaustive_search(small, n, steps=5, offsets=3))
+    assert best.count <= exhaustive

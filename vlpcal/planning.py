@@ -312,3 +312,170 @@ def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
                                     found.append(Candidate(family, nx, ny, spacing,
                                                            (cx0 + dx, cy0 + dy), yaw, cams, ev))
     return sorted(found, key=lambda c: c.evaluation.p95)
+
+
+# -- the optimiser ----------------------------------------------------------------------------
+
+def _layout_indices(family: str, nx: int, ny: int):
+    """Grid indices (i + row shift, j) of each camera of a family, as floats."""
+    ij = []
+    for j in range(ny if family != "linear" else 1):
+        for i in range(nx):
+            ij.append((i + (0.5 if family == "triangular" and j % 2 else 0.0), float(j)))
+    return np.array(ij)
+
+
+def optimise_layout(site: Site, family: str, nx: int, ny: int, yaw: float,
+                    starts: int = 3, screen_step: float = 0.2) -> Candidate | None:
+    """Spacing(s) and offset of one grid arrangement by CasADi/IPOPT on smooth surrogates,
+    then judged by the reference model (:func:`evaluate`). None when nothing passes.
+
+    Surrogates (nadir cameras, the site's camera model): a camera sees a sample point with
+    weight σ(k·(half-width·Z − |d|)) per image axis (a product of sigmoids), a point is covered
+    with σ(k'·(Σ weights − (min_cameras − ½))), and its predicted error is sqrt(trace(F⁻¹)) with
+    F built from those weights. The objective rewards soft coverage and penalises covered
+    points whose error exceeds the requirement; steepness rises 20 → 60 m⁻¹ with warm starts.
+    """
+    import casadi as ca
+
+    def sig(x):  # the logistic function without overflow (tanh form)
+        return 0.5 * (1 + ca.tanh(x / 2))
+
+    r = site.requirements
+    cam = site.camera
+    Z0 = site.ceiling_height
+    pts = sample_points(site, screen_step)
+    px, py, pz = pts[:, 0], pts[:, 1], pts[:, 2]
+    idx = _layout_indices(family, nx, ny)
+    hw = (cam.width / 2 - 0.5 - MARGIN_PX) / cam.fx
+    hh = (cam.height / 2 - 0.5 - MARGIN_PX) / cam.fy
+    if yaw:
+        hw, hh = hh, hw
+    from shapely.geometry import Polygon
+
+    x0, y0, x1, y1 = Polygon(site.room).bounds
+    fw, fd = footprint(site)
+    if yaw:
+        fw, fd = fd, fw
+
+    opti = ca.Opti()
+    a = opti.variable()
+    b = opti.variable() if family == "square" else (a * math.sqrt(3) / 2 if family ==
+                                                    "triangular" else 0.0)
+    dx, dy = opti.variable(), opti.variable()
+    k_vis = opti.parameter()
+    span_x = (idx[:, 0].max()) * a
+    span_y = (idx[:, 1].max()) * b
+    ox = (x0 + x1) / 2 - span_x / 2 + dx
+    oy = (y0 + y1) / 2 - span_y / 2 + dy
+    Z = Z0 - pz  # N
+    fxz = cam.fx / Z
+    count = 0
+    F = [0] * 6  # xx, xy, xz, yy, yz, zz of Σ w JᵀJ (nadir: J rows (f/Z)[1,0,−x], [0,1,−y])
+    for i, j in idx:
+        cx = ox + i * a
+        cy = oy + j * b
+        ddx = px - cx
+        ddy = py - cy
+        w = sig(k_vis * (hw * Z - ddx)) * sig(k_vis * (hw * Z + ddx)) \
+            * sig(k_vis * (hh * Z - ddy)) * sig(k_vis * (hh * Z + ddy))
+        count = count + w
+        xn, yn = ddx / Z, ddy / Z
+        s = w * fxz ** 2 / r.pixel_noise ** 2
+        F[0] += s
+        F[2] += s * xn
+        F[3] += s
+        F[4] += s * yn
+        F[5] += s * (xn ** 2 + yn ** 2)
+    eps = 1e-6
+    F = [F[0] + eps, F[1] if not isinstance(F[1], int) else 0, F[2], F[3] + eps, F[4],
+         F[5] + eps]
+    det = F[0] * (F[3] * F[5] - F[4] ** 2) - F[1] * (F[1] * F[5] - F[4] * F[2]) \
+        + F[2] * (F[1] * F[4] - F[3] * F[2])
+    tr_inv = ((F[3] * F[5] - F[4] ** 2) + (F[0] * F[5] - F[2] ** 2) + (F[0] * F[3] - F[1] ** 2)) \
+        / det
+    err = ca.sqrt(tr_inv + 1e-12)
+    covered = sig(8 * (count - (r.min_cameras - 0.5)))
+    x = 8 * (err / r.max_error_p95 - 1)
+    excess = (ca.fmax(x, 0) + ca.log1p(ca.exp(-ca.fabs(x)))) / 8  # softplus, overflow-free
+    n = len(pts)
+    opti.minimize(-ca.sum1(covered) / n + 2.0 * ca.sum1(covered * excess) / n)
+    opti.subject_to(opti.bounded(0.2 * fw, a, 1.2 * fw))
+    if family == "square":
+        opti.subject_to(opti.bounded(0.2 * fd, b, 1.2 * fd))
+    opti.subject_to(opti.bounded(-fw, dx, fw))
+    opti.subject_to(opti.bounded(-fd, dy, fd))
+    opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
+                          "ipopt.max_iter": 200,
+                          "ipopt.hessian_approximation": "limited-memory"})
+    best = None
+    for s0 in np.linspace(0.5, 0.9, starts):
+        opti.set_initial(a, s0 * fw)
+        if family == "square":
+            opti.set_initial(b, s0 * fd)
+        opti.set_initial(dx, 0.0)
+        opti.set_initial(dy, 0.0)
+        try:
+            for k in (20.0, 60.0):
+                opti.set_value(k_vis, k)
+                sol = opti.solve()
+                opti.set_initial(sol.value_variables())
+            va = float(sol.value(a))
+            vb = float(sol.value(b)) if family == "square" else None
+            vdx, vdy = float(sol.value(dx)), float(sol.value(dy))
+        except RuntimeError:
+            continue
+        bb = vb if vb is not None else (va * math.sqrt(3) / 2 if family == "triangular"
+                                        else 0.0)
+        spacing = (va, vb) if family == "square" else (va,)
+        origin = ((x0 + x1) / 2 - idx[:, 0].max() * va / 2 + vdx,
+                  (y0 + y1) / 2 - idx[:, 1].max() * bb / 2 + vdy)
+        cams = grid_cameras(site, family, nx, ny, spacing, origin, yaw=yaw)
+        ev = evaluate(site, cams)
+        if ev.meets and (best is None or ev.p95 < best.evaluation.p95):
+            best = Candidate(family, nx, ny, spacing, origin, yaw, cams, ev)
+    return best
+
+
+@dataclass
+class Plan:
+    """The result of planning: ranked candidates at the fewest cameras that meet the site's
+    requirements (empty when none up to ``max_cameras`` does), and the best seen otherwise."""
+
+    candidates: list  # Candidate, best p95 first
+    tried: int  # arrangements optimised
+    seconds: float
+    closest: Candidate | None = None  # when nothing meets: the best coverage seen
+
+
+def plan_site(site: Site, max_cameras: int = 40, starts: int = 3, progress=None) -> Plan:
+    """The fewest cameras that meet the requirements: for each count from a lower bound up, every
+    family and arrangement (nx × ny) and both yaws, spacing and offset by
+    :func:`optimise_layout`, each result judged by :func:`evaluate`; the first count with a
+    passing layout ends the search and its candidates are ranked by predicted p95."""
+    import time
+
+    from shapely.geometry import Polygon
+
+    t0 = time.perf_counter()
+    area = Polygon(site.room).area
+    fw, fd = footprint(site)
+    # k-coverage needs at least k footprints' worth of area at the highest LED height
+    lower = max(2, math.ceil(site.requirements.min_cameras * site.requirements.coverage * area
+                             / (fw * fd)))
+    tried, closest = 0, None
+    for n in range(lower, max_cameras + 1):
+        found = []
+        for family in site.families:
+            for nx, ny in shapes(family, n):
+                for yaw in (0.0, math.pi / 2):
+                    tried += 1
+                    c = optimise_layout(site, family, nx, ny, yaw, starts)
+                    if c is not None:
+                        found.append(c)
+        if progress:
+            progress(n)
+        if found:
+            return Plan(sorted(found, key=lambda c: c.evaluation.p95), tried,
+                        time.perf_counter() - t0)
+    return Plan([], tried, time.perf_counter() - t0, closest)
