@@ -316,97 +316,109 @@ def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
 
 # -- the optimiser ----------------------------------------------------------------------------
 
-def _layout_indices(family: str, nx: int, ny: int):
-    """Grid indices (i + row shift, j) of each camera of a family, as floats."""
-    ij = []
-    for j in range(ny if family != "linear" else 1):
-        for i in range(nx):
-            ij.append((i + (0.5 if family == "triangular" and j % 2 else 0.0), float(j)))
-    return np.array(ij)
-
-
 def optimise_layout(site: Site, family: str, nx: int, ny: int, yaw: float,
                     starts: int = 3, screen_step: float = 0.2) -> Candidate | None:
     """Spacing(s) and offset of one grid arrangement by CasADi/IPOPT on smooth surrogates,
     then judged by the reference model (:func:`evaluate`). None when nothing passes.
 
     Surrogates (nadir cameras, the site's camera model): a camera sees a sample point with
-    weight σ(k·(half-width·Z − |d|)) per image axis (a product of sigmoids), a point is covered
-    with σ(k'·(Σ weights − (min_cameras − ½))), and its predicted error is sqrt(trace(F⁻¹)) with
-    F built from those weights. The objective rewards soft coverage and penalises covered
-    points whose error exceeds the requirement; steepness rises 20 → 60 m⁻¹ with warm starts.
+    weight σ(k·(half-width·Z − |d|)) per image axis, a point is covered with
+    σ(8·(Σ weights − (min_cameras − ½))), and its predicted error is sqrt(trace(F⁻¹)) with F
+    built from those weights. On an axis-aligned lattice every sum separates into a sum over
+    columns times a sum over rows (FIELD-NOTES), so the surrogate costs O(cameras × (columns
+    + rows)) per height, not O(cameras × points): large rooms stay fast. A triangular lattice
+    is two such lattices (even and odd rows). The objective rewards soft coverage and
+    penalises covered points whose error exceeds the requirement; the steepness rises
+    20 → 60 m⁻¹ with warm starts; ``starts`` initial spacings.
     """
     import casadi as ca
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
 
     def sig(x):  # the logistic function without overflow (tanh form)
         return 0.5 * (1 + ca.tanh(x / 2))
 
     r = site.requirements
     cam = site.camera
-    Z0 = site.ceiling_height
-    pts = sample_points(site, screen_step)
-    px, py, pz = pts[:, 0], pts[:, 1], pts[:, 2]
-    idx = _layout_indices(family, nx, ny)
+    area = Polygon(site.room)
+    for poly in site.keep_out:
+        area = area.difference(Polygon(poly))
+    x0, y0, x1, y1 = Polygon(site.room).bounds
+    xs = np.arange(x0 + screen_step / 2, x1, screen_step)
+    ys = np.arange(y0 + screen_step / 2, y1, screen_step)
+    gx, gy = np.meshgrid(xs, ys)
+    mask = contains_xy(area, gx.ravel(), gy.ravel()).reshape(gx.shape).astype(float)
+    mask_dm = ca.DM(mask)
+    total = float(mask.sum())
+    hs = r.heights
+    levels = sorted({min(hs), (min(hs) + max(hs)) / 2, max(hs)})
     hw = (cam.width / 2 - 0.5 - MARGIN_PX) / cam.fx
     hh = (cam.height / 2 - 0.5 - MARGIN_PX) / cam.fy
     if yaw:
         hw, hh = hh, hw
-    from shapely.geometry import Polygon
-
-    x0, y0, x1, y1 = Polygon(site.room).bounds
     fw, fd = footprint(site)
     if yaw:
         fw, fd = fd, fw
+    rows = ny if family != "linear" else 1
+    # row groups of one shift each: (shift in spacings, row indices)
+    groups = [(0.0, list(range(rows)))] if family != "triangular" else \
+        [(0.0, list(range(0, rows, 2))), (0.5, list(range(1, rows, 2)))]
+    groups = [g for g in groups if g[1]]
 
     opti = ca.Opti()
     a = opti.variable()
-    b = opti.variable() if family == "square" else (a * math.sqrt(3) / 2 if family ==
-                                                    "triangular" else 0.0)
+    b = opti.variable() if family == "square" else (a * math.sqrt(3) / 2
+                                                    if family == "triangular" else 0.0)
     dx, dy = opti.variable(), opti.variable()
     k_vis = opti.parameter()
-    span_x = (idx[:, 0].max()) * a
-    span_y = (idx[:, 1].max()) * b
+    span_x = (nx - 1 + (0.5 if family == "triangular" and rows > 1 else 0.0)) * a
+    span_y = (rows - 1) * b
     ox = (x0 + x1) / 2 - span_x / 2 + dx
     oy = (y0 + y1) / 2 - span_y / 2 + dy
-    Z = Z0 - pz  # N
-    fxz = cam.fx / Z
-    count = 0
-    F = [0] * 6  # xx, xy, xz, yy, yz, zz of Σ w JᵀJ (nadir: J rows (f/Z)[1,0,−x], [0,1,−y])
-    for i, j in idx:
-        cx = ox + i * a
-        cy = oy + j * b
-        ddx = px - cx
-        ddy = py - cy
-        w = sig(k_vis * (hw * Z - ddx)) * sig(k_vis * (hw * Z + ddx)) \
-            * sig(k_vis * (hh * Z - ddy)) * sig(k_vis * (hh * Z + ddy))
-        count = count + w
-        xn, yn = ddx / Z, ddy / Z
-        s = w * fxz ** 2 / r.pixel_noise ** 2
-        F[0] += s
-        F[2] += s * xn
-        F[3] += s
-        F[4] += s * yn
-        F[5] += s * (xn ** 2 + yn ** 2)
-    eps = 1e-6
-    F = [F[0] + eps, F[1] if not isinstance(F[1], int) else 0, F[2], F[3] + eps, F[4],
-         F[5] + eps]
-    det = F[0] * (F[3] * F[5] - F[4] ** 2) - F[1] * (F[1] * F[5] - F[4] * F[2]) \
-        + F[2] * (F[1] * F[4] - F[3] * F[2])
-    tr_inv = ((F[3] * F[5] - F[4] ** 2) + (F[0] * F[5] - F[2] ** 2) + (F[0] * F[3] - F[1] ** 2)) \
-        / det
-    err = ca.sqrt(tr_inv + 1e-12)
-    covered = sig(8 * (count - (r.min_cameras - 0.5)))
-    x = 8 * (err / r.max_error_p95 - 1)
-    excess = (ca.fmax(x, 0) + ca.log1p(ca.exp(-ca.fabs(x)))) / 8  # softplus, overflow-free
-    n = len(pts)
-    opti.minimize(-ca.sum1(covered) / n + 2.0 * ca.sum1(covered * excess) / n)
+    xs_row = ca.DM(xs).T  # 1 × Mx
+    ys_col = ca.DM(ys)  # My × 1
+    objective = 0
+    for h in levels:
+        Z = site.ceiling_height - h
+        c = (cam.fx / Z) ** 2 / r.pixel_noise ** 2
+        count = 0
+        F00 = F02 = F12 = F22 = 0
+        for shift, js in groups:
+            Sx = [0, 0, 0]
+            for i in range(nx):
+                d = xs_row - (ox + (i + shift) * a)
+                v = sig(k_vis * (hw * Z - d)) * sig(k_vis * (hw * Z + d))
+                Sx = [Sx[0] + v, Sx[1] + v * d / Z, Sx[2] + v * (d / Z) ** 2]
+            Sy = [0, 0, 0]
+            for j in js:
+                d = ys_col - (oy + j * b)
+                v = sig(k_vis * (hh * Z - d)) * sig(k_vis * (hh * Z + d))
+                Sy = [Sy[0] + v, Sy[1] + v * d / Z, Sy[2] + v * (d / Z) ** 2]
+            n00 = ca.mtimes(Sy[0], Sx[0])  # My × Mx: Σ weights
+            count = count + n00
+            F00 = F00 + c * n00
+            F02 = F02 + c * ca.mtimes(Sy[0], Sx[1])
+            F12 = F12 + c * ca.mtimes(Sy[1], Sx[0])
+            F22 = F22 + c * (ca.mtimes(Sy[0], Sx[2]) + ca.mtimes(Sy[2], Sx[0]))
+        eps = 1e-6
+        F00, F22 = F00 + eps, F22 + eps
+        # F = [[F00, 0, F02], [0, F00, F12], [F02, F12, F22]]
+        det = F00 * (F00 * F22 - F12 ** 2) - F02 * (F00 * F02)
+        tr_inv = ((F00 * F22 - F12 ** 2) + (F00 * F22 - F02 ** 2) + F00 ** 2) / det
+        err = ca.sqrt(tr_inv + 1e-12)
+        covered = sig(8 * (count - (r.min_cameras - 0.5)))
+        x = 8 * (err / r.max_error_p95 - 1)
+        excess = (ca.fmax(x, 0) + ca.log1p(ca.exp(-ca.fabs(x)))) / 8  # softplus, no overflow
+        objective = objective - ca.sum1(ca.sum2(mask_dm * covered)) / total \
+            + 2.0 * ca.sum1(ca.sum2(mask_dm * covered * excess)) / total
+    opti.minimize(objective / len(levels))
     opti.subject_to(opti.bounded(0.2 * fw, a, 1.2 * fw))
     if family == "square":
         opti.subject_to(opti.bounded(0.2 * fd, b, 1.2 * fd))
     opti.subject_to(opti.bounded(-fw, dx, fw))
     opti.subject_to(opti.bounded(-fd, dy, fd))
     opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-                          "ipopt.max_iter": 200,
+                          "ipopt.max_iter": 150,
                           "ipopt.hessian_approximation": "limited-memory"})
     best = None
     for s0 in np.linspace(0.5, 0.9, starts):
@@ -424,12 +436,17 @@ def optimise_layout(site: Site, family: str, nx: int, ny: int, yaw: float,
             vb = float(sol.value(b)) if family == "square" else None
             vdx, vdy = float(sol.value(dx)), float(sol.value(dy))
         except RuntimeError:
-            continue
+            try:  # IPOPT stopped early (iterations): its last point is still worth judging
+                va = float(opti.debug.value(a))
+                vb = float(opti.debug.value(b)) if family == "square" else None
+                vdx, vdy = float(opti.debug.value(dx)), float(opti.debug.value(dy))
+            except RuntimeError:
+                continue
         bb = vb if vb is not None else (va * math.sqrt(3) / 2 if family == "triangular"
                                         else 0.0)
         spacing = (va, vb) if family == "square" else (va,)
-        origin = ((x0 + x1) / 2 - idx[:, 0].max() * va / 2 + vdx,
-                  (y0 + y1) / 2 - idx[:, 1].max() * bb / 2 + vdy)
+        sx = (nx - 1 + (0.5 if family == "triangular" and rows > 1 else 0.0)) * va
+        origin = ((x0 + x1) / 2 - sx / 2 + vdx, (y0 + y1) / 2 - (rows - 1) * bb / 2 + vdy)
         cams = grid_cameras(site, family, nx, ny, spacing, origin, yaw=yaw)
         ev = evaluate(site, cams)
         if ev.meets and (best is None or ev.p95 < best.evaluation.p95):
