@@ -142,3 +142,33 @@ def test_optimiser_needs_no_more_cameras_than_the_exhaustive_search():
     assert evaluate(small, best.cameras).meets  # judged by the model, not the surrogate
     exhaustive = next(n for n in range(2, 7) if exhaustive_search(small, n, steps=5, offsets=3))
     assert best.count <= exhaustive
+
+
+def test_plan_command_exports_a_deployment_that_meets_the_site(tmp_path):
+    from click.testing import CliRunner
+
+    from vlpcal import deployment
+    from vlpcal.cli import main
+
+    doc = {**SITE, "site": {**SITE["site"], "room": [[0, 0], [2.0, 0], [2.0, 1.2], [0, 1.2]]},
+           "requirements": {**SITE["requirements"], "heights": [0.0, 0.3], "coverage": 0.9,
+                            "max_error_p95": 0.03}}
+    (tmp_path / "site.yaml").write_text(yaml.safe_dump(doc))
+    out = tmp_path / "planned.yaml"
+    res = CliRunner().invoke(main, ["plan", "--site", str(tmp_path / "site.yaml"), "--out",
+                                    str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    dep = deployment.load(out)
+    site = load_site(tmp_path / "site.yaml")
+    ev = evaluate(site, dep.cameras)  # the independent check of the exported file
+    assert ev.meets and ev.coverage >= 0.9 and ev.p95 <= 0.03
+    assert dep.extra["provenance"]["predicted"]["p95_error_m"] == pytest.approx(ev.p95)
+    assert out.with_suffix(".png").is_file()
+    # 1 mm at the paper's 2.3 m with 160 × 120 px: refused with the best figures, no file
+    doc["requirements"]["max_error_p95"] = 0.001
+    (tmp_path / "hard.yaml").write_text(yaml.safe_dump(doc))
+    bad = tmp_path / "bad.yaml"
+    res = CliRunner().invoke(main, ["plan", "--site", str(tmp_path / "hard.yaml"), "--out",
+                                    str(bad), "--max-cameras", "5", "-q"])
+    assert res.exit_code == 1 and "no grid of up to 5 cameras meets" in res.output
+    assert "the best found" in res.output and "p95" in res.output and not bad.exists()

@@ -6,6 +6,8 @@ Heavy modules (cv2, scipy, casadi, matplotlib) are imported inside commands, so 
 
 from __future__ import annotations
 
+import math
+
 import click
 
 from . import __version__
@@ -617,6 +619,122 @@ def _survey_figure(path, stats, per_point, X, cameras) -> None:
     axes[2].set_ylabel("CDF")
     axes[2].grid(alpha=0.3)
     axes[2].legend(fontsize=6)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+
+
+@main.command()
+@click.option("--site", "site_path", required=True, type=click.Path(dir_okay=False),
+              help="Site file (DESIGN.md format vlpcal-site).")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="Deployment to write; maps per LED height (.png) go beside it.")
+@click.option("--candidate", default=1, show_default=True, type=click.IntRange(1),
+              help="Which ranked candidate to export.")
+@click.option("--max-cameras", default=120, show_default=True, type=click.IntRange(2),
+              help="Give up above this many cameras.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
+def plan(site_path, out, candidate, max_cameras, quiet):
+    """Plan a camera grid: the fewest cameras that meet the site's requirements.
+
+    Searches linear, triangular and square (two spacings) grids by camera count; for each
+    arrangement and yaw a CasADi/IPOPT optimiser sets spacing and offset on smooth
+    surrogates, and every result is judged by the reference model of DESIGN.md (coverage and
+    predicted 95th-percentile error). Prints the ranked candidates, writes the chosen one.
+
+    Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
+    """
+    from datetime import datetime, timezone
+    from pathlib import Path
+
+    from . import __version__
+    from .deployment import Deployment, save
+    from .planning import SiteError, load_site, plan_site
+
+    try:
+        site = load_site(site_path)
+    except SiteError as e:
+        raise UserError(str(e)) from None
+    out = Path(out)
+    if out.is_dir() or not out.parent.is_dir():
+        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    say = (lambda m: None) if quiet else (lambda m: click.echo(m, err=True))
+    result = plan_site(site, max_cameras, progress=lambda n: say(f"  tried {n} cameras"))
+    r = site.requirements
+    if not result.candidates:
+        c = result.closest
+        best = (f"the best found: {c.count} cameras ({c.family}) cover "
+                f"{c.evaluation.coverage:.1%} with p95 {c.evaluation.p95 * 100:.2f} cm"
+                if c else "no layout could be evaluated")
+        raise click.ClickException(
+            f"{site_path}: no grid of up to {max_cameras} cameras meets coverage "
+            f"{r.coverage:.0%} with p95 ≤ {r.max_error_p95 * 100:g} cm ({best}); relax the "
+            "requirements, lower the LED heights or use a camera with more pixels")
+    click.echo(f"{site.name}: {len(result.candidates)} layouts of "
+               f"{result.candidates[0].count} cameras meet the requirements "
+               f"({result.tried} arrangements optimised, {result.seconds:.1f} s)\n")
+    click.echo(f"{'#':>2s} {'family':10s} {'cams':>4s} {'grid':>6s} {'spacing m':>12s} "
+               f"{'yaw':>4s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
+    for k, c in enumerate(result.candidates, start=1):
+        sp = "×".join(f"{v:.2f}" for v in c.spacing)
+        click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {c.nx:>3d}×{c.ny:<2d} {sp:>12s} "
+                   f"{round(math.degrees(c.yaw)):4d} {c.evaluation.coverage:8.1%} "
+                   f"{c.evaluation.mean * 100:8.2f} {c.evaluation.p95 * 100:7.2f}")
+    if candidate > len(result.candidates):
+        raise UserError(f"--candidate {candidate}: only {len(result.candidates)} candidates")
+    chosen = result.candidates[candidate - 1]
+    ev = chosen.evaluation
+    provenance = {
+        "command": "vlpcal plan", "vlpcal": __version__,
+        "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "from": {"site": str(site_path)},
+        "plan": {"family": chosen.family, "grid": [chosen.nx, chosen.ny],
+                 "spacing_m": [float(v) for v in chosen.spacing],
+                 "origin_m": [float(v) for v in chosen.origin],
+                 "yaw_rad": float(chosen.yaw), "rank": candidate},
+        "predicted": {"coverage": ev.coverage, "mean_error_m": ev.mean, "p95_error_m": ev.p95,
+                      "model": "DESIGN.md reference model", "pixel_noise_px": r.pixel_noise},
+    }
+    dep = Deployment(site.name, site.ceiling_height, site.room, chosen.cameras, site.keep_out,
+                     {"uncertainty": {"pixel_noise": r.pixel_noise}, "provenance": provenance})
+    save(dep, out, header=f"Planned by vlpcal plan from {site_path}: candidate {candidate}.")
+    _plan_maps(out.with_suffix(".png"), site, chosen)
+    click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
+
+
+def _plan_maps(path, site, cand) -> None:
+    """Per LED height: cameras, how many see each point, and the predicted error."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ev = cand.evaluation
+    levels = sorted(set(ev.points[:, 2].round(6)))
+    fig, axes = plt.subplots(2, len(levels), figsize=(4.6 * len(levels), 7.2), squeeze=False,
+                             constrained_layout=True)
+    room = np.array(list(site.room) + [site.room[0]])
+    vmax = np.nanpercentile(ev.error, 99) * 100 if np.isfinite(ev.error).any() else 1
+    for col, h in enumerate(levels):
+        sel = np.isclose(ev.points[:, 2], h)
+        for row, (values, cmap, label) in enumerate((
+                (ev.views[sel], "viridis", "cameras seeing the point"),
+                (ev.error[sel] * 100, "magma_r", "predicted RMS error (cm)"))):
+            ax = axes[row][col]
+            sc = ax.scatter(ev.points[sel, 0], ev.points[sel, 1], c=values, cmap=cmap, s=6,
+                            marker="s", vmin=0, vmax=None if row == 0 else vmax)
+            ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
+            for poly in site.keep_out:
+                ax.fill(*np.array(poly).T, color="0.85", ec="0.5")
+            for c in cand.cameras:
+                ax.plot(*c.position[:2], "c^", ms=6, mec="k")
+            ax.set_aspect("equal")
+            ax.set_title(f"h = {h:g} m: {label}", fontsize=8)
+            fig.colorbar(sc, ax=ax, shrink=0.7)
+    fig.suptitle(f"{site.name}: {cand.count} cameras, {cand.family} — coverage "
+                 f"{ev.coverage:.1%}, predicted p95 {ev.p95 * 100:.2f} cm", fontsize=10)
     tmp = path.with_name(f".{path.name}.tmp.png")
     fig.savefig(tmp, dpi=110)
     plt.close(fig)

@@ -272,6 +272,21 @@ def shapes(family: str, n: int) -> list[tuple[int, int]]:
     return [(nx, n // nx) for nx in range(1, n + 1) if n % nx == 0 and n // nx >= 2 and nx >= 2]
 
 
+def mountable(site: Site, cameras: list[Camera]) -> list[Camera]:
+    """The cameras that can hang from the ceiling: inside the room polygon (keep-out areas are
+    floor obstacles, not ceiling bans); renamed C1, C2, … in order."""
+    from dataclasses import replace as _replace
+
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    room = Polygon(site.room).buffer(1e-9)
+    xy = np.array([c.position[:2] for c in cameras])
+    inside = contains_xy(room, xy[:, 0], xy[:, 1]) if len(xy) else np.zeros(0, bool)
+    kept = [c for c, ok in zip(cameras, inside) if ok]
+    return [_replace(c, id=f"C{k + 1}") for k, c in enumerate(kept)]
+
+
 def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
                       screen_step: float = 0.2) -> list[Candidate]:
     """Every layout of ``n`` cameras over a grid of spacings (``steps`` values from 0.3 to 1.0
@@ -303,8 +318,9 @@ def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
                             for dy in (np.linspace(-b / 2, b / 2, offsets) if ny > 1 and b
                                        else [0.0]):
                                 spacing = (a, b) if family == "square" else (a,)
-                                cams = grid_cameras(site, family, nx, ny, spacing,
-                                                    (cx0 + dx, cy0 + dy), yaw=yaw)
+                                cams = mountable(site, grid_cameras(
+                                    site, family, nx, ny, spacing, (cx0 + dx, cy0 + dy),
+                                    yaw=yaw))
                                 if not evaluate(site, cams, screen_step).meets:
                                     continue
                                 ev = evaluate(site, cams)
@@ -319,7 +335,8 @@ def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
 def optimise_layout(site: Site, family: str, nx: int, ny: int, yaw: float,
                     starts: int = 3, screen_step: float = 0.2) -> Candidate | None:
     """Spacing(s) and offset of one grid arrangement by CasADi/IPOPT on smooth surrogates,
-    then judged by the reference model (:func:`evaluate`). None when nothing passes.
+    then judged by the reference model (:func:`evaluate`): the best start, passing or not
+    (cameras that would hang outside the room are left out). None if IPOPT gave nothing.
 
     Surrogates (nadir cameras, the site's camera model): a camera sees a sample point with
     weight σ(k·(half-width·Z − |d|)) per image axis, a point is covered with
@@ -447,11 +464,18 @@ def optimise_layout(site: Site, family: str, nx: int, ny: int, yaw: float,
         spacing = (va, vb) if family == "square" else (va,)
         sx = (nx - 1 + (0.5 if family == "triangular" and rows > 1 else 0.0)) * va
         origin = ((x0 + x1) / 2 - sx / 2 + vdx, (y0 + y1) / 2 - (rows - 1) * bb / 2 + vdy)
-        cams = grid_cameras(site, family, nx, ny, spacing, origin, yaw=yaw)
+        cams = mountable(site, grid_cameras(site, family, nx, ny, spacing, origin, yaw=yaw))
         ev = evaluate(site, cams)
-        if ev.meets and (best is None or ev.p95 < best.evaluation.p95):
-            best = Candidate(family, nx, ny, spacing, origin, yaw, cams, ev)
+        cand = Candidate(family, nx, ny, spacing, origin, yaw, cams, ev)
+        if best is None or _rank(cand) < _rank(best):
+            best = cand
     return best
+
+
+def _rank(c: Candidate) -> tuple:
+    """Passing layouts first (fewer cameras, then lower p95), then the closest to passing."""
+    ev = c.evaluation
+    return (0, c.count, ev.p95) if ev.meets else (1, -ev.coverage, ev.p95)
 
 
 @dataclass
@@ -488,11 +512,14 @@ def plan_site(site: Site, max_cameras: int = 40, starts: int = 3, progress=None)
                 for yaw in (0.0, math.pi / 2):
                     tried += 1
                     c = optimise_layout(site, family, nx, ny, yaw, starts)
-                    if c is not None:
+                    if c is None:
+                        continue
+                    if c.evaluation.meets:
                         found.append(c)
+                    elif closest is None or _rank(c) < _rank(closest):
+                        closest = c
         if progress:
             progress(n)
         if found:
-            return Plan(sorted(found, key=lambda c: c.evaluation.p95), tried,
-                        time.perf_counter() - t0)
+            return Plan(sorted(found, key=_rank), tried, time.perf_counter() - t0)
     return Plan([], tried, time.perf_counter() - t0, closest)
