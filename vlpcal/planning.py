@@ -272,6 +272,25 @@ def shapes(family: str, n: int) -> list[tuple[int, int]]:
     return [(nx, n // nx) for nx in range(1, n + 1) if n % nx == 0 and n // nx >= 2 and nx >= 2]
 
 
+def promising(site: Site, family: str, nx: int, ny: int, yaw: float) -> bool:
+    """Whether an arrangement can meet the coverage at all (a cheap closed-form screen,
+    FIELD-NOTES): on an axis-aligned lattice a point's camera count is columns × rows seeing
+    it, so covering the room once needs nx footprints across and ny along, and k cameras
+    need k-fold cover along at least one axis (10 % slack for the coverage share)."""
+    from shapely.geometry import Polygon
+
+    fw, fd = footprint(site)
+    if yaw:
+        fw, fd = fd, fw
+    x0, y0, x1, y1 = Polygon(site.room).bounds
+    lx, ly = x1 - x0, y1 - y0
+    rows = 1 if family == "linear" else ny
+    k = site.requirements.min_cameras
+    once = nx * fw >= 0.9 * lx and rows * fd >= 0.9 * ly
+    k_fold = nx * fw >= 0.9 * k * lx or rows * fd >= 0.9 * k * ly
+    return once and k_fold
+
+
 def mountable(site: Site, cameras: list[Camera]) -> list[Camera]:
     """The cameras that can hang from the ceiling: inside the room polygon (keep-out areas are
     floor obstacles, not ceiling bans); renamed C1, C2, … in order."""
@@ -301,6 +320,8 @@ def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
     for family in site.families:
         for nx, ny in shapes(family, n):
             for yaw in (0.0, math.pi / 2):
+                if not promising(site, family, nx, ny, yaw):
+                    continue
                 fw, fd = footprint(site)
                 if yaw:
                     fw, fd = fd, fw
@@ -465,7 +486,9 @@ def optimise_layout(site: Site, family: str, nx: int, ny: int, yaw: float,
         sx = (nx - 1 + (0.5 if family == "triangular" and rows > 1 else 0.0)) * va
         origin = ((x0 + x1) / 2 - sx / 2 + vdx, (y0 + y1) / 2 - (rows - 1) * bb / 2 + vdy)
         cams = mountable(site, grid_cameras(site, family, nx, ny, spacing, origin, yaw=yaw))
-        ev = evaluate(site, cams)
+        ev = evaluate(site, cams, screen_step)  # a quick look; the full model if promising
+        if ev.coverage >= r.coverage - 0.02 and ev.p95 <= 1.1 * r.max_error_p95:
+            ev = evaluate(site, cams)
         cand = Candidate(family, nx, ny, spacing, origin, yaw, cams, ev)
         if best is None or _rank(cand) < _rank(best):
             best = cand
@@ -489,7 +512,7 @@ class Plan:
     closest: Candidate | None = None  # when nothing meets: the best coverage seen
 
 
-def plan_site(site: Site, max_cameras: int = 40, starts: int = 3, progress=None) -> Plan:
+def plan_site(site: Site, max_cameras: int = 60, starts: int = 3, progress=None) -> Plan:
     """The fewest cameras that meet the requirements: for each count from a lower bound up, every
     family and arrangement (nx × ny) and both yaws, spacing and offset by
     :func:`optimise_layout`, each result judged by :func:`evaluate`; the first count with a
@@ -510,6 +533,8 @@ def plan_site(site: Site, max_cameras: int = 40, starts: int = 3, progress=None)
         for family in site.families:
             for nx, ny in shapes(family, n):
                 for yaw in (0.0, math.pi / 2):
+                    if not promising(site, family, nx, ny, yaw):
+                        continue
                     tried += 1
                     c = optimise_layout(site, family, nx, ny, yaw, starts)
                     if c is None:
@@ -518,7 +543,8 @@ def plan_site(site: Site, max_cameras: int = 40, starts: int = 3, progress=None)
                         found.append(c)
                     elif closest is None or _rank(c) < _rank(closest):
                         closest = c
-        if progress:
+        if progress and any(promising(site, f, nx, ny, y) for f in site.families
+                            for nx, ny in shapes(f, n) for y in (0.0, math.pi / 2)):
             progress(n)
         if found:
             return Plan(sorted(found, key=_rank), tried, time.perf_counter() - t0)
