@@ -5,8 +5,9 @@ height; predicted p95 ≤ 2 cm at 0.3 px of spot noise, DESIGN.md's reference mo
 a 4 × 3 m rectangle, an L-shaped room with a pillar (keep-out), a 10 × 1.6 m corridor. For each:
 the optimiser's camera count and time (`plan_site`), and the exhaustive search's over the same
 counts (every family, arrangement and yaw over 12 spacings × 7 × 7 offsets per count, from the
-same lower bound up to the optimiser's answer; "–" when it finds none there). Both results are judged by `evaluate` (the model, not a surrogate).
-Then the time to plan a 10 × 8 m room. Prints a table, writes benchmarks/out/planner.json.
+same lower bound up to the optimiser's answer; "–" when it finds none there). Both results
+are judged by `evaluate` (the model, not a surrogate). Then the time to plan a 10 × 8 m room.
+Prints a table, writes benchmarks/out/planner.json.
 
     python benchmarks/planner.py
 """
