@@ -35,6 +35,8 @@ FORMAT, VERSION = "vlpcal-site", 1
 FAMILIES = ("linear", "triangular", "square")
 REQUIREMENT_KEYS = ("heights", "min_cameras", "coverage", "max_error_p95", "pixel_noise")
 CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
+#: weight of the surrogate's penalty on covered points whose error exceeds the requirement
+PENALTY = 0.5
 #: sample grid spacing of the reference model, m (DESIGN.md: at most 10 cm)
 SAMPLE_STEP = 0.10
 #: px: a point is seen when it projects at least this far inside the image
@@ -448,7 +450,7 @@ def optimise_layout(site: Site, family: str, nx: int, ny: int, yaw: float,
         x = 8 * (err / r.max_error_p95 - 1)
         excess = (ca.fmax(x, 0) + ca.log1p(ca.exp(-ca.fabs(x)))) / 8  # softplus, no overflow
         objective = objective - ca.sum1(ca.sum2(mask_dm * covered)) / total \
-            + 2.0 * ca.sum1(ca.sum2(mask_dm * covered * excess)) / total
+            + PENALTY * ca.sum1(ca.sum2(mask_dm * covered * excess)) / total
     opti.minimize(objective / len(levels))
     opti.subject_to(opti.bounded(0.2 * fw, a, 1.2 * fw))
     if family == "square":
