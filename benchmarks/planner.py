@@ -5,7 +5,8 @@ height; predicted p95 ≤ 2 cm at 0.3 px of spot noise, DESIGN.md's reference mo
 a 4 × 3 m rectangle, an L-shaped room with a pillar (keep-out), a 10 × 1.6 m corridor. For each:
 the optimiser's camera count and time (`plan_site`), and the exhaustive search's over the same
 counts (every family, arrangement and yaw over 12 spacings × 7 × 7 offsets per count, from the
-same lower bound up to the optimiser's answer; "–" when it finds none there). Both results
+same lower bound up to the optimiser's grid size — cameras that would hang outside the room
+are dropped from both; "–" when it finds none there). Both results
 are judged by `evaluate` (the model, not a surrogate). Then the time to plan a 10 × 8 m room.
 Prints a table, writes benchmarks/out/planner.json.
 
@@ -72,7 +73,9 @@ def main() -> int:
         # the exhaustive search over the same counts: up to the optimiser's answer
         t0 = time.perf_counter()
         ex_best = None
-        for n in range(lower_bound(s), (best.count if best else 40) + 1):
+        # grid sizes, as the optimiser counts them (cameras outside the room are dropped after)
+        grid_n = best.nx * (best.ny if best.family != "linear" else 1) if best else 40
+        for n in range(lower_bound(s), grid_n + 1):
             found = exhaustive_search(s, n, steps=STEPS, offsets=OFFSETS)
             if found:
                 ex_best = found[0]
