@@ -21,7 +21,13 @@ import time
 import _common  # noqa: F401  (one-core setup before numpy)
 from _common import table, write_json
 
-from vlpcal.planning import evaluate, exhaustive_search, plan_site, site_from_dict
+from vlpcal.planning import (
+    evaluate,
+    exhaustive_search,
+    lower_bound,
+    plan_site,
+    site_from_dict,
+)
 
 CAMERA = {"width": 160, "height": 120, "fx": 153.3, "fy": 153.3, "cx": 79.5, "cy": 59.5,
           "dist": [0, 0, 0, 0, 0]}
@@ -48,18 +54,6 @@ SITES = [
 #: offsets on a 7 × 7 grid within one spacing, both yaws, every family and arrangement
 STEPS, OFFSETS = 12, 7
 LARGE = site("hall 10×8 m", [[0, 0], [10, 0], [10, 8], [0, 8]], 3.0, heights=[0.0, 0.3])
-
-
-def lower_bound(s):
-    import math
-
-    from shapely.geometry import Polygon
-
-    from vlpcal.planning import footprint
-
-    fw, fd = footprint(s)
-    r = s.requirements
-    return max(2, math.ceil(r.min_cameras * r.coverage * Polygon(s.room).area / (fw * fd)))
 
 
 def main() -> int:

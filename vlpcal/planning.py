@@ -274,6 +274,26 @@ def shapes(family: str, n: int) -> list[tuple[int, int]]:
     return [(nx, n // nx) for nx in range(1, n + 1) if n % nx == 0 and n // nx >= 2 and nx >= 2]
 
 
+def arrangements(site: Site, n: int):
+    """Every (family, nx, ny, yaw) of ``n`` cameras worth trying: the site's families, their
+    shapes, yaw 0° and 90°, kept by :func:`promising`."""
+    for family in site.families:
+        for nx, ny in shapes(family, n):
+            for yaw in (0.0, math.pi / 2):
+                if promising(site, family, nx, ny, yaw):
+                    yield family, nx, ny, yaw
+
+
+def lower_bound(site: Site) -> int:
+    """Fewest cameras worth trying: k footprints' worth of the covered area at the highest
+    LED height."""
+    from shapely.geometry import Polygon
+
+    fw, fd = footprint(site)
+    r = site.requirements
+    return max(2, math.ceil(r.min_cameras * r.coverage * Polygon(site.room).area / (fw * fd)))
+
+
 def promising(site: Site, family: str, nx: int, ny: int, yaw: float) -> bool:
     """Whether an arrangement can meet the coverage at all (a cheap closed-form screen,
     FIELD-NOTES): on an axis-aligned lattice a point's camera count is columns × rows seeing
@@ -315,41 +335,36 @@ def exhaustive_search(site: Site, n: int, steps: int = 8, offsets: int = 5,
     (0°, 90°), for each of the site's families; screened on a coarse sample grid, the
     promising ones judged by :func:`evaluate`. Returns the candidates that meet the
     requirements, best predicted p95 first."""
+    from itertools import product
+
     from shapely.geometry import Polygon
 
     x0, y0, x1, y1 = Polygon(site.room).bounds
+    grid = np.linspace(0.3, 1.0, steps)
     found = []
-    for family in site.families:
-        for nx, ny in shapes(family, n):
-            for yaw in (0.0, math.pi / 2):
-                if not promising(site, family, nx, ny, yaw):
+    for family, nx, ny, yaw in arrangements(site, n):
+        fw, fd = footprint(site)
+        if yaw:
+            fw, fd = fd, fw
+        for fa, fb in product(grid, grid if family == "square" else [None]):
+            a = fa * fw
+            b = fb * fd if fb is not None else (a * math.sqrt(3) / 2
+                                                 if family == "triangular" else 0.0)
+            span_x = (nx - 1) * a + (a / 2 if family == "triangular" and ny > 1 else 0.0)
+            cx0 = (x0 + x1 - span_x) / 2
+            cy0 = (y0 + y1 - (ny - 1) * b) / 2
+            spacing = (a, b) if family == "square" else (a,)
+            shifts_x = np.linspace(-a / 2, a / 2, offsets) if nx > 1 else [0.0]
+            shifts_y = np.linspace(-b / 2, b / 2, offsets) if ny > 1 and b else [0.0]
+            for dx, dy in product(shifts_x, shifts_y):
+                origin = (cx0 + dx, cy0 + dy)
+                cams = mountable(site, grid_cameras(site, family, nx, ny, spacing, origin,
+                                                    yaw=yaw))
+                if not evaluate(site, cams, screen_step).meets:
                     continue
-                fw, fd = footprint(site)
-                if yaw:
-                    fw, fd = fd, fw
-                for fa in np.linspace(0.3, 1.0, steps):
-                    for fb in (np.linspace(0.3, 1.0, steps) if family == "square" else [None]):
-                        a = fa * fw
-                        b = fb * fd if fb is not None else (a * math.sqrt(3) / 2
-                                                             if family == "triangular" else 0.0)
-                        span_x = (nx - 1) * a + (a / 2 if family == "triangular" and ny > 1
-                                                 else 0.0)
-                        span_y = (ny - 1) * b
-                        cx0 = (x0 + x1 - span_x) / 2
-                        cy0 = (y0 + y1 - span_y) / 2
-                        for dx in np.linspace(-a / 2, a / 2, offsets) if nx > 1 else [0.0]:
-                            for dy in (np.linspace(-b / 2, b / 2, offsets) if ny > 1 and b
-                                       else [0.0]):
-                                spacing = (a, b) if family == "square" else (a,)
-                                cams = mountable(site, grid_cameras(
-                                    site, family, nx, ny, spacing, (cx0 + dx, cy0 + dy),
-                                    yaw=yaw))
-                                if not evaluate(site, cams, screen_step).meets:
-                                    continue
-                                ev = evaluate(site, cams)
-                                if ev.meets:
-                                    found.append(Candidate(family, nx, ny, spacing,
-                                                           (cx0 + dx, cy0 + dy), yaw, cams, ev))
+                ev = evaluate(site, cams)
+                if ev.meets:
+                    found.append(Candidate(family, nx, ny, spacing, origin, yaw, cams, ev))
     return sorted(found, key=lambda c: c.evaluation.p95)
 
 
@@ -521,32 +536,21 @@ def plan_site(site: Site, max_cameras: int = 60, starts: int = 3, progress=None)
     passing layout ends the search and its candidates are ranked by predicted p95."""
     import time
 
-    from shapely.geometry import Polygon
 
     t0 = time.perf_counter()
-    area = Polygon(site.room).area
-    fw, fd = footprint(site)
-    # k-coverage needs at least k footprints' worth of area at the highest LED height
-    lower = max(2, math.ceil(site.requirements.min_cameras * site.requirements.coverage * area
-                             / (fw * fd)))
     tried, closest = 0, None
-    for n in range(lower, max_cameras + 1):
+    for n in range(lower_bound(site), max_cameras + 1):
         found = []
-        for family in site.families:
-            for nx, ny in shapes(family, n):
-                for yaw in (0.0, math.pi / 2):
-                    if not promising(site, family, nx, ny, yaw):
-                        continue
-                    tried += 1
-                    c = optimise_layout(site, family, nx, ny, yaw, starts)
-                    if c is None:
-                        continue
-                    if c.evaluation.meets:
-                        found.append(c)
-                    elif closest is None or _rank(c) < _rank(closest):
-                        closest = c
-        if progress and any(promising(site, f, nx, ny, y) for f in site.families
-                            for nx, ny in shapes(f, n) for y in (0.0, math.pi / 2)):
+        for family, nx, ny, yaw in arrangements(site, n):
+            tried += 1
+            c = optimise_layout(site, family, nx, ny, yaw, starts)
+            if c is None:
+                continue
+            if c.evaluation.meets:
+                found.append(c)
+            elif closest is None or _rank(c) < _rank(closest):
+                closest = c
+        if progress and next(arrangements(site, n), None):
             progress(n)
         if found:
             return Plan(sorted(found, key=_rank), tried, time.perf_counter() - t0)
