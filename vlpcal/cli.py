@@ -433,10 +433,7 @@ def _plan_figure(path, dep, plan) -> None:
     axes[0][0].set_ylabel("y (m)")
     fig.suptitle(f"Survey plan for {dep.name}: place the LED at each point, measure, record",
                  fontsize=10)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=130)
-    plt.close(fig)
-    tmp.replace(path)
+    _save_figure(fig, path, dpi=130)
 
 
 @survey.command("calibrate")
@@ -572,6 +569,19 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
                f"{out.with_suffix('.png')}")
 
 
+def _save_figure(fig, path, dpi: int = 110) -> None:
+    """Write a matplotlib figure as PNG atomically (a temporary file, then rename), close it."""
+    import matplotlib.pyplot as plt
+
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    try:
+        fig.savefig(tmp, dpi=dpi)
+        tmp.replace(path)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+
+
 def _check_survey_positions(survey_path, dep, X, ids) -> None:
     """Refuse positions that cannot be in this room (millimetres read as metres, a typo)."""
     import numpy as np
@@ -619,10 +629,7 @@ def _survey_figure(path, stats, per_point, X, cameras) -> None:
     axes[2].set_ylabel("CDF")
     axes[2].grid(alpha=0.3)
     axes[2].legend(fontsize=6)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    _save_figure(fig, path, dpi=110)
 
 
 @main.command()
@@ -735,7 +742,4 @@ def _plan_maps(path, site, cand) -> None:
             fig.colorbar(sc, ax=ax, shrink=0.7)
     fig.suptitle(f"{site.name}: {cand.count} cameras, {cand.family} — coverage "
                  f"{ev.coverage:.1%}, predicted p95 {ev.p95 * 100:.2f} cm", fontsize=10)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    _save_figure(fig, path, dpi=110)
