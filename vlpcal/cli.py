@@ -369,6 +369,7 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
     from pathlib import Path
 
     from .datasets import POINTS_COLUMNS, write_truth_csv
+    from .reports import survey_plan_figure
     from .survey import SurveyError, plan_survey
 
     dep = _load_deployment(deployment_path)
@@ -389,7 +390,7 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
     if out.is_dir():
         raise UserError(f"{out}: is a folder (expected a points.csv file to write)")
     write_truth_csv(out, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
-    _plan_figure(out.with_suffix(".png"), dep, plan)
+    survey_plan_figure(out.with_suffix(".png"), dep, plan)
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
                f"→ {out}, map {out.with_suffix('.png')}")
     ids = plan.camera_ids
@@ -398,42 +399,6 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
                   if j != k]
         pairs = ", ".join(f"{cj} {n}" for cj, n in shared if n)
         click.echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
-
-
-def _plan_figure(path, dep, plan) -> None:
-    """One panel per height: room, keep-out areas, cameras, points with their ids."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    heights = sorted(set(plan.xyz[:, 2].round(6)))
-    room = np.array(dep.room + dep.room[:1])
-    fig, axes = plt.subplots(1, len(heights), figsize=(5.5 * len(heights), 5.0),
-                             squeeze=False, constrained_layout=True)
-    for ax, h in zip(axes[0], heights):
-        ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
-        for poly in dep.keep_out:
-            ax.fill(*np.array(poly).T, color="0.85", hatch="//", ec="0.5")
-        for c in dep.cameras:
-            ax.plot(*c.position[:2], "rs", ms=7)
-            ax.annotate(c.id, c.position[:2], color="r", fontsize=8, xytext=(4, 4),
-                        textcoords="offset points")
-        sel = np.flatnonzero(np.isclose(plan.xyz[:, 2], h))
-        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "-", color="0.8", lw=0.6)  # walking order
-        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "o", color="#2a7ab0", ms=4)
-        for i in sel:
-            ax.annotate(plan.ids[i][1:].lstrip("0"), plan.xyz[i, :2], fontsize=5,
-                        xytext=(2, 2), textcoords="offset points")
-        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points (S{plan.ids[sel[0]][1:]}…)",
-                     fontsize=9)
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-    axes[0][0].set_ylabel("y (m)")
-    fig.suptitle(f"Survey plan for {dep.name}: place the LED at each point, measure, record",
-                 fontsize=10)
-    _save_figure(fig, path, dpi=130)
 
 
 @survey.command("calibrate")
@@ -464,18 +429,9 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     """
     from pathlib import Path
 
-    import numpy as np
-
     from .datasets import DatasetError, read_survey_bundle
-    from .deployment import Deployment, save
-    from .geometry import rodrigues
-    from .survey import (
-        SurveyError,
-        calibrate,
-        held_out,
-        learn_region_map,
-        survey_spots,
-    )
+    from .reports import write_calibration
+    from .survey import SurveyError, calibrate_survey, survey_spots
 
     dep = _load_deployment(deployment_path)
     try:
@@ -488,58 +444,33 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     uv, notes = survey_spots(dep, bundle)
     for note in notes:
         click.echo(note, err=True)
-    X, ids, cams = bundle.xyz, bundle.point_ids, dep.cameras
+    X, ids = bundle.xyz, bundle.point_ids
     _check_survey_positions(survey_path, dep, X, ids)
     try:
         with click.progressbar(length=folds + 1, label="calibrating (all, then k-fold)",
                                file=None if not quiet else open("/dev/null", "w")) as bar:
-            cal = calibrate(cams, X, uv, ids, intrinsics, point_sigma)
-            bar.update(1)
-            per_point: dict = {}
-            stats = held_out(cams, X, uv, ids, dep.room, intrinsics, folds, point_sigma,
-                             progress=lambda i, n: bar.update(1), per_point=per_point,
-                             pair_method=dep.pair_method, max_residual=dep.max_residual)
+            result = calibrate_survey(
+                dep, X, uv, ids, intrinsics, folds, point_sigma,
+                progress=lambda i, n: bar.update(1),
+                sources={"deployment": str(deployment_path), "survey": str(survey_path)})
     except SurveyError as e:
         raise UserError(f"{survey_path}: {e}") from None
-    rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
-    choice = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest pair": "nearest",
-              "calibrated, (c) region map": "region", "calibrated, all-camera LS": "robust"}
-    best = min(choice, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
-               else np.inf)
-    extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
-    extra["fusion"] = {**extra.get("fusion", {}), "method": choice[best],
-                       "region_map": rmap.to_dict()}
-    from datetime import datetime, timezone
+    _print_calibration(result, folds, point_sigma)
+    paths = write_calibration(out, result, notes,
+                              header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
+    click.echo(f"\nwrote {paths[0]} (fusion: {result.fusion}), {paths[1]}, {paths[2]}")
 
-    from . import __version__
 
-    extra["provenance"] = {
-        "command": "vlpcal survey calibrate", "vlpcal": __version__,
-        "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "from": {"deployment": str(deployment_path), "survey": str(survey_path),
-                 "points": len(ids)},
-        "intrinsics": intrinsics,
-        "held_out_mean_m": {k: v["mean"] for k, v in stats.items()},
-    }
-    calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
-                            extra)
-    # the report: per camera and held out
-    cam_rows = []
-    for nom, fit in zip(cams, cal.fits):
-        c = fit.camera
-        dR = rodrigues(c.rotation) @ rodrigues(nom.rotation).T
-        angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
-        cam_rows.append({"camera": c.id, "rms_px": fit.rms_px, "points": fit.used,
-                         "outliers": fit.outliers,
-                         "moved_cm": float(np.linalg.norm(np.subtract(c.position,
-                                                                      nom.position)) * 100),
-                         "turned_deg": angle,
-                         "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
-    click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {len(ids)} points), cm; the "
+def _print_calibration(result, folds: int, point_sigma: float) -> None:
+    """The held-out table, the per-camera verdicts and the mis-measured points."""
+    import numpy as np
+
+    n = len(result.points)
+    click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), cm; the "
                f"reference is the measured position itself (±{point_sigma * 1000:g} mm per "
                f"axis ≈ {point_sigma * 173:.2f} cm in 3D):")
     click.echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p90':>7s} {'max':>7s} {'fixed':>6s}")
-    for label, st in stats.items():
+    for label, st in result.stats.items():
         if st["mean"] is None:
             click.echo(f"{label:32s} {'–':>7s}")
             continue
@@ -547,40 +478,14 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
                    f"{st['p90'] * 100:7.2f} {st['max'] * 100:7.2f} {st['fixed']:6.0%}")
     click.echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'moved cm':>9s} "
                f"{'turned °':>9s}  rejected spots")
-    for r in cam_rows:
+    for r in result.cameras:
         click.echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['moved_cm']:9.2f} "
                    f"{r['turned_deg']:9.2f}  {', '.join(r['outliers']) or '–'}")
-    if cal.mismeasured:
+    if result.mismeasured:
         click.echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
                    "from its record the calibrated cameras put the LED):")
-        for pid, off in cal.mismeasured:
+        for pid, off in result.mismeasured:
             click.echo(f"  {pid}: {off * 100:.1f} cm" if np.isfinite(off) else f"  {pid}: –")
-    save(calibrated, out, header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
-    report = {"held_out_m": stats, "cameras": cam_rows, "fusion": choice[best],
-              "mismeasured": [{"point_id": p, "moved_m": m} for p, m in cal.mismeasured],
-              "notes": notes}
-    import json
-
-    from .deployment import atomic_write_text
-
-    atomic_write_text(out.with_suffix(".report.json"), json.dumps(report, indent=2))
-    _survey_figure(out.with_suffix(".png"), stats, per_point, X, cal.cameras)
-    click.echo(f"\nwrote {out} (fusion: {choice[best]}), {out.with_suffix('.report.json')}, "
-               f"{out.with_suffix('.png')}")
-
-
-def _save_figure(fig, path, dpi: int = 110) -> None:
-    """Write a matplotlib figure as PNG atomically (a temporary file, then rename), close it."""
-    import matplotlib.pyplot as plt
-
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    try:
-        fig.savefig(tmp, dpi=dpi)
-        tmp.replace(path)
-    finally:
-        plt.close(fig)
-        tmp.unlink(missing_ok=True)
-
 
 def _check_survey_positions(survey_path, dep, X, ids) -> None:
     """Refuse positions that cannot be in this room (millimetres read as metres, a typo)."""
@@ -596,40 +501,6 @@ def _check_survey_positions(survey_path, dep, X, ids) -> None:
         raise UserError(f"{survey_path}: point {ids[i]} at ({X[i, 0]:g}, {X[i, 1]:g}, "
                         f"{X[i, 2]:g}) m is not in the room of {dep.name} (0.5 m margin) or "
                         f"under its {dep.ceiling_height:g} m ceiling: metres expected")
-
-
-def _survey_figure(path, stats, per_point, X, cameras) -> None:
-    """Held-out errors: map over the floor (nominal vs calibrated, all-camera LS) and CDF."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    nom = per_point["nominal, all-camera LS"] * 100
-    cal = per_point["calibrated, all-camera LS"] * 100
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), constrained_layout=True)
-    vmax = np.nanpercentile(nom, 95) if np.isfinite(nom).any() else 1.0
-    for ax, err, title in ((axes[0], nom, "nominal cameras"), (axes[1], cal, "calibrated")):
-        ok = np.isfinite(err)
-        sc = ax.scatter(X[ok, 0], X[ok, 1], c=err[ok], cmap="viridis", vmin=0, vmax=vmax, s=18)
-        for c in cameras:
-            ax.plot(*c.position[:2], "rs", ms=6)
-        ax.set_title(f"held-out error, {title}: mean {np.nanmean(err):.2f} cm", fontsize=9)
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-    fig.colorbar(sc, ax=axes[:2].tolist(), label="3D error (cm)", shrink=0.8)
-    for label, err in per_point.items():
-        e = np.sort(err[np.isfinite(err)] * 100)
-        if len(e):
-            axes[2].plot(e, np.arange(1, len(e) + 1) / len(e), label=label,
-                         ls="--" if label.startswith("nominal") else "-")
-    axes[2].set_xscale("log")
-    axes[2].set_xlabel("held-out 3D error (cm)")
-    axes[2].set_ylabel("CDF")
-    axes[2].grid(alpha=0.3)
-    axes[2].legend(fontsize=6)
-    _save_figure(fig, path, dpi=110)
 
 
 @main.command()
@@ -652,12 +523,11 @@ def plan(site_path, out, candidate, max_cameras, quiet):
 
     Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
     """
-    from datetime import datetime, timezone
     from pathlib import Path
 
-    from . import __version__
-    from .deployment import Deployment, save
-    from .planning import SiteError, load_site, plan_site
+    from .deployment import save
+    from .planning import SiteError, load_site, plan_site, planned_deployment
+    from .reports import plan_maps
 
     try:
         site = load_site(site_path)
@@ -691,55 +561,135 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     if candidate > len(result.candidates):
         raise UserError(f"--candidate {candidate}: only {len(result.candidates)} candidates")
     chosen = result.candidates[candidate - 1]
-    ev = chosen.evaluation
-    provenance = {
-        "command": "vlpcal plan", "vlpcal": __version__,
-        "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "from": {"site": str(site_path)},
-        "plan": {"family": chosen.family, "grid": [chosen.nx, chosen.ny],
-                 "spacing_m": [float(v) for v in chosen.spacing],
-                 "origin_m": [float(v) for v in chosen.origin],
-                 "yaw_rad": float(chosen.yaw), "rank": candidate},
-        "predicted": {"coverage": ev.coverage, "mean_error_m": ev.mean, "p95_error_m": ev.p95,
-                      "model": "DESIGN.md reference model", "pixel_noise_px": r.pixel_noise},
-    }
-    dep = Deployment(site.name, site.ceiling_height, site.room, chosen.cameras, site.keep_out,
-                     {"uncertainty": {"pixel_noise": r.pixel_noise}, "provenance": provenance})
+    dep = planned_deployment(site, chosen, candidate, site_path)
     save(dep, out, header=f"Planned by vlpcal plan from {site_path}: candidate {candidate}.")
-    _plan_maps(out.with_suffix(".png"), site, chosen)
+    plan_maps(out.with_suffix(".png"), site, chosen)
     click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
 
 
-def _plan_maps(path, site, cand) -> None:
-    """Per LED height: cameras, how many see each point, and the predicted error."""
-    import matplotlib
+@main.command("export")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="The deployment whose cameras to export.")
+@click.option("--to", "fmt", required=True, type=click.Choice(["anipose", "opencv"]),
+              help="anipose: aniposelib CameraGroup TOML; opencv: cv::FileStorage YAML.")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="File to write (.toml for anipose, .yaml for opencv).")
+@click.option("--units", type=click.Choice(["m", "cm", "mm"]), default="m", show_default=True,
+              help="Length unit of the anipose translations (anipose itself uses the "
+                   "calibration board's, often mm). The OpenCV file is always in metres.")
+def export_cameras(deployment_path, fmt, out, units):
+    """Export a deployment's cameras for other tools, in their order, convention stated.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
+    Both formats hold OpenCV's model: camera matrix, distortion [k1, k2, p1, p2, k3], rvec
+    (world → camera) and tvec = −R · position; the world is the room's (z up, floor at 0).
+    aniposelib sorts camera sections as text, so sections are zero-padded (cam_00 … cam_11)
+    and keep their order for any number of cameras.
 
-    ev = cand.evaluation
-    levels = sorted(set(ev.points[:, 2].round(6)))
-    fig, axes = plt.subplots(2, len(levels), figsize=(4.6 * len(levels), 7.2), squeeze=False,
-                             constrained_layout=True)
-    room = np.array(list(site.room) + [site.room[0]])
-    vmax = np.nanpercentile(ev.error, 99) * 100 if np.isfinite(ev.error).any() else 1
-    for col, h in enumerate(levels):
-        sel = np.isclose(ev.points[:, 2], h)
-        for row, (values, cmap, label) in enumerate((
-                (ev.views[sel], "viridis", "cameras seeing the point"),
-                (ev.error[sel] * 100, "magma_r", "predicted RMS error (cm)"))):
-            ax = axes[row][col]
-            sc = ax.scatter(ev.points[sel, 0], ev.points[sel, 1], c=values, cmap=cmap, s=6,
-                            marker="s", vmin=0, vmax=None if row == 0 else vmax)
-            ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
-            for poly in site.keep_out:
-                ax.fill(*np.array(poly).T, color="0.85", ec="0.5")
-            for c in cand.cameras:
-                ax.plot(*c.position[:2], "c^", ms=6, mec="k")
-            ax.set_aspect("equal")
-            ax.set_title(f"h = {h:g} m: {label}", fontsize=8)
-            fig.colorbar(sc, ax=ax, shrink=0.7)
-    fig.suptitle(f"{site.name}: {cand.count} cameras, {cand.family} — coverage "
-                 f"{ev.coverage:.1%}, predicted p95 {ev.p95 * 100:.2f} cm", fontsize=10)
-    _save_figure(fig, path, dpi=110)
+    Example: vlpcal export -d planned.yaml --to anipose -o calibration.toml
+    """
+    from pathlib import Path
+
+    from .deployment import atomic_write_text
+    from .interchange import to_anipose_toml, to_opencv_yaml
+
+    dep = _load_deployment(deployment_path)
+    out = Path(out)
+    if out.is_dir() or not out.parent.is_dir():
+        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    if fmt == "anipose":
+        text = to_anipose_toml(dep.cameras, units, {"deployment": dep.name})
+    else:
+        text = to_opencv_yaml(dep.cameras)
+    atomic_write_text(out, text)
+    click.echo(f"wrote {len(dep.cameras)} cameras of {dep.name} to {out} ({fmt}"
+               f"{', ' + units if fmt == 'anipose' else ', m'})")
+
+
+@main.command("import")
+@click.option("--cameras", "cameras_path", required=True, type=click.Path(dir_okay=False),
+              help="aniposelib TOML (.toml) or the OpenCV YAML vlpcal export writes (.yaml).")
+@click.option("--base", "-b", "base_path", required=True, type=click.Path(dir_okay=False),
+              help="A deployment or site file giving the room (its cameras are replaced).")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="Deployment to write.")
+@click.option("--units", type=click.Choice(["m", "cm", "mm"]), default=None,
+              help="Length unit of the TOML's translations, if its [metadata] does not say.")
+def import_cameras(cameras_path, base_path, out, units):
+    """Make a deployment from cameras calibrated by another tool.
+
+    The cameras' world frame must be the room's (z up, floor at z = 0, metres once scaled):
+    an anipose calibration is in its first camera's or its board's frame until aligned to
+    the floor. The room, keep-out areas and settings come from --base; a region map or pixel
+    corrections naming cameras the file lacks are dropped, with a note.
+
+    Example: vlpcal import --cameras calibration.toml --units mm -b site.yaml -o cams.yaml
+    """
+    from pathlib import Path
+
+    import yaml
+
+    from .deployment import Deployment, DeploymentError, provenance, save
+    from .interchange import (
+        InterchangeError,
+        check_world_frame,
+        from_anipose_toml,
+        from_opencv_yaml,
+    )
+    from .planning import load_site
+
+    path = Path(cameras_path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise UserError(f"{path}: cannot read ({e.strerror})") from None
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not a text file (expected TOML or YAML)") from None
+    try:
+        base_doc = yaml.safe_load(Path(base_path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        base_doc = None
+    kind = base_doc.get("format") if isinstance(base_doc, dict) else None
+    try:
+        if kind == "vlpcal-site":
+            site = load_site(base_path)
+            base = Deployment(site.name, site.ceiling_height, site.room, [], site.keep_out)
+        else:
+            base = _load_deployment(base_path) if kind else None
+    except DeploymentError as e:
+        raise UserError(str(e)) from None
+    if base is None:
+        raise UserError(f"{base_path}: not a vlpcal deployment or site file (expected YAML "
+                        "with format: vlpcal-deployment or vlpcal-site)")
+    try:
+        if path.suffix.lower() == ".toml":
+            cams = from_anipose_toml(text, str(path), units)
+        elif path.suffix.lower() in (".yaml", ".yml"):
+            cams = from_opencv_yaml(text, str(path))
+        else:
+            raise InterchangeError(f"{path}: unknown kind (expected .toml for anipose or .yaml "
+                                   "for OpenCV FileStorage)")
+        check_world_frame(cams, base.ceiling_height, str(path))
+    except InterchangeError as e:
+        raise UserError(str(e)) from None
+    extra = {k: v for k, v in base.extra.items() if k != "provenance"}
+    if {c.id for c in cams} != {c.id for c in base.cameras}:
+        dropped = [k for k in ("corrections",) if k in extra]
+        if "region_map" in extra.get("fusion", {}):
+            extra["fusion"] = {k: v for k, v in extra["fusion"].items() if k != "region_map"}
+            if extra["fusion"].get("method") == "region":
+                extra["fusion"].pop("method")
+            dropped.append("fusion.region_map")
+        for k in dropped:
+            extra.pop(k, None)
+        if dropped:
+            click.echo(f"dropped {', '.join(dropped)} of {base_path}: they name other cameras",
+                       err=True)
+    extra["provenance"] = provenance("vlpcal import", **{"from": {"cameras": str(path),
+                                                                  "base": str(base_path)}})
+    out = Path(out)
+    if out.is_dir() or not out.parent.is_dir():
+        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    dep = Deployment(base.name, base.ceiling_height, base.room, cams, base.keep_out, extra)
+    save(dep, out, header=f"Cameras imported by vlpcal import from {path}.")
+    click.echo(f"wrote {out}: {len(cams)} cameras ({', '.join(c.id for c in cams)}) in the room "
+               f"of {base.name}")

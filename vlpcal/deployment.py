@@ -357,3 +357,14 @@ def save(deployment: Deployment, path, header: str = "") -> None:
     if header:
         out = "".join(f"# {line}\n" for line in header.splitlines()) + out
     atomic_write_text(path, out)
+
+
+def provenance(command: str, **fields) -> dict:
+    """The provenance block every writer of a deployment adds: command, version, time, more."""
+    from datetime import datetime, timezone
+
+    from . import __version__
+
+    return {"command": command, "vlpcal": __version__,
+            "written": datetime.now(timezone.utc).isoformat(timespec="seconds"), **fields}
+

@@ -22,11 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from .deployment import (
+    Deployment,
     DeploymentError,
     _mapping,
     _number,
     _polygon,
     check_intrinsics,
+    provenance,
 )
 from .geometry import NADIR, Camera, rodrigues, rotation_vector
 from .triangulation import predicted_rms_error
@@ -555,3 +557,19 @@ def plan_site(site: Site, max_cameras: int = 60, starts: int = 3, progress=None)
         if found:
             return Plan(sorted(found, key=_rank), tried, time.perf_counter() - t0)
     return Plan([], tried, time.perf_counter() - t0, closest)
+
+
+def planned_deployment(site: Site, cand: Candidate, rank: int = 1, source: str = "") -> Deployment:
+    """The deployment file of a planned layout, with its predicted figures in the provenance
+    (so that the survey can later report planned against achieved)."""
+    ev, r = cand.evaluation, site.requirements
+    prov = provenance(
+        "vlpcal plan", **{"from": {"site": str(source)}},
+        plan={"family": cand.family, "grid": [cand.nx, cand.ny],
+              "spacing_m": [float(v) for v in cand.spacing],
+              "origin_m": [float(v) for v in cand.origin],
+              "yaw_rad": float(cand.yaw), "rank": rank},
+        predicted={"coverage": ev.coverage, "mean_error_m": ev.mean, "p95_error_m": ev.p95,
+                   "model": "DESIGN.md reference model", "pixel_noise_px": r.pixel_noise})
+    return Deployment(site.name, site.ceiling_height, site.room, cand.cameras, site.keep_out,
+                      {"uncertainty": {"pixel_noise": r.pixel_noise}, "provenance": prov})

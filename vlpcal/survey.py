@@ -419,3 +419,73 @@ def plan_survey(deployment, step: float = 0.3, heights=(0.0, 0.35, 0.7),
     pts, seen = pts[order], seen[:, order]
     ids = [f"S{i + 1:04d}" for i in range(len(pts))]
     return SurveyPlan(ids, pts, seen, [c.id for c in cams])
+
+
+# -- the whole calibration, as `vlpcal survey calibrate` runs it ------------------------------
+
+#: held-out label → the fusion the calibrated deployment would then use
+FUSION_OF = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest pair": "nearest",
+             "calibrated, (c) region map": "region", "calibrated, all-camera LS": "robust"}
+
+
+@dataclass
+class SurveyResult:
+    """A calibrated deployment and the report behind it (all lengths in metres)."""
+
+    deployment: object  #: the calibrated :class:`~vlpcal.deployment.Deployment`
+    stats: dict  #: held-out label → :func:`error_stats`
+    per_point: dict  #: held-out label → N errors
+    cameras: list  #: per camera: rms_px, points, outliers, moved_cm, turned_deg, intrinsics
+    mismeasured: list  #: (point id, m)
+    fusion: str  #: the fusion chosen by held-out mean
+    points: np.ndarray  #: N×3 the survey positions as measured
+
+    def report(self, notes=()) -> dict:
+        return {"held_out_m": self.stats, "cameras": self.cameras, "fusion": self.fusion,
+                "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
+                "notes": list(notes)}
+
+
+def calibrate_survey(dep, X, uv, ids, intrinsics: bool = False, folds: int = 5,
+                     point_sigma: float = 0.003, progress=None, sources: dict | None = None
+                     ) -> SurveyResult:
+    """Calibrate ``dep``'s cameras from a survey, measure the held-out accuracy (k-fold), learn
+    the region map (approach (c)) and choose the fusion with the lowest held-out mean; returns
+    the calibrated deployment, its provenance naming ``sources``. ``progress(i, n)`` counts the
+    full fit and each fold."""
+    from .deployment import Deployment, provenance
+    from .geometry import rodrigues
+
+    cams = dep.cameras
+    cal = calibrate(cams, X, uv, ids, intrinsics, point_sigma)
+    if progress:
+        progress(1, folds + 1)
+    per_point: dict = {}
+    stats = held_out(cams, X, uv, ids, dep.room, intrinsics, folds, point_sigma,
+                     progress=(lambda i, n: progress(i + 1, n + 1)) if progress else None,
+                     per_point=per_point, pair_method=dep.pair_method,
+                     max_residual=dep.max_residual)
+    rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
+    best = min(FUSION_OF, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
+               else np.inf)
+    extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
+    extra["fusion"] = {**extra.get("fusion", {}), "method": FUSION_OF[best],
+                       "region_map": rmap.to_dict()}
+    extra["provenance"] = provenance(
+        "vlpcal survey calibrate", **{"from": {**(sources or {}), "points": len(ids)}},
+        intrinsics=intrinsics, held_out_mean_m={k: v["mean"] for k, v in stats.items()})
+    rows = []
+    for nom, fit in zip(cams, cal.fits):
+        c = fit.camera
+        dR = rodrigues(c.rotation) @ rodrigues(nom.rotation).T
+        angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
+        rows.append({"camera": c.id, "rms_px": fit.rms_px, "points": fit.used,
+                     "outliers": fit.outliers,
+                     "moved_cm": float(np.linalg.norm(np.subtract(c.position, nom.position))
+                                       * 100),
+                     "turned_deg": angle,
+                     "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
+    calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
+                            extra)
+    return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
+                        np.asarray(X, float))

@@ -3,14 +3,12 @@ deployment files (nominal, and the true cameras for evaluation)."""
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from ..datasets import write_frames_folder, write_survey_bundle, write_truth_csv
-from ..deployment import Deployment, save
+from ..deployment import Deployment, provenance, save
 from .scene import STREAM_PATH, STREAM_TAPE, Scene, render_scene
 
 
@@ -49,11 +47,9 @@ def deployment_of(scene: Scene, which: str = "nominal") -> Deployment:
     """The scene's ``nominal`` (what the installer believes) or ``true`` cameras as a file."""
     p = scene.profile
     cams = list(scene.nominal if which == "nominal" else scene.true)
-    provenance = {"command": "vlpcal simulate", "vlpcal": __version__,
-                  "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                  "profile": p.name, "seed": scene.seed, "cameras": which}
+    prov = provenance("vlpcal simulate", profile=p.name, seed=scene.seed, cameras=which)
     return Deployment(f"{p.name}-sim", p.ceiling_height, [list(xy) for xy in p.room], cams,
-                      extra={"provenance": provenance})
+                      extra={"provenance": prov})
 
 
 def write_deployments(scene: Scene, out) -> tuple[Path, Path]:

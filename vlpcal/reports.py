@@ -1,0 +1,135 @@
+"""Reports: the figures (PNG) and report files that commands and the demo write beside their
+results. matplotlib is imported inside each function, so the runtime path never loads it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def _pyplot():
+    """matplotlib's pyplot on the file-only backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, path, dpi: int = 110) -> None:
+    """Write a matplotlib figure as PNG atomically (a temporary file, then rename), close it."""
+    plt = _pyplot()
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    try:
+        fig.savefig(tmp, dpi=dpi)
+        tmp.replace(path)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+
+
+def survey_plan_figure(path, dep, plan) -> None:
+    """One panel per height: room, keep-out areas, cameras, points with their ids."""
+    plt = _pyplot()
+    heights = sorted(set(plan.xyz[:, 2].round(6)))
+    room = np.array(dep.room + dep.room[:1])
+    fig, axes = plt.subplots(1, len(heights), figsize=(5.5 * len(heights), 5.0),
+                             squeeze=False, constrained_layout=True)
+    for ax, h in zip(axes[0], heights):
+        ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
+        for poly in dep.keep_out:
+            ax.fill(*np.array(poly).T, color="0.85", hatch="//", ec="0.5")
+        for c in dep.cameras:
+            ax.plot(*c.position[:2], "rs", ms=7)
+            ax.annotate(c.id, c.position[:2], color="r", fontsize=8, xytext=(4, 4),
+                        textcoords="offset points")
+        sel = np.flatnonzero(np.isclose(plan.xyz[:, 2], h))
+        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "-", color="0.8", lw=0.6)  # walking order
+        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "o", color="#2a7ab0", ms=4)
+        for i in sel:
+            ax.annotate(plan.ids[i][1:].lstrip("0"), plan.xyz[i, :2], fontsize=5,
+                        xytext=(2, 2), textcoords="offset points")
+        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points (S{plan.ids[sel[0]][1:]}…)",
+                     fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+    axes[0][0].set_ylabel("y (m)")
+    fig.suptitle(f"Survey plan for {dep.name}: place the LED at each point, measure, record",
+                 fontsize=10)
+    save_figure(fig, path, dpi=130)
+
+
+def calibration_figure(path, stats, per_point, X, cameras) -> None:
+    """Held-out errors: map over the floor (nominal vs calibrated, all-camera LS) and CDF."""
+    plt = _pyplot()
+    nom = per_point["nominal, all-camera LS"] * 100
+    cal = per_point["calibrated, all-camera LS"] * 100
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), constrained_layout=True)
+    vmax = np.nanpercentile(nom, 95) if np.isfinite(nom).any() else 1.0
+    for ax, err, title in ((axes[0], nom, "nominal cameras"), (axes[1], cal, "calibrated")):
+        ok = np.isfinite(err)
+        sc = ax.scatter(X[ok, 0], X[ok, 1], c=err[ok], cmap="viridis", vmin=0, vmax=vmax, s=18)
+        for c in cameras:
+            ax.plot(*c.position[:2], "rs", ms=6)
+        ax.set_title(f"held-out error, {title}: mean {np.nanmean(err):.2f} cm", fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+    fig.colorbar(sc, ax=axes[:2].tolist(), label="3D error (cm)", shrink=0.8)
+    for label, err in per_point.items():
+        e = np.sort(err[np.isfinite(err)] * 100)
+        if len(e):
+            axes[2].plot(e, np.arange(1, len(e) + 1) / len(e), label=label,
+                         ls="--" if label.startswith("nominal") else "-")
+    axes[2].set_xscale("log")
+    axes[2].set_xlabel("held-out 3D error (cm)")
+    axes[2].set_ylabel("CDF")
+    axes[2].grid(alpha=0.3)
+    axes[2].legend(fontsize=6)
+    save_figure(fig, path, dpi=110)
+
+
+def plan_maps(path, site, cand) -> None:
+    """Per LED height: cameras, how many see each point, and the predicted error."""
+    plt = _pyplot()
+    ev = cand.evaluation
+    levels = sorted(set(ev.points[:, 2].round(6)))
+    fig, axes = plt.subplots(2, len(levels), figsize=(4.6 * len(levels), 7.2), squeeze=False,
+                             constrained_layout=True)
+    room = np.array(list(site.room) + [site.room[0]])
+    vmax = np.nanpercentile(ev.error, 99) * 100 if np.isfinite(ev.error).any() else 1
+    for col, h in enumerate(levels):
+        sel = np.isclose(ev.points[:, 2], h)
+        for row, (values, cmap, label) in enumerate((
+                (ev.views[sel], "viridis", "cameras seeing the point"),
+                (ev.error[sel] * 100, "magma_r", "predicted RMS error (cm)"))):
+            ax = axes[row][col]
+            sc = ax.scatter(ev.points[sel, 0], ev.points[sel, 1], c=values, cmap=cmap, s=6,
+                            marker="s", vmin=0, vmax=None if row == 0 else vmax)
+            ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
+            for poly in site.keep_out:
+                ax.fill(*np.array(poly).T, color="0.85", ec="0.5")
+            for c in cand.cameras:
+                ax.plot(*c.position[:2], "c^", ms=6, mec="k")
+            ax.set_aspect("equal")
+            ax.set_title(f"h = {h:g} m: {label}", fontsize=8)
+            fig.colorbar(sc, ax=ax, shrink=0.7)
+    fig.suptitle(f"{site.name}: {cand.count} cameras, {cand.family} — coverage "
+                 f"{ev.coverage:.1%}, predicted p95 {ev.p95 * 100:.2f} cm", fontsize=10)
+    save_figure(fig, path, dpi=110)
+
+
+def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Path, Path]:
+    """A survey calibration's files: the calibrated deployment ``out``, ``.report.json`` and
+    ``.png`` beside it (each written atomically). ``result`` is a ``survey.SurveyResult``."""
+    from .deployment import atomic_write_text, save
+
+    out = Path(out)
+    paths = out, out.with_suffix(".report.json"), out.with_suffix(".png")
+    save(result.deployment, out, header=header)
+    atomic_write_text(paths[1], json.dumps(result.report(notes), indent=2))
+    cal = result.deployment.cameras
+    calibration_figure(paths[2], result.stats, result.per_point, result.points, cal)
+    return paths
