@@ -137,212 +137,45 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
 
 
 @main.command()
-@click.option("--seed", default=0, show_default=True, help="Seed of the simulated frames.")
-@click.option("--step", default=0.15, show_default=True, type=click.FloatRange(0.03, 1.0),
-              help="Spacing of the LED test grid, m.")
-def demo(seed: int, step: float):
-    """Run the built-in demo: a simulated install of the paper's three-camera rig, the paper's
-    pipeline beside vlpcal's on the same frames.
+@click.option("--out", "-o", default="vlpcal-demo", show_default=True,
+              type=click.Path(file_okay=False),
+              help="Folder to write (replaced if an earlier demo wrote it).")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0),
+              help="Seed of the simulated install, survey and frames.")
+def demo(out: str, seed: int):
+    """Run the built-in demo: plan, install, survey, calibrate and locate, all simulated.
 
-    Example: vlpcal demo --seed 1
+    Plans a camera grid for a built-in 3 × 2.4 m lab, hangs the cameras with the errors of a
+    careful install by hand, plans and simulates the survey, calibrates, then locates an LED
+    on a robot driving around the room with the paper's pipeline and vlpcal's on the same
+    frames. Prints one table and writes every file a real user would have into --out.
+
+    Example: vlpcal demo --out my-demo
     """
-    from .demo import format_table, run_demo
-
-    rows, n = run_demo(seed=seed, step=step)
-    click.echo(f"A simulated install of the paper's rig (profile paper-2024, seed {seed}): 3 "
-               f"cameras at 2.3 m, 160 × 120 px,\nhung a little off the plan; {n} LED "
-               "positions at h = 0 and 0.35 m seen by ≥ 2 cameras; JPEG frames.")
-    click.echo("3D error in cm over the same frames, with the cameras as planned (nominal):\n")
-    click.echo(format_table(rows))
-    click.echo("\nfixed: share of positions with a fix (the paper's pair method is undefined "
-               "within 3° of\nthe cameras' line in top view). Calibrated: from a simulated "
-               "survey of other points\n(vlpcal survey calibrate --intrinsics); the last row "
-               "is the floor it aims for.")
-
-
-@main.command()
-@click.option("--deployment", "-d", "deployment_path", required=True,
-              type=click.Path(dir_okay=False), help="Deployment YAML (DESIGN.md).")
-@click.option("--frames", "frames_dir", type=click.Path(file_okay=False),
-              help="Folder of <frame_id>/<camera_id>.jpg.")
-@click.option("--observations", type=click.Path(dir_okay=False),
-              help="CSV frame_id,camera_id,u,v of spots the cameras found themselves.")
-@click.option("--camera", "cameras", multiple=True, metavar="ID=SOURCE",
-              help="Live source per camera: an MJPEG URL (ESP32-CAM: http://IP:81/stream) or "
-                   "a video device (/dev/video0). Repeat for each camera.")
-@click.option("--out", "-o", default="-", show_default=True,
-              help="Fixes file (.csv or .jsonl), or - for stdout.")
-@click.option("--format", "fmt", type=click.Choice(["csv", "jsonl"]), default=None,
-              help="Output format (default: from --out's extension; csv for stdout).")
-@click.option("--batch", default=512, show_default=True, type=click.IntRange(1),
-              help="Frame sets located together (folders).")
-@click.option("--tolerance", default=0.05, show_default=True, type=click.FloatRange(0.001),
-              help="Live: frames arriving within this many seconds form one set.")
-@click.option("--duration", type=click.FloatRange(0), default=None,
-              help="Live: stop after this many seconds.")
-@click.option("--max-sets", type=click.IntRange(1), default=None,
-              help="Live: stop after this many frame sets.")
-@click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
-def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, tolerance,
-           duration, max_sets, quiet):
-    """Turn camera frames into 3D fixes (metres, world frame, z up).
-
-    One row per frame set: frame_id,x,y,z,status first (DESIGN.md), then the cameras used,
-    the predicted RMS error sigma_m, the worst reprojection residual and each camera's status.
-    A frame set without a fix keeps its row with empty x, y, z and a status saying why.
-
-    Example: vlpcal locate -d deployment.yaml --frames frames/ --out fixes.csv
-    """
-    import sys
-    import time
-    from collections import Counter
-
-    from .locator import FixWriter, Locator
-
-    sources = [name for name, given in (("--frames", frames_dir),
-                                         ("--observations", observations),
-                                         ("--camera", cameras)) if given]
-    if len(sources) != 1:
-        raise click.UsageError("give exactly one input: --frames DIR, --observations CSV or "
-                               "--camera ID=SOURCE …")
-    loc = Locator(_load_deployment(deployment_path))
-    say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
-    live = bool(cameras)
-    try:
-        writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else ())
-    except OSError as e:
-        raise UserError(f"{out}: cannot write the fixes there ({e.strerror})") from None
-    t0 = time.perf_counter()
-    statuses: Counter = Counter()
-    notes = []
-    try:
-        if frames_dir:
-            n = _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet)
-        elif observations:
-            n = _locate_observations(loc, observations, writer, statuses, notes)
-        else:
-            n = _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses,
-                             notes, say)
-    except KeyboardInterrupt:
-        notes.append("interrupted: the fixes so far are kept")
-        n = sum(statuses.values())
-    except UserError:
-        writer.abort()
-        raise
-    writer.close()
-    secs = time.perf_counter() - t0
-    if n and not quiet:
-        ok = statuses.get("ok", 0)
-        parts = ", ".join(f"{k} {v}" for k, v in statuses.most_common())
-        say(f"{n} frame sets: {ok / n:.1%} fixed ({parts}); {n / secs:,.0f} sets/s"
-            + (f" → {out}" if out != "-" else ""))
-    for note in notes:
-        say(note)
-    if not n:
-        say("no frame sets located")
-    sys.stdout.flush()
-
-
-def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> int:
-    from .datasets import DatasetError, read_frames_folder
+    from .demo import REDO, DemoError, format_table, run_demo
 
     try:
-        folder = read_frames_folder(frames_dir)
-    except DatasetError as e:
+        res = run_demo(out, seed, say=lambda m: click.echo(m, err=True))
+    except DemoError as e:
         raise UserError(str(e)) from None
-    unknown = sorted(set(folder.camera_ids) - set(loc.camera_ids))
-    if unknown:
-        files = sum(1 for (_, c) in folder.files if c in unknown)
-        notes.append(f"ignored {files} frames of camera(s) {', '.join(unknown)} that "
-                     f"{loc.deployment.name} does not have")
-    ids = folder.frame_ids
-    with click.progressbar(length=len(ids), label="locating", file=None if not quiet else
-                           open("/dev/null", "w"), show_pos=True) as bar:
-        for s in range(0, len(ids), batch):
-            chunk = ids[s:s + batch]
-            sets = []
-            for fid in chunk:
-                fs = {}
-                for cid in loc.camera_ids:
-                    path = folder.files.get((fid, cid))
-                    if path is not None:
-                        try:
-                            fs[cid] = path.read_bytes()
-                        except OSError:
-                            fs[cid] = b""  # unreadable: reported as a corrupt frame
-                sets.append(fs)
-            fixes = loc.locate_batch(sets, chunk)
-            statuses.update(fixes.counts())
-            writer.write(fixes)
-            bar.update(len(chunk))
-    return len(ids)
-
-
-def _locate_observations(loc, path, writer, statuses, notes) -> int:
-    import numpy as np
-
-    from .datasets import DatasetError, read_observations
-
-    try:
-        obs, ids = read_observations(path, "frame_id")
-    except DatasetError as e:
-        raise UserError(str(e)) from None
-    index = {c: k for k, c in enumerate(loc.camera_ids)}
-    frame_index = {f: n for n, f in enumerate(ids)}
-    uv = np.full((len(index), len(ids), 2), np.nan)
-    unknown = set()
-    for (fid, cid), p in obs.items():
-        if cid in index:
-            uv[index[cid], frame_index[fid]] = p
-        else:
-            unknown.add(cid)
-    if unknown:
-        notes.append(f"ignored spots of camera(s) {', '.join(sorted(unknown))} that "
-                     f"{loc.deployment.name} does not have")
-    fixes = loc.locate_pixels(uv, frame_ids=ids)
-    statuses.update(fixes.counts())
-    writer.write(fixes)
-    return len(ids)
-
-
-def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, notes,
-                 say) -> int:
-    import time
-
-    from .live import LiveGrouper, open_source
-
-    sources = {}
-    for spec in cameras:
-        cid, sep, src = spec.partition("=")
-        if not sep or not cid or not src:
-            raise UserError(f"--camera {spec!r}: expected ID=SOURCE, e.g. "
-                            "C1=http://10.0.0.21:81/stream")
-        if cid not in loc.camera_ids:
-            raise UserError(f"--camera {spec!r}: {loc.deployment.name} has no camera {cid!r} "
-                            f"(it has {', '.join(loc.camera_ids)})")
-        sources[cid] = open_source(src)
-    t_end = time.monotonic() + duration if duration else None
-    grouper = LiveGrouper(sources, tolerance, on_event=say, deadline=t_end)
-    n = 0
-    try:
-        for fs in grouper:
-            fixes = loc.locate_batch([fs.frames], [f"{fs.index:06d}"])
-            statuses.update(fixes.counts())
-            writer.write(fixes, {"t_s": round(fs.t, 3)})
-            n += 1
-            if (max_sets and n >= max_sets) or (t_end and time.monotonic() > t_end):
-                break
-    finally:
-        grouper.stop()
-    st = grouper.stats
-    for cid in loc.camera_ids:
-        if cid in sources:
-            notes.append(f"camera {cid}: {st.frames[cid]} frames, absent from "
-                         f"{st.missing[cid]} of {st.sets} sets"
-                         + (f"; {st.dropped[cid]} dropped (the locator fell behind)"
-                            if st.dropped[cid] else "")
-                         + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
-    return n
+    p, s = res.planned, res.survey
+    click.echo(f"\nvlpcal demo (seed {seed}): {p['cameras']} cameras planned ({p['family']}); "
+               f"survey of {s['points']} points, held-out 3D error {s['held_out_nominal_cm']:.2f} "
+               f"cm with the\ncameras as planned, {s['held_out_calibrated_cm']:.2f} cm calibrated "
+               f"(worst camera {s['worst_camera_rms_px']:.2f} px RMS); the robot: "
+               f"{res.frames} frames.\n3D error in cm:\n")
+    click.echo(format_table(res))
+    click.echo(f"\nThe paper's pipeline: NI-P spots, its pair method, fusions (a)–(c) with the "
+               f"cameras as planned.\nvlpcal: blob spots, robust all-camera least squares (the "
+               f"calibrated file uses\nthe fusion its survey chose: {s['fusion']}). fixes/s: "
+               "JPEG decoding included, one core.")
+    click.echo(f"\nwrote {res.folder}/ in {res.seconds:.0f} s:")
+    for name, (what, _) in REDO.items():
+        click.echo(f"  {name:21s} {what}")
+    click.echo("\nredo any step by hand, e.g. (inside the folder):")
+    for _, cmd in REDO.values():
+        if cmd:
+            click.echo(f"  {cmd}")
 
 
 @main.group()

@@ -1,35 +1,99 @@
-"""The built-in demo: a simulated install of the paper's rig, every pipeline on the same frames.
+"""The built-in demo: the whole life of an install, simulated, with every file a user would have.
 
-A first version of ``vlpcal demo``: simulates the paper's lab (``paper-2024`` profile: the
-cameras as really hung differ slightly from the plan), renders JPEG frames of an LED at a grid
-of positions and two heights, and runs the paper's pipeline (NI-P spots, pair method, fusion
-(a) and (b)) beside vlpcal's (blob spots, robust all-camera least squares) with the *nominal*
-cameras, then with the cameras calibrated from a simulated survey (a grid of other points at
-three heights, tape-measured), and given the true cameras — the floor calibration aims for.
+``vlpcal demo`` plays the three users on a built-in site (:data:`DEMO_SITE`):
+
+1. the installer plans a camera grid for the room (:func:`~vlpcal.planning.plan_site`);
+2. the cameras go up — not quite where planned: each is drawn around its planned pose with the
+   errors of a careful install by hand (:data:`DEMO_ERRORS`: a centimetre, a fraction of a
+   degree, an uncalibrated lens), and the simulator renders what they see;
+3. the surveyor plans the survey points, the LED is put on each (positions tape-measured, ±3 mm)
+   and the cameras' frames are kept as a survey bundle; the survey calibrates the cameras;
+4. a robot carries the LED around the room and the locator turns its frames into fixes — with
+   the paper's pipeline (NI-P spots, pair method, fusions (a), (b), (c)) and vlpcal's, on the
+   same frames, with the cameras as planned and as calibrated.
+
+Everything lands in one folder, written in DESIGN.md's formats, so that each step can be
+redone by hand with the command that :data:`REDO` names.
 """
 
 from __future__ import annotations
 
+import json
+import math
+import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
-from .detection import detect_spots
-from .fusion import fuse
+from .datasets import read_frames_folder, write_truth_csv
+from .deployment import Deployment, atomic_write_text, provenance, save
+from .locator import FixWriter, Locator
+from .planning import plan_site, planned_deployment, site_from_dict
+from .reports import demo_figure, plan_maps, survey_plan_figure, write_calibration
 from .sim.profiles import get_profile
-from .sim.scene import make_scene, render_scene
-from .sim.writers import grid_points
-from .survey import calibrate
+from .sim.scene import InstallErrors, make_scene
+from .sim.writers import simulate_frames, simulate_survey, trajectory
+from .survey import calibrate_survey, learn_region_map, plan_survey, survey_spots
 
-#: (label, detector, fusion, which cameras)
+DEG = math.pi / 180.0
+
+#: the demo's room: a 3.0 × 2.4 m lab under a 2.5 m ceiling, the paper's 160 × 120 px OV2640
+#: camera, an LED anywhere from the floor to 35 cm, every point seen by two cameras over 90 %
+#: of the floor with a predicted p95 of 2 cm at 0.3 px of spot noise
+DEMO_SITE = {
+    "format": "vlpcal-site", "version": 1,
+    "site": {"name": "demo-lab", "ceiling_height": 2.5,
+             "room": [[0.0, 0.0], [3.0, 0.0], [3.0, 2.4], [0.0, 2.4]], "keep_out": []},
+    "camera": {"width": 160, "height": 120, "fx": 153.3, "fy": 153.3, "cx": 79.5, "cy": 59.5,
+               "dist": [0.0, 0.0, 0.0, 0.0, 0.0]},
+    "requirements": {"heights": [0.0, 0.35], "min_cameras": 2, "coverage": 0.9,
+                     "max_error_p95": 0.02, "pixel_noise": 0.3},
+    "families": ["linear", "triangular", "square"],
+}
+
+#: a careful install by hand (1-sigma): tape-measured mounts, a spirit level, lenses as they
+#: come (focal length and principal point off the datasheet's, a little barrel distortion)
+DEMO_ERRORS = InstallErrors(position=0.005, height=0.005, tilt=0.2 * DEG, yaw=0.5 * DEG,
+                            focal=0.01, aspect=0.0135, principal=1.0, k1=(-0.02, 0.01),
+                            k2=(0.0, 0.005), tangential=0.0002)
+
+#: the robot's LED: frames along its path and its height above the floor, m
+ROBOT_FRAMES, ROBOT_HEIGHT = 400, 0.15
+
+#: (label, which deployment, detector, fusion): every pipeline runs on the same frames
 PIPELINES = (
-    ("paper: NI-P + pairs (a) mean", "nip", "mean", "nominal"),
-    ("paper: NI-P + pairs (b) nearest", "nip", "nearest", "nominal"),
-    ("vlpcal: blob + robust LS", "blob", "robust", "nominal"),
-    ("vlpcal, calibrated from a survey", "blob", "robust", "calibrated"),
-    ("vlpcal, cameras known exactly", "blob", "robust", "true"),
+    ("paper: NI-P + (a) mean of pairs", "planned", "nip", "mean"),
+    ("paper: NI-P + (b) nearest pair", "planned", "nip", "nearest"),
+    ("paper: NI-P + (c) region map", "planned", "nip", "region"),
+    ("vlpcal: planned cameras", "planned", None, None),
+    ("vlpcal: calibrated by the survey", "calibrated", None, None),
+    ("vlpcal: cameras as really hung", "truth", None, None),
 )
+
+#: what each file is, and the command that makes it by hand
+REDO = {
+    "site.yaml": ("the room and the requirements (site file)", ""),
+    "planned.yaml": ("the planned cameras (deployment) + planned.png maps",
+                     "vlpcal plan --site site.yaml --out planned.yaml"),
+    "installed-truth.yaml": ("the cameras as really hung (simulation only)", ""),
+    "survey-plan.csv": ("the survey points to measure + survey-plan.png",
+                        "vlpcal survey plan -d planned.yaml --out survey-plan.csv"),
+    "survey/": ("the survey bundle: points.csv as measured, frames/", ""),
+    "calibrated.yaml": ("calibrated deployment + .report.json, .png",
+                        "vlpcal survey calibrate -d planned.yaml --survey survey --out "
+                        "calibrated.yaml --intrinsics"),
+    "robot/": ("the robot's frames; robot.truth.csv: where it was", ""),
+    "fixes.csv": ("the calibrated locator's fixes of the robot",
+                  "vlpcal locate -d calibrated.yaml --frames robot --out fixes.csv"),
+    "demo.png": ("the robot's path, the fixes, every pipeline's CDF", ""),
+    "summary.json": ("the summary table's figures", ""),
+}
+
+
+class DemoError(Exception):
+    """The demo cannot write where it was asked to (one line)."""
 
 
 @dataclass
@@ -37,47 +101,188 @@ class Row:
     label: str
     mean_cm: float
     median_cm: float
-    p90_cm: float
+    p95_cm: float
     fix_rate: float
-    us_per_fix: float
+    fixes_per_s: float
 
 
-def run_demo(seed: int = 0, step: float = 0.15) -> tuple[list[Row], int]:
-    """Simulate, render once, run every pipeline; returns the table rows and N positions."""
-    scene = make_scene(get_profile("paper-2024"), seed)
-    X = grid_points(scene, step, (0.0, 0.35), min_cameras=2) + [0.011, 0.013, 0.0]
-    frames, _ = render_scene(scene, X, seed=seed)
-    cams = {"nominal": list(scene.nominal), "true": list(scene.true),
-            "calibrated": _calibrated(scene, seed)}
-    rows = []
-    for label, detector, fusion, which in PIPELINES:
-        t0 = time.perf_counter()
-        uv = np.stack([detect_spots(frames[c.id], detector).uv for c in scene.nominal])
-        res = fuse(cams[which], uv, fusion)
-        dt = time.perf_counter() - t0
-        err = np.linalg.norm(res.X - X, axis=1) * 100
+@dataclass
+class DemoResult:
+    folder: Path
+    rows: list[Row]
+    planned: dict  #: family, cameras, predicted coverage, mean and p95 (cm)
+    survey: dict  #: points, held-out mean nominal / calibrated (cm), worst camera RMS px
+    frames: int
+    seconds: float
+
+
+def check_target(out: Path) -> None:
+    """Refuse to write over a folder the demo did not write itself."""
+    if out.exists() and not (out / "summary.json").is_file():
+        if out.is_dir() and not any(out.iterdir()):
+            return
+        raise DemoError(f"{out}: exists and was not written by vlpcal demo (choose another "
+                        "--out, or remove it)")
+
+
+def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
+    """Run the whole demo into the folder ``out`` (replaced if an earlier demo wrote it).
+
+    Written to a hidden folder beside ``out`` first and renamed at the end, so an interrupted
+    demo leaves no half-written folder behind."""
+    out = Path(out)
+    check_target(out)
+    stage = out.with_name(f".{out.name}.partial")
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir(parents=True)
+    t_start = time.perf_counter()
+    try:
+        result = _run(stage, seed, say)
+        if out.exists():
+            shutil.rmtree(out)
+        stage.rename(out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    result.folder = out
+    result.seconds = time.perf_counter() - t_start
+    return result
+
+
+def _run(root: Path, seed: int, say) -> DemoResult:
+    import yaml
+
+    t0 = time.perf_counter()
+
+    def step(k: int, text: str) -> None:
+        say(f"[{k}/5 {time.perf_counter() - t0:5.1f} s] {text}")
+
+    # 1. the installer's plan
+    atomic_write_text(root / "site.yaml", "# The demo's room (vlpcal-site, metres).\n"
+                      + yaml.safe_dump(DEMO_SITE, sort_keys=False))
+    site = site_from_dict(DEMO_SITE, "site.yaml")
+    step(1, f"planning cameras for {site.name} ({_room_size(site.room)}, "
+            f"{site.ceiling_height:g} m ceiling)…")
+    plan = plan_site(site)
+    if not plan.candidates:  # the built-in site is known to be feasible
+        raise RuntimeError("the demo site has no feasible plan")
+    cand = plan.candidates[0]
+    planned = planned_deployment(site, cand, 1, "site.yaml")
+    save(planned, root / "planned.yaml", header="Planned by vlpcal demo (vlpcal plan).")
+    plan_maps(root / "planned.png", site, cand)
+    ev = cand.evaluation
+    planned_fig = {"family": cand.family, "cameras": cand.count,
+                   "coverage": ev.coverage, "mean_cm": ev.mean * 100, "p95_cm": ev.p95 * 100}
+
+    # 2. the install, as it really is
+    profile = replace(get_profile("paper-2024"), name=site.name,
+                      description="the demo's planned cameras, hung by hand",
+                      nominal=tuple(cand.cameras), room=tuple(map(tuple, site.room)),
+                      ceiling_height=site.ceiling_height, errors=DEMO_ERRORS)
+    scene = make_scene(profile, seed)
+    truth = Deployment(site.name, site.ceiling_height, site.room, list(scene.true),
+                       extra={"provenance": provenance("vlpcal demo", seed=seed,
+                                                       cameras="as really hung")})
+    save(truth, root / "installed-truth.yaml",
+         header="The cameras as really hung (simulated; for evaluation only).")
+    step(2, f"{cand.count} cameras ({cand.family}, {cand.nx}×{cand.ny}) hung with half a centimetre "
+            "and a fraction of a degree of error; surveying…")
+
+    # 3. the survey: plan, measure, calibrate
+    sp = plan_survey(planned, 0.3, (0.0, 0.35, 0.7))
+    write_truth_csv(root / "survey-plan.csv", sp.ids, sp.xyz, id_column="point_id")
+    survey_plan_figure(root / "survey-plan.png", planned, sp)
+    measured = simulate_survey(scene, root / "survey", sp.xyz, seed=seed)
+    from .datasets import read_survey_bundle
+
+    bundle = read_survey_bundle(root / "survey")
+    uv, notes = survey_spots(planned, bundle)
+    step(3, f"{len(sp.ids)} survey points measured at h = 0, 0.35, 0.7 m; calibrating…")
+    result = calibrate_survey(planned, measured, uv, sp.ids, intrinsics=True,
+                              sources={"deployment": "planned.yaml", "survey": "survey"})
+    write_calibration(root / "calibrated.yaml", result, notes,
+                      header="Calibrated by vlpcal demo (vlpcal survey calibrate).")
+    st = result.stats
+    survey_fig = {"points": len(sp.ids),
+                  "held_out_nominal_cm": st["nominal, all-camera LS"]["mean"] * 100,
+                  "held_out_calibrated_cm": st["calibrated, all-camera LS"]["mean"] * 100,
+                  "worst_camera_rms_px": max(r["rms_px"] for r in result.cameras),
+                  "fusion": result.fusion}
+
+    # 4. the robot
+    path = trajectory(scene, ROBOT_FRAMES, ROBOT_HEIGHT, seed=seed)
+    step(4, f"calibrated (held-out {survey_fig['held_out_nominal_cm']:.2f} → "
+            f"{survey_fig['held_out_calibrated_cm']:.2f} cm); the robot drives "
+            f"{ROBOT_FRAMES} frames…")
+    simulate_frames(scene, root / "robot", path, seed=seed + 1)
+    folder = read_frames_folder(root / "robot")
+    sets = [{c: folder.frame(f, c) for c in folder.camera_ids} for f in folder.frame_ids]
+    step(5, "locating the robot with every pipeline on the same frames…")
+    # the paper's (c): pair per region learned on the survey, NI-P spots, planned cameras
+    nip_uv, _ = survey_spots(_with(planned, detector="nip"), bundle)
+    paper_map = learn_region_map(planned.cameras, nip_uv, measured, planned.room)
+    deployments = {"planned": planned, "calibrated": result.deployment, "truth": truth}
+    rows, fixes_of = [], {}
+    for label, which, detector, fusion in PIPELINES:
+        dep = deployments[which]
+        if detector:
+            dep = _with(dep, detector, fusion, paper_map if fusion == "region" else None)
+        loc = Locator(dep)
+        t = time.perf_counter()
+        fixes = loc.locate_batch(sets, folder.frame_ids)
+        dt = time.perf_counter() - t
+        err = np.linalg.norm(fixes.X - path, axis=1) * 100
         ok = np.isfinite(err)
-        rows.append(Row(label, float(np.mean(err[ok])), float(np.median(err[ok])),
-                        float(np.percentile(err[ok], 90)), float(ok.mean()),
-                        dt / len(X) * 1e6))
-    return rows, len(X)
+        rows.append(Row(label, *_stats(err[ok]), float(ok.mean()), len(sets) / dt))
+        fixes_of[label] = fixes
+    writer = FixWriter(str(root / "fixes.csv"))
+    writer.write(fixes_of["vlpcal: calibrated by the survey"])
+    writer.close()
+    demo_figure(root / "demo.png", site, path, fixes_of, planned.cameras,
+                ("paper: NI-P + (b) nearest pair", "vlpcal: calibrated by the survey"))
+    res = DemoResult(root, rows, planned_fig, survey_fig, len(sets), 0.0)
+    summary = {"written_by": "vlpcal demo", "seed": seed, "site": site.name,
+               "planned": planned_fig, "survey": survey_fig, "robot_frames": len(sets),
+               "robot_height_m": ROBOT_HEIGHT,
+               "pipelines": [vars(r) for r in rows], "files": {k: v[0] for k, v in REDO.items()},
+               "redo": {k: v[1] for k, v in REDO.items() if v[1]}}
+    atomic_write_text(root / "summary.json", json.dumps(summary, indent=2))
+    return res
 
 
-def _calibrated(scene, seed: int) -> list:
-    """The cameras as a survey calibrates them: a grid at three heights (not the test
-    positions), tape-measured to ±3 mm, frames rendered, spots found, lens and pose fitted."""
-    survey = grid_points(scene, 0.25, (0.0, 0.35, 0.7))
-    frames, _ = render_scene(scene, survey, seed=seed + 1000)
-    measured = survey + np.random.default_rng(seed).normal(0, scene.profile.tape, survey.shape)
-    uv = np.stack([detect_spots(frames[c.id]).uv for c in scene.nominal])
-    ids = [f"S{i + 1:04d}" for i in range(len(survey))]
-    return calibrate(list(scene.nominal), measured, uv, ids, intrinsics=True).cameras
+def _with(dep: Deployment, detector: str, fusion: str | None = None, region_map=None
+          ) -> Deployment:
+    """``dep`` with another detector (and fusion, region map): the paper's pipeline."""
+    extra = {k: v for k, v in dep.extra.items() if k not in ("detector", "fusion")}
+    extra["detector"] = {"method": detector}
+    if fusion:
+        extra["fusion"] = {"method": fusion, "pair_method": "paper"}
+        if region_map is not None:
+            extra["fusion"]["region_map"] = region_map.to_dict()
+    return Deployment(dep.name, dep.ceiling_height, dep.room, dep.cameras, dep.keep_out, extra)
 
 
-def format_table(rows: list[Row]) -> str:
-    head = f"{'pipeline':34s} {'mean':>7s} {'median':>7s} {'p90':>7s} {'fixed':>6s} {'µs/fix':>7s}"
-    lines = [head, "-" * len(head)]
-    for r in rows:
-        lines.append(f"{r.label:34s} {r.mean_cm:6.2f}  {r.median_cm:6.2f}  {r.p90_cm:6.2f}  "
-                     f"{100 * r.fix_rate:5.1f}% {r.us_per_fix:7.1f}")
+def _stats(err_cm: np.ndarray) -> tuple[float, float, float]:
+    if not len(err_cm):
+        return math.nan, math.nan, math.nan
+    return float(err_cm.mean()), float(np.median(err_cm)), float(np.percentile(err_cm, 95))
+
+
+def _room_size(room) -> str:
+    xy = np.asarray(room, float)
+    w, h = xy.max(axis=0) - xy.min(axis=0)
+    return f"{w:g} × {h:g} m"
+
+
+def format_table(res: DemoResult) -> str:
+    """The summary table: planned vs achieved, nominal vs calibrated, paper vs vlpcal."""
+    head = (f"{'pipeline (same robot frames)':34s} {'mean':>6s} {'median':>7s} {'p95':>6s} "
+            f"{'fixed':>6s} {'fixes/s':>8s}")
+    p = res.planned
+    lines = [head, "-" * len(head),
+             f"{'planned: predicted at 0.3 px':34s} {p['mean_cm']:6.2f} {'–':>7s} "
+             f"{p['p95_cm']:6.2f} {p['coverage']:6.1%} {'–':>8s}"]
+    for r in res.rows:
+        lines.append(f"{r.label:34s} {r.mean_cm:6.2f} {r.median_cm:7.2f} {r.p95_cm:6.2f} "
+                     f"{r.fix_rate:6.1%} {r.fixes_per_s:8.0f}")
     return "\n".join(lines)

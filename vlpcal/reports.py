@@ -133,3 +133,37 @@ def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Pa
     cal = result.deployment.cameras
     calibration_figure(paths[2], result.stats, result.per_point, result.points, cal)
     return paths
+
+
+def demo_figure(path, site, truth, fixes_of: dict, cameras, shown: tuple) -> None:
+    """The robot's path seen from above with the fixes of the ``shown`` pipelines, and the
+    error CDF of every pipeline (``fixes_of``: label → FixBatch on the same frames)."""
+    plt = _pyplot()
+    fig, (top, cdf) = plt.subplots(1, 2, figsize=(13, 5), constrained_layout=True)
+    room = np.array(list(site.room) + [site.room[0]])
+    top.plot(room[:, 0], room[:, 1], "k-", lw=1)
+    for c in cameras:
+        top.plot(*c.position[:2], "c^", ms=8, mec="k")
+        top.annotate(c.id, c.position[:2], fontsize=7, xytext=(4, 4), textcoords="offset points")
+    top.plot(truth[:, 0], truth[:, 1], "-", color="0.6", lw=1.5, label="the LED's true path")
+    for label, style in zip(shown, ("x", ".")):
+        X = fixes_of[label].X
+        top.plot(X[:, 0], X[:, 1], style, ms=4, label=label)
+    top.set_aspect("equal")
+    top.set_xlabel("x (m)")
+    top.set_ylabel("y (m)")
+    top.legend(fontsize=7, loc="upper right")
+    top.set_title(f"{site.name}: the robot's LED at h = {truth[0, 2]:g} m, seen from above",
+                  fontsize=9)
+    for label, fixes in fixes_of.items():
+        e = np.sort(np.linalg.norm(fixes.X - truth, axis=1)[np.isfinite(fixes.X[:, 0])] * 100)
+        if len(e):
+            cdf.plot(e, np.arange(1, len(e) + 1) / len(truth), label=label,
+                     ls="--" if label.startswith("paper") else "-")
+    cdf.set_xscale("log")
+    cdf.set_xlabel("3D error (cm)")
+    cdf.set_ylabel("share of frames (CDF)")
+    cdf.grid(alpha=0.3)
+    cdf.legend(fontsize=7)
+    cdf.set_title("every pipeline on the same frames", fontsize=9)
+    save_figure(fig, Path(path), dpi=110)

@@ -1,0 +1,64 @@
+"""`vlpcal demo`: the whole life of a simulated install, into a folder a user can explore."""
+
+import csv
+import json
+
+from click.testing import CliRunner
+
+from vlpcal.cli import main
+from vlpcal.deployment import load
+from vlpcal.planning import load_site
+
+FILES = ["site.yaml", "planned.yaml", "planned.png", "installed-truth.yaml", "survey-plan.csv",
+         "survey-plan.png", "survey/points.csv", "calibrated.yaml", "calibrated.report.json",
+         "calibrated.png", "robot.truth.csv", "fixes.csv", "demo.png", "summary.json"]
+
+
+def test_demo_writes_every_file_and_its_summary_holds(tmp_path):
+    out = tmp_path / "demo"
+    res = CliRunner().invoke(main, ["demo", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    for name in FILES:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    assert not list(tmp_path.glob(".*partial*"))  # the staging folder is gone
+    # the files are what the commands read
+    site = load_site(out / "site.yaml")
+    planned, calibrated = load(out / "planned.yaml"), load(out / "calibrated.yaml")
+    assert [c.id for c in planned.cameras] == [c.id for c in calibrated.cameras]
+    assert site.name == planned.name
+    points = list(csv.DictReader(open(out / "survey/points.csv")))
+    frames = {p.name for p in (out / "survey/frames").iterdir()}
+    assert frames <= {p["point_id"] for p in points} and len(frames) >= 0.9 * len(points)
+    robot = sorted(p.name for p in (out / "robot").iterdir())
+    fixes = list(csv.DictReader(open(out / "fixes.csv")))
+    assert [f["frame_id"] for f in fixes] == robot
+    assert sum(f["status"] == "ok" for f in fixes) >= 0.95 * len(fixes)
+
+    summary = json.loads((out / "summary.json").read_text())
+    rows = {r["label"]: r for r in summary["pipelines"]}
+    cal = rows["vlpcal: calibrated by the survey"]
+    nominal = rows["vlpcal: planned cameras"]
+    truth = rows["vlpcal: cameras as really hung"]
+    paper = [r for label, r in rows.items() if label.startswith("paper")]
+    assert len(paper) == 3
+    # the install's errors cost centimetres; the survey takes them away (held out and on the
+    # robot's frames); the achieved accuracy meets what the plan promised
+    assert cal["mean_cm"] < nominal["mean_cm"] / 5
+    assert cal["mean_cm"] < min(r["mean_cm"] for r in paper) / 5
+    assert cal["mean_cm"] < 1.5 * truth["mean_cm"] + 0.05
+    assert cal["p95_cm"] <= summary["planned"]["p95_cm"]
+    s = summary["survey"]
+    assert s["held_out_calibrated_cm"] < s["held_out_nominal_cm"] / 3
+    assert all(r["fixes_per_s"] > 0 for r in rows.values())
+    # the table printed is the summary's
+    assert f"{cal['mean_cm']:6.2f}" in res.output and "planned: predicted" in res.output
+
+
+def test_demo_refuses_a_folder_it_did_not_write(tmp_path):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "thesis.tex").write_text("keep me")
+    res = CliRunner().invoke(main, ["demo", "--out", str(tmp_path / "mine")])
+    assert res.exit_code == 2
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and "was not written by vlpcal demo" in lines[0]
+    assert [p.name for p in (tmp_path / "mine").iterdir()] == ["thesis.tex"]
