@@ -308,8 +308,10 @@ def read_frames_folder(root) -> FramesFolder:
             for f in d.glob("*.jpg"):
                 files[(d.name, f.stem)] = f
                 cams.add(f.stem)
-    if not ids:
-        raise DatasetError(f"{root}: no frame folders (expected <frame_id>/<camera_id>.jpg)")
+    if not files:
+        hint = (" — it looks like a survey bundle (points.csv): that goes to vlpcal survey "
+                "calibrate --survey" if (root / "points.csv").is_file() else "")
+        raise DatasetError(f"{root}: no frames (expected <frame_id>/<camera_id>.jpg){hint}")
     order = lambda t: (natural_key(t), t)  # noqa: E731  (ties such as 1 and 01: by text)
     return FramesFolder(root, sorted(ids, key=order), sorted(cams, key=order), files)
 

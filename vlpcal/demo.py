@@ -185,8 +185,8 @@ def _run(root: Path, seed: int, say) -> DemoResult:
                                                        cameras="as really hung")})
     save(truth, root / "installed-truth.yaml",
          header="The cameras as really hung (simulated; for evaluation only).")
-    step(2, f"{cand.count} cameras ({cand.family}, {cand.nx}×{cand.ny}) hung with half a centimetre "
-            "and a fraction of a degree of error; surveying…")
+    step(2, f"{cand.count} cameras ({cand.family}, {cand.nx}×{cand.ny}) hung with half a "
+            "centimetre and a fraction of a degree of error; surveying…")
 
     # 3. the survey: plan, measure, calibrate
     sp = plan_survey(planned, 0.3, (0.0, 0.35, 0.7))
