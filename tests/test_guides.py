@@ -61,6 +61,12 @@ WRONG = {
                                         "{out}"],
     "import: a CSV as base": ["import", "--cameras", DEP, "-b", POINTS, "--out", "{out}"],
     "demo: out is a file": ["demo", "--out", POINTS],
+    "survey capture: a deployment as points": ["survey", "capture", "-d", DEP, "--points", DEP,
+                                               "--survey", "{out}", "--camera",
+                                               "C1=http://127.0.0.1:9/stream"],
+    "survey capture: an unknown camera": ["survey", "capture", "-d", DEP, "--points", POINTS,
+                                          "--survey", "{out}", "--camera",
+                                          "C9=http://127.0.0.1:9/stream"],
 }
 
 

@@ -338,22 +338,33 @@ def _locate_observations(loc, path, writer, statuses, notes) -> int:
     return len(ids)
 
 
-def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, notes,
-                 say) -> int:
-    import time
+def _camera_sources(cameras, dep) -> dict:
+    """``--camera ID=SOURCE`` values → camera id → frame source, checked against ``dep``."""
+    from .live import open_source
 
-    from .live import LiveGrouper, open_source
-
+    ids = [c.id for c in dep.cameras]
     sources = {}
     for spec in cameras:
         cid, sep, src = spec.partition("=")
         if not sep or not cid or not src:
             raise UserError(f"--camera {spec!r}: expected ID=SOURCE, e.g. "
                             "C1=http://10.0.0.21:81/stream")
-        if cid not in loc.camera_ids:
-            raise UserError(f"--camera {spec!r}: {loc.deployment.name} has no camera {cid!r} "
-                            f"(it has {', '.join(loc.camera_ids)})")
+        if cid not in ids:
+            raise UserError(f"--camera {spec!r}: {dep.name} has no camera {cid!r} "
+                            f"(it has {', '.join(ids)})")
+        if cid in sources:
+            raise UserError(f"--camera {spec!r}: camera {cid} given twice")
         sources[cid] = open_source(src)
+    return sources
+
+
+def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, notes,
+                 say) -> int:
+    import time
+
+    from .live import LiveGrouper
+
+    sources = _camera_sources(cameras, loc.deployment)
     t_end = time.monotonic() + duration if duration else None
     grouper = LiveGrouper(sources, tolerance, on_event=say, deadline=t_end)
     n = 0
@@ -435,6 +446,136 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
                   if j != k]
         pairs = ", ".join(f"{cj} {n}" for cj, n in shared if n)
         click.echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
+
+
+@survey.command("capture")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="The deployment (cameras as installed).")
+@click.option("--points", "points_path", required=True, type=click.Path(dir_okay=False),
+              help="Points to walk, in order: point_id,x,y,z (vlpcal survey plan's output).")
+@click.option("--survey", "survey_path", required=True, type=click.Path(file_okay=False),
+              help="Survey bundle to write (created; resumed if it exists).")
+@click.option("--camera", "cameras", multiple=True, required=True, metavar="ID=SOURCE",
+              help="A live camera: ID=http://…/stream (MJPEG) or ID=/dev/videoN. Repeat.")
+@click.option("--yes", is_flag=True,
+              help="Non-interactive: capture and accept every point (for scripted rigs).")
+@click.option("--delay", type=click.FloatRange(0), default=None,
+              help="Seconds to wait at each point before grabbing  [default: 1 with --yes, "
+                   "else 0]")
+@click.option("--on-point", "on_point", default=None, metavar="COMMAND",
+              help="Shell command run before each point, e.g. to move a rig: {id}, {x}, {y}, "
+                   "{z} are replaced.")
+@click.option("--burst", default=5, show_default=True, type=click.IntRange(1, 100),
+              help="Frame sets grabbed per point.")
+@click.option("--check-every", default=5, show_default=True, type=click.IntRange(0),
+              help="Show the per-camera calibration check every N points (0: at the end).")
+def survey_capture(deployment_path, points_path, survey_path, cameras, yes, delay, on_point,
+                   burst, check_every):
+    """Capture a survey live: walk through the points while the cameras stream.
+
+    At each point: place the LED, press Enter; a short burst is grabbed from every camera and
+    what each saw is shown (pixel, peak, saturation, not seen, two blobs, no frames). Then
+    accept, redo, skip or go back; an extra point can be added with its measured position.
+    Each accepted point is on disk (frames, then its line in points.csv) before the next
+    prompt: an interrupted session resumes where it stopped when run again. Every few points
+    a quick fit per camera says whether the survey is good enough yet.
+
+    Example: vlpcal survey capture -d planned.yaml --points points.csv --survey survey
+    --camera C1=http://10.0.0.21:81/stream --camera C2=http://10.0.0.22:81/stream
+    """
+    import subprocess
+    import sys
+
+    from .capture import Burst, CaptureSession, Step
+    from .datasets import DatasetError, SurveyAppender, read_points
+    from .live import LiveGrouper
+
+    dep = _load_deployment(deployment_path)
+    try:
+        ids, xyz = read_points(points_path)
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    sources = _camera_sources(cameras, dep)
+    missing = [c.id for c in dep.cameras if c.id not in sources]
+    if missing:
+        click.echo(f"note: no --camera for {', '.join(missing)}: their frames stay missing",
+                   err=True)
+    from pathlib import Path
+
+    bundle = Path(survey_path)
+    if (bundle / "points.csv").exists() and not (bundle / ".capture").is_dir():
+        raise UserError(f"{bundle}: holds a points.csv that survey capture did not write (a "
+                        "survey plan? give it with --points and --survey a new folder)")
+    try:
+        appender = SurveyAppender(survey_path)
+    except (DatasetError, OSError) as e:
+        raise UserError(f"{survey_path}: cannot write the survey there ({e})") from None
+    delay = (1.0 if yes else 0.0) if delay is None else delay
+
+    def say(line: str) -> None:
+        click.echo(line)
+        sys.stdout.flush()
+
+    def ask(prompt: str) -> Step:
+        placing = not prompt.startswith("accept")
+        if yes:
+            if placing:
+                say(prompt)
+            return Step("go" if placing else "accept")
+        keys = ("Enter: capture · s skip · b back · e extra point · q quit" if placing
+                else "Enter: accept · r redo · s skip · b back · q quit")
+        choices = {"": "go" if placing else "accept", "s": "skip", "b": "back", "q": "quit",
+                   **({"e": "extra"} if placing else {"r": "redo"})}
+        while True:
+            click.echo(f"{prompt}  [{keys}] > ", nl=False)
+            sys.stdout.flush()
+            line = sys.stdin.readline()
+            if not line:  # end of input: stop, resumable
+                return Step("quit")
+            key = line.strip().lower()[:1]
+            if key not in choices:
+                keys_ok = ", ".join(k for k in choices if k)
+                say(f"  ? {line.strip()!r}: press Enter or one of {keys_ok}")
+                continue
+            if choices[key] != "extra":
+                return Step(choices[key])
+            click.echo("  measured position of the extra point, x y z in metres > ", nl=False)
+            sys.stdout.flush()
+            try:
+                vals = [float(t) for t in sys.stdin.readline().replace(",", " ").split()]
+            except ValueError:
+                vals = []
+            if len(vals) == 3 and all(map(math.isfinite, vals)):
+                return Step("extra", tuple(vals))
+            say("  expected three numbers, e.g. 1.20 0.45 0.35")
+
+    def move(pid, p) -> None:
+        cmd = on_point.format(id=pid, x=p[0], y=p[1], z=p[2])
+        res = subprocess.run(cmd, shell=True)
+        if res.returncode:
+            raise UserError(f"--on-point {cmd!r} failed (exit {res.returncode}) at {pid}; "
+                            "the survey so far is kept: fix the rig and run again to resume")
+
+    grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: say(f"! {m}"))
+    session = CaptureSession(dep, ids, xyz, appender, Burst(grouper, burst), ask, say,
+                             on_point=move if on_point else None, delay=delay,
+                             check_every=check_every, stopped=grouper.stats.ended)
+    try:
+        n = session.run()
+    except KeyboardInterrupt:
+        done = len(appender.accepted()[0])
+        click.echo(f"\ninterrupted: {done} points are safe in {survey_path}; run the same "
+                   "command to resume", err=True)
+        sys.exit(130)
+    finally:
+        grouper.stop()
+    done = len(appender.accepted()[0])
+    left = [p for p in ids if p not in set(appender.accepted()[0]) | appender.skipped()]
+    say(f"\n{n} points captured now, {done} in {survey_path}"
+        + (f"; {len(left)} still to do (run again to resume)" if left else ""))
+    if not left:
+        say(f"next: vlpcal survey calibrate -d {deployment_path} --survey {survey_path} "
+            "--out calibrated.yaml")
 
 
 @survey.command("calibrate")

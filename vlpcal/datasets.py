@@ -206,14 +206,10 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
     return root
 
 
-def read_survey_bundle(root) -> SurveyBundle:
-    """Read and check a survey bundle folder."""
-    root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"{root}: not a folder (expected a survey bundle with points.csv)")
-    path = root / "points.csv"
-    if not path.is_file():
-        raise DatasetError(f"{path}: missing (a survey bundle needs points.csv)")
+def read_points(path) -> tuple[list[str], np.ndarray]:
+    """A ``point_id,x,y,z`` file (a survey's ``points.csv``, or ``survey plan``'s output):
+    ids in file order and ``N×3`` positions, m."""
+    path = Path(path)
     ids, xyz = [], []
     for n, row in enumerate(_read_csv(path, POINTS_COLUMNS), start=2):
         where = f"{path} line {n}"
@@ -224,6 +220,18 @@ def read_survey_bundle(root) -> SurveyBundle:
         xyz.append([_finite(row[c], f"{where} {c}") for c in ("x", "y", "z")])
     if not ids:
         raise DatasetError(f"{path}: no points")
+    return ids, np.array(xyz, dtype=float).reshape(-1, 3)
+
+
+def read_survey_bundle(root) -> SurveyBundle:
+    """Read and check a survey bundle folder."""
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: not a folder (expected a survey bundle with points.csv)")
+    path = root / "points.csv"
+    if not path.is_file():
+        raise DatasetError(f"{path}: missing (a survey bundle needs points.csv)")
+    ids, xyz = read_points(path)
     known = set(ids)
     frames = {}
     fdir = root / "frames"
@@ -242,7 +250,7 @@ def read_survey_bundle(root) -> SurveyBundle:
         for (pid, _cid) in observations:
             if pid not in known:
                 raise DatasetError(f"{opath}: point {pid!r} is not in points.csv")
-    return SurveyBundle(root, ids, np.array(xyz, dtype=float), frames, observations)
+    return SurveyBundle(root, ids, xyz, frames, observations)
 
 
 def read_observations(path, id_column: str = "frame_id") -> tuple[dict, list[str]]:
@@ -329,3 +337,109 @@ def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+class SurveyAppender:
+    """A survey bundle written one point at a time, append-only and resumable.
+
+    Each point is committed in an order that survives a crash at any instant: its frames go to
+    ``.capture/stage-<id>/`` and are renamed to ``frames/<id>/``, then its line is appended to
+    ``points.csv`` and flushed to disk. ``points.csv`` is the record: on opening, a trailing
+    partial line is cut and a ``frames/<id>/`` without its line (a crash between the two
+    steps) is removed, so the point is captured again. Skips go to ``.capture/journal.csv``
+    (not part of the bundle's format; readers ignore it).
+    """
+
+    def __init__(self, root):
+        self.root = Path(root)
+        self.points = self.root / "points.csv"
+        self.frames = self.root / "frames"
+        self.state = self.root / ".capture"
+        self.journal = self.state / "journal.csv"
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.state.mkdir(exist_ok=True)
+        self.frames.mkdir(exist_ok=True)
+        if not self.points.exists():
+            self._write_points([])
+        self._recover()
+
+    # -- state -----------------------------------------------------------------------------
+    def _recover(self) -> None:
+        data = self.points.read_bytes()
+        if data and not data.endswith(b"\n"):  # a line cut by a crash: drop it
+            with open(self.points, "r+b") as f:
+                f.truncate(data.rfind(b"\n") + 1)
+                os.fsync(f.fileno())
+        ids, _ = self.accepted()
+        for d in self.frames.iterdir():
+            if d.is_dir() and d.name not in ids:
+                shutil.rmtree(d)
+        for d in self.state.glob("stage-*"):
+            shutil.rmtree(d, ignore_errors=True)
+
+    def accepted(self) -> tuple[list[str], np.ndarray]:
+        """Ids and positions committed so far, in order."""
+        rows = _read_csv(self.points, POINTS_COLUMNS)
+        if not rows:
+            return [], np.zeros((0, 3))
+        return read_points(self.points)
+
+    def skipped(self) -> set:
+        """Ids the person chose to skip (and has not captured since)."""
+        out: set = set()
+        if self.journal.exists():
+            for line in self.journal.read_text(encoding="utf-8").splitlines():
+                event, _, pid = line.partition(",")
+                if event == "skip":
+                    out.add(pid)
+                elif event in ("accept", "unskip"):
+                    out.discard(pid)
+        return out
+
+    # -- changes ---------------------------------------------------------------------------
+    def accept(self, point_id: str, xyz, frames: dict) -> None:
+        """Commit a point: ``frames`` camera id → JPEG bytes (cameras without one: none)."""
+        pid = _check_id(str(point_id), "point id")
+        if pid in self.accepted()[0]:
+            raise DatasetError(f"{self.points}: point {pid!r} is already in the survey")
+        stage = self.state / f"stage-{pid}"
+        shutil.rmtree(stage, ignore_errors=True)
+        stage.mkdir()
+        for cid, data in frames.items():
+            if data is not None:
+                with open(stage / f"{_check_id(str(cid), 'camera id')}.jpg", "wb") as f:
+                    f.write(data)
+                    os.fsync(f.fileno())
+        os.replace(stage, self.frames / pid)
+        with open(self.points, "a", newline="") as f:
+            csv.writer(f).writerow([pid, *map(_fmt, xyz)])
+            f.flush()
+            os.fsync(f.fileno())
+        self._log("accept", pid)
+
+    def skip(self, point_id: str) -> None:
+        self._log("skip", point_id)
+
+    def unskip(self, point_id: str) -> None:
+        self._log("unskip", point_id)
+
+    def remove(self, point_id: str) -> None:
+        """Take a committed point out again (the person went back to redo it)."""
+        ids, xyz = self.accepted()
+        keep = [(i, p) for i, p in zip(ids, xyz) if i != point_id]
+        self._write_points(keep)
+        shutil.rmtree(self.frames / point_id, ignore_errors=True)
+        self._log("remove", point_id)
+
+    def _write_points(self, rows) -> None:
+        fd, tmp = tempfile.mkstemp(prefix=".points.", dir=self.root)
+        os.close(fd)
+        _write_csv(Path(tmp), POINTS_COLUMNS, [[i, *map(_fmt, p)] for i, p in rows])
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, self.points)
+
+    def _log(self, event: str, pid: str) -> None:
+        with open(self.journal, "a", encoding="utf-8") as f:
+            f.write(f"{event},{pid}\n")
+            f.flush()
+            os.fsync(f.fileno())

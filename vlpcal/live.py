@@ -131,6 +131,7 @@ class LiveGrouper:
         self.stats = LiveStats()
         self._queue: queue.Queue = queue.Queue(maxsize=256)
         self._stop = threading.Event()
+        self.t0 = time.monotonic()
 
     def _reader(self, cid: str, factory) -> None:
         why = "stream ended"
@@ -156,7 +157,7 @@ class LiveGrouper:
         self._stop.set()
 
     def __iter__(self) -> Iterator[FrameSet]:
-        t0 = time.monotonic()
+        t0 = self.t0 = time.monotonic()  # FrameSet.t counts from here
         threads = [threading.Thread(target=self._reader, args=(cid, f), daemon=True)
                    for cid, f in self.sources.items()]
         for th in threads:

@@ -1,0 +1,321 @@
+"""`vlpcal survey capture` against simulated MJPEG cameras on 127.0.0.1: non-interactive with a
+kill and a resume, interactive through a pseudo-terminal, and a camera that dies mid-session."""
+
+import os
+import pty
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+import zlib
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from vlpcal import deployment
+from vlpcal.cli import main
+from vlpcal.datasets import SurveyAppender, read_points, read_survey_bundle, write_truth_csv
+from vlpcal.sim.profiles import get_profile
+from vlpcal.sim.scene import make_scene, render_scene
+from vlpcal.sim.writers import deployment_of
+from vlpcal.survey import plan_survey
+
+VARIANTS = 2  # frames a camera cycles through while the LED stays put (noise differs)
+
+
+class Rig:
+    """One MJPEG stream per simulated camera at /<camera_id>. The LED is where the file
+    ``current`` says ("x y z", written by capture's --on-point); no file: the LED is off."""
+
+    def __init__(self, scene, root: Path, fps: float = 40.0, die: dict | None = None):
+        self.scene, self.current, self.fps = scene, root / "current", fps
+        self.cache: dict = {}
+        self.lock = threading.Lock()
+        die = die or {}
+        rig = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *a):
+                pass
+
+            def do_GET(self):
+                cid = self.path.strip("/")
+                self.send_response(200)
+                self.send_header("Content-Type", "multipart/x-mixed-replace;boundary=frame")
+                self.end_headers()
+                try:
+                    for i in range(10**9):
+                        if cid in die and i >= die[cid]:
+                            self.connection.shutdown(2)  # the camera dies
+                            return
+                        jpg = rig.frame(cid, i % VARIANTS)
+                        self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\n"
+                                         + f"Content-Length: {len(jpg)}\r\n\r\n".encode()
+                                         + jpg + b"\r\n")
+                        self.wfile.flush()
+                        time.sleep(1.0 / rig.fps)
+                except (BrokenPipeError, ConnectionResetError, OSError):
+                    pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.server.daemon_threads = True
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def frame(self, cid: str, variant: int) -> bytes:
+        try:
+            key = self.current.read_text().strip()
+        except OSError:
+            key = ""
+        with self.lock:
+            if key not in self.cache:
+                p = [float(t) for t in key.split()] if key else [-50.0, -50.0, 0.0]
+                seed = zlib.crc32(key.encode())
+                frames, _ = render_scene(self.scene, np.repeat([p], VARIANTS, axis=0),
+                                         seed=seed)
+                self.cache[key] = frames
+            return self.cache[key][cid][variant]
+
+    def args(self):
+        port = self.server.server_address[1]
+        return [a for c in self.scene.true
+                for a in ("--camera", f"{c.id}=http://127.0.0.1:{port}/{c.id}")]
+
+    def hook(self):
+        return f"printf '%s %s %s' {{x}} {{y}} {{z}} > {self.current}"
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """A simulated paper-2024 install (its true cameras as the deployment) and a survey plan."""
+    root = tmp_path_factory.mktemp("capture")
+    scene = make_scene(get_profile("paper-2024"), seed=5)
+    dep = deployment_of(scene, "true")
+    deployment.save(dep, root / "dep.yaml")
+    plan = plan_survey(dep, 0.5, (0.0, 0.35), min_per_camera=8)
+    write_truth_csv(root / "points.csv", plan.ids, plan.xyz, id_column="point_id")
+    return scene, root
+
+
+def capture_cmd(root, rig, survey, *extra):
+    return [sys.executable, "-m", "vlpcal", "survey", "capture", "-d", str(root / "dep.yaml"),
+            "--points", str(root / "points.csv"), "--survey", str(survey), *rig.args(),
+            "--on-point", rig.hook(), *extra]
+
+
+def bundle_contents(path: Path) -> dict:
+    files = {p.relative_to(path).as_posix(): p.read_bytes()
+             for p in sorted(path.rglob("*")) if p.is_file() and ".capture" not in p.parts}
+    return files
+
+
+def test_capture_killed_and_resumed_equals_an_uninterrupted_run(site, tmp_path):
+    scene, root = site
+    rig = Rig(scene, tmp_path)
+    try:
+        whole = tmp_path / "whole"
+        res = subprocess.run(capture_cmd(root, rig, whole, "--yes", "--delay", "0.1"),
+                             capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+        n_planned = len(read_points(root / "points.csv")[0])
+        assert len(read_points(whole / "points.csv")[0]) == n_planned
+        assert "cameras good enough to calibrate" in res.stdout
+
+        # the same session, killed without warning midway, then run again
+        (tmp_path / "current").unlink()
+        cut = tmp_path / "cut"
+        proc = subprocess.Popen(capture_cmd(root, rig, cut, "--yes", "--delay", "0.1"),
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            path = cut / "points.csv"
+            if path.exists() and path.read_text().count("\n") >= 1 + n_planned // 2:
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        kept = read_points(cut / "points.csv")[0]
+        assert 0 < len(kept) < n_planned
+        res = subprocess.run(capture_cmd(root, rig, cut, "--yes", "--delay", "0.1"),
+                             capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0, res.stderr[-2000:]
+        assert f"resuming: {len(kept)} points already in" in res.stdout
+    finally:
+        rig.close()
+    assert bundle_contents(cut) == bundle_contents(whole)
+    bundle = read_survey_bundle(cut)
+    assert len(bundle.point_ids) == n_planned and bundle.camera_ids() == ["C1", "C2", "C3"]
+    out = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(root / "dep.yaml"),
+                                    "--survey", str(cut), "--out", str(tmp_path / "cal.yaml"),
+                                    "--folds", "3", "-q"])
+    assert out.exit_code == 0, out.output
+    cal = deployment.load(tmp_path / "cal.yaml")
+    for c, t in zip(cal.cameras, scene.true):  # the capture's frames calibrate the cameras
+        assert np.linalg.norm(np.subtract(c.position, t.position)) < 0.02
+
+
+class Terminal:
+    """A process on a pseudo-terminal: wait for text, type a line."""
+
+    def __init__(self, cmd):
+        self.master, slave = pty.openpty()
+        self.proc = subprocess.Popen(cmd, stdin=slave, stdout=slave, stderr=slave,
+                                     close_fds=True)
+        os.close(slave)
+        self.out = ""
+
+    def expect(self, text, timeout=60.0):
+        deadline = time.monotonic() + timeout
+        while text not in self.out:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise AssertionError(f"waited for {text!r}; got:\n{self.out[-3000:]}")
+            ready, _, _ = select.select([self.master], [], [], min(left, 0.5))
+            if ready:
+                try:
+                    self.out += os.read(self.master, 65536).decode(errors="replace")
+                except OSError:
+                    break
+        i = self.out.index(text) + len(text)
+        seen, self.out = self.out[:i], self.out[i:]
+        return seen
+
+    def type(self, line):
+        os.write(self.master, (line + "\n").encode())
+
+    def close(self):
+        try:
+            self.proc.wait(timeout=30)
+        finally:
+            os.close(self.master)
+
+
+def test_interactive_capture_through_a_terminal(site, tmp_path):
+    scene, root = site
+    ids, xyz = read_points(root / "points.csv")
+    write_truth_csv(tmp_path / "four.csv", ids[:4], xyz[:4], id_column="point_id")
+    rig = Rig(scene, tmp_path)
+    survey = tmp_path / "survey"
+    cmd = capture_cmd(root, rig, survey)
+    cmd[cmd.index("--points") + 1] = str(tmp_path / "four.csv")
+    term = Terminal(cmd)
+    try:
+        a, b, c, d = ids[:4]
+        term.expect(f"[1/4] place the LED at {a}")
+        term.type("")
+        first = term.expect("accept?")
+        assert "C1 " in first and "px" in first
+        term.type("r")  # redo: another burst
+        term.expect("accept?")
+        term.type("")
+        term.expect(f"{a} saved")
+        term.expect(f"[2/4] place the LED at {b}")
+        term.type("s")
+        term.expect(f"{b} skipped")
+        term.expect(f"[3/4] place the LED at {c}")
+        term.type("")
+        term.expect("accept?")
+        term.type("")
+        term.expect(f"{c} saved")
+        term.expect(f"[4/4] place the LED at {d}")
+        term.type("b")  # back: C's capture is removed and redone
+        term.expect(f"back to {c}")
+        term.expect(f"[3/4] place the LED at {c}")
+        term.type("")
+        term.expect("accept?")
+        term.type("")
+        term.expect(f"[4/4] place the LED at {d}")
+        term.type("e")  # an extra point, measured by the person
+        term.expect("x y z in metres")
+        term.type("1.70 0.80 0.10")
+        term.expect("extra point X001")
+        term.expect("accept?")
+        term.type("")
+        term.expect("X001 saved")
+        term.expect(f"[4/4] place the LED at {d}")
+        term.type("")
+        term.expect("accept?")
+        term.type("")
+        term.expect("points captured now")
+    finally:
+        term.close()
+        rig.close()
+    assert term.proc.returncode == 0
+    got, pos = read_points(survey / "points.csv")
+    assert got == [a, c, "X001", d]
+    np.testing.assert_allclose(pos[2], [1.70, 0.80, 0.10])
+    assert sorted(p.name for p in (survey / "frames").iterdir()) == sorted(got)
+    assert SurveyAppender(survey).skipped() == {b}
+
+
+def test_a_camera_that_dies_is_reported_and_the_others_are_captured(site, tmp_path):
+    scene, root = site
+    ids, xyz = read_points(root / "points.csv")
+    write_truth_csv(tmp_path / "six.csv", ids[:6], xyz[:6], id_column="point_id")
+    rig = Rig(scene, tmp_path, die={"C2": 60})  # C2 stops after 1.5 s of frames
+    cmd = capture_cmd(root, rig, tmp_path / "survey", "--yes", "--delay", "0.3")
+    cmd[cmd.index("--points") + 1] = str(tmp_path / "six.csv")
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    finally:
+        rig.close()
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "camera C2:" in res.stdout and "going on without it" in res.stdout
+    assert "C2     no frames (stopped" in res.stdout
+    bundle = read_survey_bundle(tmp_path / "survey")
+    assert bundle.point_ids == ids[:6]
+    last = bundle.point_ids[-1]
+    assert (last, "C2") not in bundle.frames
+    assert (last, "C1") in bundle.frames and (last, "C3") in bundle.frames
+
+
+def test_appender_recovers_from_a_crash_at_any_step(tmp_path):
+    """A line cut mid-write is dropped, frames without their line are removed, a stage left
+    behind is cleared: what remains is exactly the committed points."""
+    app = SurveyAppender(tmp_path / "b")
+    app.accept("S0001", (1.0, 0.5, 0.0), {"C1": b"\xff\xd8one\xff\xd9", "C2": None})
+    app.accept("S0002", (1.5, 0.5, 0.0), {"C1": b"\xff\xd8two\xff\xd9"})
+    root = tmp_path / "b"
+    with open(root / "points.csv", "a") as f:
+        f.write("S0003,2.0,0.")  # the crash: a partial line
+    (root / "frames" / "S0004").mkdir()  # renamed, but its line never written
+    (root / ".capture" / "stage-S0005").mkdir()
+    again = SurveyAppender(root)
+    ids, xyz = again.accepted()
+    assert ids == ["S0001", "S0002"] and xyz[1].tolist() == [1.5, 0.5, 0.0]
+    assert sorted(p.name for p in (root / "frames").iterdir()) == ["S0001", "S0002"]
+    assert not list((root / ".capture").glob("stage-*"))
+    assert read_survey_bundle(root).point_ids == ids
+    with pytest.raises(Exception, match="already in the survey"):
+        again.accept("S0001", (0, 0, 0), {})
+    again.skip("S0003")
+    again.remove("S0001")
+    assert again.accepted()[0] == ["S0002"] and again.skipped() == {"S0003"}
+    assert not (root / "frames" / "S0001").exists()
+
+
+def test_live_check_names_what_a_camera_still_needs(site):
+    from vlpcal.capture import live_check
+
+    scene, root = site
+    dep = deployment.load(root / "dep.yaml")
+    cam = dep.cameras[0]
+    g = np.mgrid[0.6:1.8:0.1, 0.4:1.4:0.1, 0:0.4:0.35].reshape(3, -1).T
+    uv = np.stack([np.where(c.project(g)[2][:, None], c.project(g)[0], np.nan)
+                   for c in dep.cameras])
+    ids = [f"P{i}" for i in range(len(g))]
+    checks = {c.camera: c for c in live_check(dep, g, uv, ids)}
+    assert checks[cam.id].verdict == "good" and checks[cam.id].rms_px < 0.01
+    # only points under the camera's middle: its corners are missing
+    middle = np.linalg.norm(g[:, :2] - np.array(cam.position[:2]), axis=1) < 0.3
+    few = live_check(dep, g[middle], uv[:, middle], [i for i, m in zip(ids, middle) if m])
+    assert "corners" in few[0].verdict or "more points" in few[0].verdict
+    assert set(few[0].missing) == {"top-left", "top-right", "bottom-left", "bottom-right"}

@@ -1,0 +1,330 @@
+"""Survey capture: walk a person (or a scripted rig) through the survey points while the cameras
+stream, and keep every accepted point on disk before the next prompt.
+
+At each point the LED is placed, a short burst is grabbed from every camera, the LED is found
+in each frame, and what each camera saw is shown (pixel, peak, saturation, "not seen", "two
+blobs", "no frames") before the point is accepted, redone, skipped or the person goes back.
+The bundle (DESIGN.md's survey bundle) is written by :class:`~vlpcal.datasets.SurveyAppender`:
+append-only, resumable after any interruption. Every few points a quick pose fit per camera
+tells whether the survey is good enough yet, like the per-camera feedback of motion-capture
+wanding.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from .deployment import Deployment
+from .detection import detect_spots
+from .survey import MIN_POINTS_POSE, SurveyError, fit_camera
+
+#: frame sets grabbed per point, and sets skipped first (frames of the LED's old place)
+BURST, SETTLE = 5, 1
+#: px: a spot that wanders more than this over a burst (the LED moved, a flicker) is unsteady
+STEADY_PX = 0.5
+
+
+@dataclass
+class CameraView:
+    """What one camera saw during a burst."""
+
+    camera: str
+    frames: int  #: distinct frames received
+    uv: tuple | None  #: median spot, px (None: no spot)
+    peak: float
+    saturated: bool
+    blobs: int  #: most blobs competing in a frame (> 1: reflection or lamp)
+    spread_px: float  #: RMS scatter of the spot over the burst
+    verdict: str  #: ok, not seen, two blobs, unsteady, no frames, or a detection reason
+    frame: bytes | None  #: the stored frame: the one whose spot is nearest the median
+
+    def line(self) -> str:
+        if self.uv is None:
+            return f"  {self.camera:6s} {self.verdict}"
+        extra = "" if self.verdict == "ok" else f"  ← {self.verdict}"
+        sat = " saturated" if self.saturated else ""
+        return (f"  {self.camera:6s} ({self.uv[0]:7.2f}, {self.uv[1]:6.2f}) px  peak "
+                f"{self.peak:3.0f}{sat}  ±{self.spread_px:.2f} px{extra}")
+
+
+def summarise(camera, frames: list, dep: Deployment, stopped: str | None = None) -> CameraView:
+    """One camera's burst → its view. Repeated frames count once (a camera that resends its
+    last frame does not weigh twice); the stored frame is a raw one, never re-encoded."""
+    distinct = list(dict.fromkeys(f for f in frames if f is not None))
+    if not distinct:
+        why = f"no frames (stopped: {stopped})" if stopped else "no frames"
+        return CameraView(camera.id, 0, None, math.nan, False, 0, math.nan, why, None)
+    spots = detect_spots(distinct, dep.detector, dep.detector_settings,
+                         shape=(camera.height, camera.width))
+    uv = spots.uv
+    ok = np.isfinite(uv).all(axis=1)
+    blobs = int(spots.blobs.max()) if len(spots.blobs) else 0
+    if ok.sum() * 2 <= len(distinct):  # not seen in most frames
+        reasons = [r for r, good in zip(spots.reasons, ok) if not good]
+        reason = max(set(reasons), key=reasons.count) if reasons else "no_spot"
+        verdict = "not seen" if reason in ("no_spot", None) else reason.replace("_", " ")
+        return CameraView(camera.id, len(distinct), None, float(np.nanmax(spots.peak)),
+                          False, blobs, math.nan, verdict, min(distinct))  # by content
+    med = np.median(uv[ok], axis=0)
+    dist = np.where(ok, np.linalg.norm(uv - med, axis=1), np.inf)
+    # nearest the median; a tie (two frames either side) goes by content, not arrival order,
+    # so that the same frames always give the same stored frame
+    best = min(range(len(distinct)), key=lambda k: (round(float(dist[k]), 6), distinct[k]))
+    spread = float(np.sqrt(np.mean(dist[ok] ** 2)))
+    verdict = "ok"
+    if blobs > 1:
+        verdict = "two blobs" if blobs == 2 else f"{blobs} blobs"
+    elif spread > STEADY_PX:
+        verdict = "unsteady"
+    return CameraView(camera.id, len(distinct), (float(med[0]), float(med[1])),
+                      float(spots.peak[best]), bool(spots.saturated[best]), blobs, spread,
+                      verdict, distinct[best])
+
+
+class Burst:
+    """Frame sets from a live grouper, grabbed on demand: sets that arrived before the request
+    are stale (the LED was elsewhere) and dropped, then ``settle`` more, then ``n`` kept."""
+
+    def __init__(self, grouper, n: int = BURST, settle: int = SETTLE, timeout: float = 3.0):
+        self.grouper = grouper
+        self.n, self.settle, self.timeout = n, settle, timeout
+        self._sets: Iterator | None = None
+
+    def grab(self, camera_ids) -> dict:
+        n, settle = self.n, self.settle
+        if self._sets is None:
+            self._sets = iter(self.grouper)
+        start = time.monotonic()
+        got: dict = {cid: [] for cid in camera_ids}
+        kept = skipped = 0
+        while kept < n and time.monotonic() - start < self.timeout + n:
+            try:
+                fs = next(self._sets)
+            except StopIteration:  # every camera has stopped
+                break
+            if self.grouper.t0 + fs.t < start:
+                continue
+            if skipped < settle:
+                skipped += 1
+                continue
+            for cid, frame in fs.frames.items():
+                if cid in got:
+                    got[cid].append(frame)
+            kept += 1
+        return got
+
+
+# -- the live check ------------------------------------------------------------------------------
+
+CORNERS = {(0, 0): "top-left", (2, 0): "top-right", (0, 2): "bottom-left", (2, 2): "bottom-right"}
+
+
+@dataclass
+class CameraCheck:
+    camera: str
+    points: int
+    rms_px: float  #: NaN until enough points
+    missing: list  #: image corners without a point
+    verdict: str
+
+
+def live_check(dep: Deployment, X: np.ndarray, uv: np.ndarray, ids: list,
+               enough: int = 12, good_px: float = 0.5) -> list[CameraCheck]:
+    """Per camera: a quick pose fit to the points accepted so far (reprojection RMS) and which
+    image corners have no point yet (the corners pin the lens)."""
+    out = []
+    for k, cam in enumerate(dep.cameras):
+        seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
+        cells = {(min(int(3 * u / cam.width), 2), min(int(3 * v / cam.height), 2))
+                 for u, v in uv[k, seen]}
+        missing = [name for cell, name in CORNERS.items() if cell not in cells]
+        rms = math.nan
+        if len(seen) >= MIN_POINTS_POSE:
+            try:
+                rms = fit_camera(cam, X[seen], uv[k, seen], [ids[i] for i in seen]).rms_px
+            except SurveyError:
+                pass
+        if len(seen) < enough:
+            verdict = f"needs {enough - len(seen)} more points"
+        elif not rms <= good_px:
+            verdict = f"fit {rms:.2f} px: check its spots (reflections?) and the tape"
+        elif missing:
+            verdict = f"needs points near its {', '.join(missing)} corner" + \
+                ("s" if len(missing) > 1 else "")
+        else:
+            verdict = "good"
+        out.append(CameraCheck(cam.id, len(seen), rms, missing, verdict))
+    return out
+
+
+def check_lines(checks: list[CameraCheck]) -> list[str]:
+    lines = []
+    for c in checks:
+        rms = "   –   " if math.isnan(c.rms_px) else f"{c.rms_px:5.2f} px"
+        lines.append(f"  {c.camera:6s} {c.points:4d} points  fit {rms}  {c.verdict}")
+    return lines
+
+
+# -- the session ---------------------------------------------------------------------------------
+
+@dataclass
+class Step:
+    """What the person asked for at a prompt."""
+
+    action: str  #: go, accept, redo, skip, back, extra, quit
+    xyz: tuple | None = None  #: for extra: the measured position
+
+
+class CaptureSession:
+    """Runs a capture: ``ask(prompt) -> Step`` and ``say(line)`` are the person (a terminal,
+    or ``--yes``); ``on_point(id, xyz)`` moves a scripted rig before each burst."""
+
+    def __init__(self, dep: Deployment, plan_ids: list, plan_xyz, appender, burst: Burst,
+                 ask: Callable, say: Callable, on_point: Callable | None = None,
+                 delay: float = 0.0, check_every: int = 5, stopped: dict | None = None):
+        self.dep = dep
+        self.plan = list(zip(plan_ids, np.asarray(plan_xyz, float)))
+        self.appender = appender
+        self.burst = burst
+        self.ask, self.say = ask, say
+        self.on_point = on_point
+        self.delay = delay
+        self.check_every = check_every
+        self.stopped = stopped if stopped is not None else {}
+        self.camera_ids = [c.id for c in dep.cameras]
+        self.spots: dict = {}  # point id → C×2 spots of the accepted points
+
+    def _load_spots(self) -> None:
+        """Spots of the points already in the bundle (a resumed session)."""
+        ids, _ = self.appender.accepted()
+        for pid in ids:
+            views = [summarise(c, [self._stored(pid, c.id)], self.dep) for c in self.dep.cameras]
+            self.spots[pid] = np.array([v.uv if v.uv else (np.nan, np.nan) for v in views])
+
+    def _stored(self, pid, cid):
+        path = self.appender.frames / pid / f"{cid}.jpg"
+        return path.read_bytes() if path.exists() else None
+
+    def capture(self, pid: str, xyz) -> list[CameraView]:
+        if self.on_point:
+            self.on_point(pid, xyz)
+        if self.delay:
+            time.sleep(self.delay)
+        got = self.burst.grab(self.camera_ids)
+        return [summarise(c, got[c.id], self.dep, self.stopped.get(c.id))
+                for c in self.dep.cameras]
+
+    def run(self) -> int:
+        """Capture until every planned point is accepted or skipped; returns points accepted
+        in this session."""
+        self._load_spots()
+        done, _ = self.appender.accepted()
+        skipped = self.appender.skipped()
+        if done:
+            self.say(f"resuming: {len(done)} points already in {self.appender.root}"
+                     + (f", {len(skipped)} skipped" if skipped else ""))
+        n_new, i = 0, 0
+        while i < len(self.plan):
+            pid, xyz = self.plan[i]
+            done, _ = self.appender.accepted()
+            if pid in done or pid in self.appender.skipped():
+                i += 1
+                continue
+            where = f"{pid} ({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f} m)"
+            step = self.ask(f"[{i + 1}/{len(self.plan)}] place the LED at {where}")
+            if step.action == "quit":
+                break
+            if step.action == "skip":
+                self.appender.skip(pid)
+                self.say(f"  {pid} skipped")
+                i += 1
+                continue
+            if step.action == "back":
+                i = self._back(i)
+                continue
+            if step.action == "extra":
+                self._extra(step.xyz)
+                n_new += 1
+                continue
+            decision = self._burst_until_decided(pid, xyz)
+            if decision.action == "quit":
+                break
+            if decision.action == "skip":
+                self.appender.skip(pid)
+                self.say(f"  {pid} skipped")
+                i += 1
+            elif decision.action == "back":
+                i = self._back(i)
+            else:  # accepted
+                n_new += 1
+                i += 1
+                self._maybe_check()
+        self._check(final=True)
+        return n_new
+
+    def _burst_until_decided(self, pid, xyz) -> Step:
+        while True:
+            views = self.capture(pid, xyz)
+            for v in views:
+                self.say(v.line())
+            step = self.ask("accept?")
+            if step.action == "redo":
+                continue
+            if step.action in ("accept", "go"):
+                self.appender.accept(pid, xyz, {v.camera: v.frame for v in views})
+                self.spots[pid] = np.array([v.uv if v.uv else (np.nan, np.nan)
+                                            for v in views])
+                seen = sum(v.uv is not None for v in views)
+                self.say(f"  {pid} saved ({seen} of {len(views)} cameras saw the LED)")
+                return Step("accept")
+            return step
+
+    def _back(self, i: int) -> int:
+        """To the nearest earlier planned point that was accepted (its capture is removed) or
+        skipped (the skip is undone)."""
+        done, skipped = set(self.appender.accepted()[0]), self.appender.skipped()
+        for j in range(i - 1, -1, -1):
+            pid = self.plan[j][0]
+            if pid in done:
+                self.appender.remove(pid)
+                self.spots.pop(pid, None)
+                self.say(f"  back to {pid}: its capture is removed, capture it again")
+                return j
+            if pid in skipped:
+                self.appender.unskip(pid)
+                self.say(f"  back to {pid} (skipped before)")
+                return j
+        self.say("  nothing to go back to")
+        return i
+
+    def _extra(self, xyz) -> None:
+        ids, _ = self.appender.accepted()
+        taken = set(ids) | {p for p, _ in self.plan}
+        k = 1
+        while f"X{k:03d}" in taken:
+            k += 1
+        pid = f"X{k:03d}"
+        self.say(f"  extra point {pid} at ({xyz[0]:.3f}, {xyz[1]:.3f}, {xyz[2]:.3f}) m")
+        self._burst_until_decided(pid, np.asarray(xyz, float))
+
+    def _maybe_check(self) -> None:
+        n = len(self.spots)
+        if self.check_every and n % self.check_every == 0:
+            self._check()
+
+    def _check(self, final: bool = False) -> None:
+        ids, X = self.appender.accepted()
+        if not ids:
+            return
+        uv = np.stack([self.spots[p] for p in ids], axis=1)  # C×N×2
+        checks = live_check(self.dep, X, uv, ids)
+        good = sum(c.verdict == "good" for c in checks)
+        self.say(f"{'survey' if final else 'so far'}: {len(ids)} points; {good} of "
+                 f"{len(checks)} cameras good enough to calibrate")
+        for line in check_lines(checks):
+            self.say(line)
