@@ -32,11 +32,15 @@ class Rig:
     """One MJPEG stream per simulated camera at /<camera_id>. The LED is where the file
     ``current`` says ("x y z", written by capture's --on-point); no file: the LED is off."""
 
-    def __init__(self, scene, root: Path, fps: float = 40.0, die: dict | None = None):
+    def __init__(self, scene, root: Path, fps: float = 40.0, die: dict | None = None,
+                 comes_back: bool = False):
+        """``die``: camera id → frames it sends before it drops off the network; it stays
+        off (connections refused) unless ``comes_back``."""
         self.scene, self.current, self.fps = scene, root / "current", fps
         self.cache: dict = {}
         self.lock = threading.Lock()
         die = die or {}
+        dead: set = set()
         rig = self
 
         class Handler(BaseHTTPRequestHandler):
@@ -45,13 +49,19 @@ class Rig:
 
             def do_GET(self):
                 cid = self.path.strip("/")
+                if cid in dead:
+                    self.send_error(503)
+                    return
                 self.send_response(200)
                 self.send_header("Content-Type", "multipart/x-mixed-replace;boundary=frame")
                 self.end_headers()
                 try:
                     for i in range(10**9):
                         if cid in die and i >= die[cid]:
-                            self.connection.shutdown(2)  # the camera dies
+                            if not comes_back:
+                                dead.add(cid)
+                            die.pop(cid)  # (one drop-out)
+                            self.connection.shutdown(2)  # the camera drops off
                             return
                         jpg = rig.frame(cid, i % VARIANTS)
                         self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\n"
@@ -86,7 +96,9 @@ class Rig:
                 for a in ("--camera", f"{c.id}=http://127.0.0.1:{port}/{c.id}")]
 
     def hook(self):
-        return f"printf '%s %s %s' {{x}} {{y}} {{z}} > {self.current}"
+        # braces that are not placeholders pass through untouched (awk, shell functions)
+        return (f"awk 'BEGIN{{exit 0}}' && test -n \"$VLPCAL_POINT_ID\" && "
+                f"printf '%s %s %s' {{x}} {{y}} {{z}} > {self.current}")
 
     def close(self):
         self.server.shutdown()
@@ -287,12 +299,16 @@ def test_appender_recovers_from_a_crash_at_any_step(tmp_path):
     with open(root / "points.csv", "a") as f:
         f.write("S0003,2.0,0.")  # the crash: a partial line
     (root / "frames" / "S0004").mkdir()  # renamed, but its line never written
+    with open(root / ".capture" / "journal.csv", "a") as f:
+        f.write("commit,S0004\n")
+    (root / "frames" / "S9999").mkdir()  # not ours to remove: kept (the reader will object)
     (root / ".capture" / "stage-S0005").mkdir()
     again = SurveyAppender(root)
     ids, xyz = again.accepted()
     assert ids == ["S0001", "S0002"] and xyz[1].tolist() == [1.5, 0.5, 0.0]
-    assert sorted(p.name for p in (root / "frames").iterdir()) == ["S0001", "S0002"]
+    assert sorted(p.name for p in (root / "frames").iterdir()) == ["S0001", "S0002", "S9999"]
     assert not list((root / ".capture").glob("stage-*"))
+    (root / "frames" / "S9999").rmdir()
     assert read_survey_bundle(root).point_ids == ids
     with pytest.raises(Exception, match="already in the survey"):
         again.accept("S0001", (0, 0, 0), {})
@@ -319,3 +335,58 @@ def test_live_check_names_what_a_camera_still_needs(site):
     few = live_check(dep, g[middle], uv[:, middle], [i for i, m in zip(ids, middle) if m])
     assert "corners" in few[0].verdict or "more points" in few[0].verdict
     assert set(few[0].missing) == {"top-left", "top-right", "bottom-left", "bottom-right"}
+
+
+def test_capture_never_takes_over_a_folder_it_did_not_start(tmp_path):
+    """A simulate output, a plan's folder: refused, and nothing in it is touched."""
+    sim = tmp_path / "sim"
+    (sim / "frames" / "000001").mkdir(parents=True)
+    (sim / "frames" / "000001" / "C1.jpg").write_bytes(b"jpeg")
+    with pytest.raises(Exception, match="survey capture did not start"):
+        SurveyAppender(sim)
+    assert (sim / "frames" / "000001" / "C1.jpg").read_bytes() == b"jpeg"
+    assert not (sim / "points.csv").exists() and not (sim / ".capture").exists()
+
+
+def test_a_camera_back_on_the_network_is_used_again(site, tmp_path):
+    scene, root = site
+    ids, xyz = read_points(root / "points.csv")
+    write_truth_csv(tmp_path / "six.csv", ids[:6], xyz[:6], id_column="point_id")
+    rig = Rig(scene, tmp_path, die={"C2": 30}, comes_back=True)
+    cmd = capture_cmd(root, rig, tmp_path / "survey", "--yes", "--delay", "0.3")
+    cmd[cmd.index("--points") + 1] = str(tmp_path / "six.csv")
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    finally:
+        rig.close()
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "camera C2:" in res.stdout and "camera C2: trying it again" in res.stdout
+    bundle = read_survey_bundle(tmp_path / "survey")
+    assert (bundle.point_ids[-1], "C2") in bundle.frames
+
+
+def test_unattended_capture_stops_when_no_camera_sends_frames(site, tmp_path):
+    scene, root = site
+    cmd = [sys.executable, "-m", "vlpcal", "survey", "capture", "-d", str(root / "dep.yaml"),
+           "--points", str(root / "points.csv"), "--survey", str(tmp_path / "s"), "--yes",
+           "--delay", "0", "--camera", "C1=http://127.0.0.1:9/none"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 1
+    assert "no camera sent frames at S0001" in res.stderr and "Traceback" not in res.stderr
+    assert SurveyAppender(tmp_path / "s").accepted()[0] == []
+
+
+def test_device_frames_are_stored_as_jpeg(site):
+    """V4L2 sources give arrays: they are encoded once and handled like MJPEG frames."""
+    import cv2
+
+    from vlpcal.capture import as_jpeg, summarise
+
+    scene, root = site
+    dep = deployment.load(root / "dep.yaml")
+    frames, _ = render_scene(scene, [[1.3, 0.8, 0.0]], seed=2)
+    img = cv2.imdecode(np.frombuffer(frames["C1"][0], np.uint8), cv2.IMREAD_COLOR)
+    jpegs = [as_jpeg(img), as_jpeg(img.copy())]
+    assert jpegs[0][:2] == b"\xff\xd8" and jpegs[0] == jpegs[1]
+    view = summarise(dep.cameras[0], jpegs, dep)
+    assert view.verdict == "ok" and view.frames == 1 and view.frame == jpegs[0]

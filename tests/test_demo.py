@@ -62,3 +62,16 @@ def test_demo_refuses_a_folder_it_did_not_write(tmp_path):
     lines = res.output.strip().splitlines()
     assert len(lines) == 1 and "was not written by vlpcal demo" in lines[0]
     assert [p.name for p in (tmp_path / "mine").iterdir()] == ["thesis.tex"]
+
+
+def test_demo_refuses_a_folder_with_someone_elses_summary(tmp_path, monkeypatch):
+    mine = tmp_path / "project"
+    (mine / "src").mkdir(parents=True)
+    (mine / "summary.json").write_text('{"mine": 1}')
+    (mine / "src" / "thesis.tex").write_text("keep me")
+    res = CliRunner().invoke(main, ["demo", "--out", str(mine)])
+    assert res.exit_code == 2 and "was not written by vlpcal demo" in res.output
+    assert (mine / "src" / "thesis.tex").read_text() == "keep me"
+    monkeypatch.chdir(mine)
+    res = CliRunner().invoke(main, ["demo", "--out", "."])
+    assert res.exit_code == 2 and "current folder" in res.output

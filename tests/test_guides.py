@@ -80,3 +80,9 @@ def test_a_wrong_path_or_kind_is_one_line(case, tmp_path):
     assert len(lines) == 1 and lines[0].startswith("Error"), (case, res.output)
     assert "Traceback" not in res.output
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_bare_group_shows_its_help():
+    out = CliRunner().invoke(main, ["survey"])
+    assert "capture" in out.output and "calibrate" in out.output
+    assert "Error" not in out.output

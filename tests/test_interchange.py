@@ -1,6 +1,7 @@
 """Cameras to and from aniposelib TOML and OpenCV FileStorage YAML."""
 
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -17,6 +18,8 @@ from vlpcal.interchange import (
     to_anipose_toml,
     to_opencv_yaml,
 )
+
+ROOT = Path(__file__).resolve().parents[1]
 
 try:
     import tomllib
@@ -149,3 +152,54 @@ def test_cli_import_errors_are_one_line(tmp_path):
         lines = out.output.strip().splitlines()
         assert len(lines) == 1 and message in lines[0], out.output
         assert not (tmp_path / "out.yaml").exists()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace("distortions = [", 'distortions = [ "a",', 1), "distortions"),
+    (lambda t: t.replace('units = "m"', 'units = [ "m",]'), "unit"),
+    (lambda t: t.replace("size = [ 160", "size = [ -160", 1), "size"),
+    (lambda t: t.replace('name = "C1"', 'name = " "'), "name"),
+])
+def test_malformed_anipose_values_are_named(edit, message):
+    with pytest.raises(InterchangeError, match=message):
+        from_anipose_toml(edit(to_anipose_toml(twelve_cameras())), "calib.toml")
+
+
+def test_opencv_import_refuses_other_yaml_in_one_line():
+    text = (ROOT / "layouts/paper-linear.deployment.yaml").read_text()  # not OpenCV's
+    with pytest.raises(InterchangeError, match="vlpcal-deployment file, not an OpenCV"):
+        from_opencv_yaml(text, "dep.yaml")
+    good = to_opencv_yaml(twelve_cameras()[:2])
+    bad = good.replace("camera_matrix:", "old_matrix:", 1)
+    with pytest.raises(InterchangeError, match=r"cameras\[0\]\.camera_matrix"):
+        from_opencv_yaml(bad, "c.yaml")
+
+
+def test_opencv_export_refuses_ids_that_do_not_survive_it():
+    cams = twelve_cameras()[:2]
+    cams[1] = Camera("true", **{k: getattr(cams[1], k) for k in
+                               ("width", "height", "fx", "fy", "cx", "cy", "dist", "position",
+                                "rotation")})
+    with pytest.raises(InterchangeError, match="'true' does not survive"):
+        to_opencv_yaml(cams)
+
+
+def test_import_drops_what_was_learned_for_other_cameras(tmp_path):
+    """The same ids with new poses: the region map and corrections no longer hold."""
+    root = ROOT / "surveys/paper-2024"
+    run = CliRunner().invoke
+    out = run(main, ["export", "-d", f"{root}/nominal.yaml", "--to", "anipose", "-o",
+                     str(tmp_path / "nominal.toml")])
+    assert out.exit_code == 0
+    out = run(main, ["import", "--cameras", str(tmp_path / "nominal.toml"), "-b",
+                     f"{root}/calibrated.yaml", "-o", str(tmp_path / "mixed.yaml")])
+    assert out.exit_code == 0 and "dropped fusion.region_map" in out.output
+    mixed = load(tmp_path / "mixed.yaml")
+    assert mixed.region_map is None and mixed.fusion != "region"
+    # the calibrated cameras themselves: everything kept
+    run(main, ["export", "-d", f"{root}/calibrated.yaml", "--to", "anipose", "-o",
+               str(tmp_path / "cal.toml")])
+    out = run(main, ["import", "--cameras", str(tmp_path / "cal.toml"), "-b",
+                     f"{root}/calibrated.yaml", "-o", str(tmp_path / "same.yaml")])
+    assert out.exit_code == 0 and "dropped" not in out.output
+    assert load(tmp_path / "same.yaml").region_map is not None

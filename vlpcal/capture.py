@@ -96,6 +96,7 @@ class Burst:
         self._sets: Iterator | None = None
 
     def grab(self, camera_ids) -> dict:
+        """camera id → the frames (JPEG bytes) of the burst; a camera that sent none: []."""
         n, settle = self.n, self.settle
         if self._sets is None:
             self._sets = iter(self.grouper)
@@ -105,7 +106,8 @@ class Burst:
         while kept < n and time.monotonic() - start < self.timeout + n:
             try:
                 fs = next(self._sets)
-            except StopIteration:  # every camera has stopped
+            except StopIteration:  # every camera has stopped: the next grab starts again
+                self._sets = None
                 break
             if self.grouper.t0 + fs.t < start:
                 continue
@@ -114,9 +116,24 @@ class Burst:
                 continue
             for cid, frame in fs.frames.items():
                 if cid in got:
-                    got[cid].append(frame)
+                    got[cid].append(as_jpeg(frame))
             kept += 1
         return got
+
+    def revive(self) -> list[str]:
+        """Reopen the cameras that stopped (back on the network?); their ids."""
+        return [cid for cid in list(self.grouper.stats.ended) if self.grouper.revive(cid)]
+
+
+def as_jpeg(frame) -> bytes:
+    """A frame as JPEG bytes to store: MJPEG frames as they came, device frames (arrays)
+    encoded once at quality 95."""
+    if isinstance(frame, (bytes, bytearray)):
+        return bytes(frame)
+    import cv2
+
+    ok, buf = cv2.imencode(".jpg", np.asarray(frame), [cv2.IMWRITE_JPEG_QUALITY, 95])
+    return buf.tobytes() if ok else b""
 
 
 # -- the live check ------------------------------------------------------------------------------
@@ -186,7 +203,8 @@ class CaptureSession:
 
     def __init__(self, dep: Deployment, plan_ids: list, plan_xyz, appender, burst: Burst,
                  ask: Callable, say: Callable, on_point: Callable | None = None,
-                 delay: float = 0.0, check_every: int = 5, stopped: dict | None = None):
+                 delay: float = 0.0, check_every: int = 5, stopped: dict | None = None,
+                 unattended: bool = False):
         self.dep = dep
         self.plan = list(zip(plan_ids, np.asarray(plan_xyz, float)))
         self.appender = appender
@@ -197,7 +215,11 @@ class CaptureSession:
         self.check_every = check_every
         self.stopped = stopped if stopped is not None else {}
         self.camera_ids = [c.id for c in dep.cameras]
+        self.planned = {p for p, _ in self.plan}
         self.spots: dict = {}  # point id → C×2 spots of the accepted points
+        self.recent: list = []  # ids accepted in this session, latest last (for "back")
+        self.unattended = unattended
+        self.stalled: str | None = None  # the point where no camera sent frames (--yes)
 
     def _load_spots(self) -> None:
         """Spots of the points already in the bundle (a resumed session)."""
@@ -211,6 +233,8 @@ class CaptureSession:
         return path.read_bytes() if path.exists() else None
 
     def capture(self, pid: str, xyz) -> list[CameraView]:
+        for cid in self.burst.revive():
+            self.say(f"  camera {cid}: trying it again")
         if self.on_point:
             self.on_point(pid, xyz)
         if self.delay:
@@ -248,9 +272,15 @@ class CaptureSession:
                 i = self._back(i)
                 continue
             if step.action == "extra":
-                self._extra(step.xyz)
-                n_new += 1
-                continue
+                step = self._extra(step.xyz)
+                if step.action == "accept":
+                    n_new += 1
+                    self._maybe_check()
+                elif step.action == "quit":
+                    break
+                elif step.action == "back":
+                    i = self._back(i)
+                continue  # skip at an extra point: it is simply not kept
             decision = self._burst_until_decided(pid, xyz)
             if decision.action == "quit":
                 break
@@ -268,26 +298,42 @@ class CaptureSession:
         return n_new
 
     def _burst_until_decided(self, pid, xyz) -> Step:
+        """Bursts at a point until the person decides; ``accept`` means it is on disk."""
         while True:
             views = self.capture(pid, xyz)
             for v in views:
                 self.say(v.line())
+            if not any(v.frames for v in views):
+                self.say("  no camera sent frames: nothing to save here")
+                if self.unattended:
+                    self.stalled = pid
+                    return Step("quit")
             step = self.ask("accept?")
             if step.action == "redo":
                 continue
             if step.action in ("accept", "go"):
+                if not any(v.frames for v in views):
+                    continue  # nothing to accept: burst again
                 self.appender.accept(pid, xyz, {v.camera: v.frame for v in views})
                 self.spots[pid] = np.array([v.uv if v.uv else (np.nan, np.nan)
                                             for v in views])
+                self.recent.append(pid)
                 seen = sum(v.uv is not None for v in views)
                 self.say(f"  {pid} saved ({seen} of {len(views)} cameras saw the LED)")
                 return Step("accept")
             return step
 
     def _back(self, i: int) -> int:
-        """To the nearest earlier planned point that was accepted (its capture is removed) or
+        """Undo the last step: an extra point captured just now is removed; otherwise back to
+        the nearest earlier planned point that was accepted (its capture is removed) or
         skipped (the skip is undone)."""
         done, skipped = set(self.appender.accepted()[0]), self.appender.skipped()
+        if self.recent and self.recent[-1] in done and self.recent[-1] not in self.planned:
+            pid = self.recent.pop()
+            self.appender.remove(pid)
+            self.spots.pop(pid, None)
+            self.say(f"  extra point {pid} removed (add it again with e)")
+            return i
         for j in range(i - 1, -1, -1):
             pid = self.plan[j][0]
             if pid in done:
@@ -302,15 +348,15 @@ class CaptureSession:
         self.say("  nothing to go back to")
         return i
 
-    def _extra(self, xyz) -> None:
+    def _extra(self, xyz) -> Step:
         ids, _ = self.appender.accepted()
-        taken = set(ids) | {p for p, _ in self.plan}
+        taken = set(ids) | self.planned
         k = 1
         while f"X{k:03d}" in taken:
             k += 1
         pid = f"X{k:03d}"
         self.say(f"  extra point {pid} at ({xyz[0]:.3f}, {xyz[1]:.3f}, {xyz[2]:.3f}) m")
-        self._burst_until_decided(pid, np.asarray(xyz, float))
+        return self._burst_until_decided(pid, np.asarray(xyz, float))
 
     def _maybe_check(self) -> None:
         n = len(self.spots)

@@ -27,6 +27,8 @@ class OneLineErrors(click.Group):
         try:
             return super().invoke(ctx)
         except click.UsageError as e:
+            if type(e).__name__ == "NoArgsIsHelpError":  # a bare group: its help, as asked
+                raise
             where = e.ctx.command_path if e.ctx else "vlpcal"
             raise UserError(f"{e.format_message()} (see {where} --help)") from None
 
@@ -464,7 +466,7 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
                    "else 0]")
 @click.option("--on-point", "on_point", default=None, metavar="COMMAND",
               help="Shell command run before each point, e.g. to move a rig: {id}, {x}, {y}, "
-                   "{z} are replaced.")
+                   "{z} are replaced (quoted), and VLPCAL_POINT_ID, _X, _Y, _Z are set.")
 @click.option("--burst", default=5, show_default=True, type=click.IntRange(1, 100),
               help="Frame sets grabbed per point.")
 @click.option("--check-every", default=5, show_default=True, type=click.IntRange(0),
@@ -480,9 +482,12 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     prompt: an interrupted session resumes where it stopped when run again. Every few points
     a quick fit per camera says whether the survey is good enough yet.
 
-    Example: vlpcal survey capture -d planned.yaml --points points.csv --survey survey
-    --camera C1=http://10.0.0.21:81/stream --camera C2=http://10.0.0.22:81/stream
+    \b
+    Example:
+      vlpcal survey capture -d planned.yaml --points points.csv --survey survey \\
+        --camera C1=http://10.0.0.21:81/stream --camera C2=http://10.0.0.22:81/stream
     """
+    import os
     import subprocess
     import sys
 
@@ -508,8 +513,10 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
                         "survey plan? give it with --points and --survey a new folder)")
     try:
         appender = SurveyAppender(survey_path)
-    except (DatasetError, OSError) as e:
-        raise UserError(f"{survey_path}: cannot write the survey there ({e})") from None
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    except OSError as e:
+        raise UserError(f"{survey_path}: cannot write the survey there ({e.strerror})") from None
     delay = (1.0 if yes else 0.0) if delay is None else delay
 
     def say(line: str) -> None:
@@ -550,8 +557,13 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
             say("  expected three numbers, e.g. 1.20 0.45 0.35")
 
     def move(pid, p) -> None:
-        cmd = on_point.format(id=pid, x=p[0], y=p[1], z=p[2])
-        res = subprocess.run(cmd, shell=True)
+        import re
+        import shlex
+
+        values = {"id": pid, "x": f"{p[0]:.6g}", "y": f"{p[1]:.6g}", "z": f"{p[2]:.6g}"}
+        cmd = re.sub(r"\{(id|x|y|z)\}", lambda m: shlex.quote(values[m.group(1)]), on_point)
+        env = {**os.environ, **{f"VLPCAL_POINT_{k.upper()}": v for k, v in values.items()}}
+        res = subprocess.run(cmd, shell=True, env=env)
         if res.returncode:
             raise UserError(f"--on-point {cmd!r} failed (exit {res.returncode}) at {pid}; "
                             "the survey so far is kept: fix the rig and run again to resume")
@@ -559,7 +571,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: say(f"! {m}"))
     session = CaptureSession(dep, ids, xyz, appender, Burst(grouper, burst), ask, say,
                              on_point=move if on_point else None, delay=delay,
-                             check_every=check_every, stopped=grouper.stats.ended)
+                             check_every=check_every, stopped=grouper.stats.ended,
+                             unattended=yes)
     try:
         n = session.run()
     except KeyboardInterrupt:
@@ -570,6 +583,10 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     finally:
         grouper.stop()
     done = len(appender.accepted()[0])
+    if session.stalled:
+        raise click.ClickException(
+            f"no camera sent frames at {session.stalled}: stopped with {done} points safe in "
+            f"{survey_path}; check the cameras and run the same command to resume")
     left = [p for p in ids if p not in set(appender.accepted()[0]) | appender.skipped()]
     say(f"\n{n} points captured now, {done} in {survey_path}"
         + (f"; {len(left)} still to do (run again to resume)" if left else ""))
@@ -823,7 +840,9 @@ def import_cameras(cameras_path, base_path, out, units):
         raise UserError(f"{path}: not a text file (expected TOML or YAML)") from None
     try:
         base_doc = yaml.safe_load(Path(base_path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+    except OSError as e:
+        raise UserError(f"{base_path}: cannot read ({e.strerror})") from None
+    except (UnicodeDecodeError, yaml.YAMLError):
         base_doc = None
     kind = base_doc.get("format") if isinstance(base_doc, dict) else None
     try:
@@ -845,11 +864,13 @@ def import_cameras(cameras_path, base_path, out, units):
         else:
             raise InterchangeError(f"{path}: unknown kind (expected .toml for anipose or .yaml "
                                    "for OpenCV FileStorage)")
-        check_world_frame(cams, base.ceiling_height, str(path))
+        check_world_frame(cams, base.ceiling_height, str(path), base.room)
     except InterchangeError as e:
         raise UserError(str(e)) from None
     extra = {k: v for k, v in base.extra.items() if k != "provenance"}
-    if {c.id for c in cams} != {c.id for c in base.cameras}:
+    if not _same_cameras(cams, base.cameras):
+        # a region map and pixel corrections were learned for the base's cameras: with other
+        # cameras (or the same ones calibrated anew) they no longer hold
         dropped = [k for k in ("corrections",) if k in extra]
         if "region_map" in extra.get("fusion", {}):
             extra["fusion"] = {k: v for k, v in extra["fusion"].items() if k != "region_map"}
@@ -859,14 +880,35 @@ def import_cameras(cameras_path, base_path, out, units):
         for k in dropped:
             extra.pop(k, None)
         if dropped:
-            click.echo(f"dropped {', '.join(dropped)} of {base_path}: they name other cameras",
-                       err=True)
+            click.echo(f"dropped {', '.join(dropped)} of {base_path}: learned for other "
+                       "cameras (run survey calibrate to learn them again)", err=True)
     extra["provenance"] = provenance("vlpcal import", **{"from": {"cameras": str(path),
                                                                   "base": str(base_path)}})
     out = Path(out)
     if out.is_dir() or not out.parent.is_dir():
         raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
     dep = Deployment(base.name, base.ceiling_height, base.room, cams, base.keep_out, extra)
-    save(dep, out, header=f"Cameras imported by vlpcal import from {path}.")
+    try:
+        save(dep, out, header=f"Cameras imported by vlpcal import from {path}.")
+    except DeploymentError as e:
+        raise UserError(f"{path}: {e}") from None
     click.echo(f"wrote {out}: {len(cams)} cameras ({', '.join(c.id for c in cams)}) in the room "
                f"of {base.name}")
+
+
+def _same_cameras(a, b, metres: float = 1e-4, radians: float = 1e-5) -> bool:
+    """Same ids in the same order, poses within ``metres`` / ``radians`` and the same lenses."""
+    import numpy as np
+
+    from .geometry import rodrigues
+
+    if [c.id for c in a] != [c.id for c in b]:
+        return False
+    for p, q in zip(a, b):
+        lens_p = np.r_[p.width, p.height, p.fx, p.fy, p.cx, p.cy, p.dist]
+        lens_q = np.r_[q.width, q.height, q.fx, q.fy, q.cx, q.cy, q.dist]
+        if (not np.allclose(lens_p, lens_q, rtol=1e-6, atol=1e-9)
+                or np.linalg.norm(np.subtract(p.position, q.position)) > metres
+                or np.abs(rodrigues(p.rotation) - rodrigues(q.rotation)).max() > radians):
+            return False
+    return True

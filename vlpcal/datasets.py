@@ -356,6 +356,9 @@ class SurveyAppender:
         self.frames = self.root / "frames"
         self.state = self.root / ".capture"
         self.journal = self.state / "journal.csv"
+        if self.root.is_dir() and any(self.root.iterdir()) and not self.state.is_dir():
+            raise DatasetError(f"{self.root}: a folder that survey capture did not start "
+                               "(choose a new folder for the survey)")
         self.root.mkdir(parents=True, exist_ok=True)
         self.state.mkdir(exist_ok=True)
         self.frames.mkdir(exist_ok=True)
@@ -371,11 +374,19 @@ class SurveyAppender:
                 f.truncate(data.rfind(b"\n") + 1)
                 os.fsync(f.fileno())
         ids, _ = self.accepted()
-        for d in self.frames.iterdir():
-            if d.is_dir() and d.name not in ids:
+        started = {line.partition(",")[2] for line in self._journal()
+                   if line.startswith("commit,")}
+        for d in self.frames.iterdir():  # renamed into place, its line never written
+            if d.is_dir() and d.name not in ids and d.name in started:
                 shutil.rmtree(d)
         for d in self.state.glob("stage-*"):
             shutil.rmtree(d, ignore_errors=True)
+        for f in self.root.glob(".points.*"):
+            f.unlink(missing_ok=True)
+
+    def _journal(self) -> list[str]:
+        return (self.journal.read_text(encoding="utf-8").splitlines()
+                if self.journal.exists() else [])
 
     def accepted(self) -> tuple[list[str], np.ndarray]:
         """Ids and positions committed so far, in order."""
@@ -387,13 +398,12 @@ class SurveyAppender:
     def skipped(self) -> set:
         """Ids the person chose to skip (and has not captured since)."""
         out: set = set()
-        if self.journal.exists():
-            for line in self.journal.read_text(encoding="utf-8").splitlines():
-                event, _, pid = line.partition(",")
-                if event == "skip":
-                    out.add(pid)
-                elif event in ("accept", "unskip"):
-                    out.discard(pid)
+        for line in self._journal():
+            event, _, pid = line.partition(",")
+            if event == "skip":
+                out.add(pid)
+            elif event in ("accept", "unskip"):
+                out.discard(pid)
         return out
 
     # -- changes ---------------------------------------------------------------------------
@@ -410,6 +420,7 @@ class SurveyAppender:
                 with open(stage / f"{_check_id(str(cid), 'camera id')}.jpg", "wb") as f:
                     f.write(data)
                     os.fsync(f.fileno())
+        self._log("commit", pid)
         os.replace(stage, self.frames / pid)
         with open(self.points, "a", newline="") as f:
             csv.writer(f).writerow([pid, *map(_fmt, xyz)])
@@ -434,9 +445,12 @@ class SurveyAppender:
     def _write_points(self, rows) -> None:
         fd, tmp = tempfile.mkstemp(prefix=".points.", dir=self.root)
         os.close(fd)
-        _write_csv(Path(tmp), POINTS_COLUMNS, [[i, *map(_fmt, p)] for i, p in rows])
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, self.points)
+        try:
+            _write_csv(Path(tmp), POINTS_COLUMNS, [[i, *map(_fmt, p)] for i, p in rows])
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, self.points)
+        finally:
+            Path(tmp).unlink(missing_ok=True)
 
     def _log(self, event: str, pid: str) -> None:
         with open(self.journal, "a", encoding="utf-8") as f:

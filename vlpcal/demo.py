@@ -117,10 +117,19 @@ class DemoResult:
 
 
 def check_target(out: Path) -> None:
-    """Refuse to write over a folder the demo did not write itself."""
-    if out.exists() and not (out / "summary.json").is_file():
-        if out.is_dir() and not any(out.iterdir()):
-            return
+    """Refuse to write over anything the demo did not write itself (it replaces only a
+    folder whose summary.json it wrote, or an empty one)."""
+    if Path.cwd().resolve().is_relative_to(out.resolve()):
+        raise DemoError(f"{out}: is the current folder or holds it (choose a new folder)")
+    if not out.exists():
+        return
+    if out.is_dir() and not any(out.iterdir()):
+        return
+    try:
+        ours = json.loads((out / "summary.json").read_text())["written_by"] == "vlpcal demo"
+    except (OSError, ValueError, KeyError, TypeError):
+        ours = False
+    if not ours:
         raise DemoError(f"{out}: exists and was not written by vlpcal demo (choose another "
                         "--out, or remove it)")
 
@@ -130,7 +139,7 @@ def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
 
     Written to a hidden folder beside ``out`` first and renamed at the end, so an interrupted
     demo leaves no half-written folder behind."""
-    out = Path(out)
+    given, out = Path(out), Path(out).resolve()
     check_target(out)
     stage = out.with_name(f".{out.name}.partial")
     shutil.rmtree(stage, ignore_errors=True)
@@ -144,7 +153,7 @@ def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
-    result.folder = out
+    result.folder = given
     result.seconds = time.perf_counter() - t_start
     return result
 

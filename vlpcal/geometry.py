@@ -10,6 +10,7 @@ Everything here is vectorised over points: arrays are ``N×3`` world points and 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -91,6 +92,12 @@ def max_radius2(dist) -> float:
     The first positive root of d/dr, 1 + 3 k1 s + 5 k2 s² + 7 k3 s³ = 0 with s = r²; inf if none.
     """
     k1, k2, _, _, k3 = dist
+    return _fold_radius2(float(k1), float(k2), float(k3))
+
+
+@functools.lru_cache(maxsize=4096)
+def _fold_radius2(k1: float, k2: float, k3: float) -> float:
+    # cached: a calibration rebuilds its cameras thousands of times with the same lens
     roots = np.roots([7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]) if any((k1, k2, k3)) else []
     s = [r.real for r in np.atleast_1d(roots) if abs(r.imag) < 1e-12 and r.real > 0]
     return min(s) if s else math.inf

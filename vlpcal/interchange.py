@@ -89,8 +89,10 @@ def from_anipose_toml(text: str, source: str = "<toml>", units: str | None = Non
     except ValueError as e:
         raise InterchangeError(f"{source}: not a TOML file ({e})") from None
     meta = doc.get("metadata", {})
+    if not isinstance(meta, dict):
+        raise InterchangeError(f"{source}: metadata: expected a [metadata] table")
     units = units or meta.get("units")
-    if units not in UNITS:
+    if not isinstance(units, (str, type(None))) or units not in UNITS:
         raise InterchangeError(
             f"{source}: the length unit is not stated in [metadata] (aniposelib does not "
             f"record it): state it with --units m, cm or mm" if units is None else
@@ -132,7 +134,10 @@ def _camera_of_section(sec: dict, where: str, metres: float) -> Camera:
         return a
 
     size, K = array("size", (2,)), array("matrix", (3, 3))
-    dist = np.asarray(sec.get("distortions", [0.0] * 5), float).ravel()
+    try:
+        dist = np.asarray(sec.get("distortions", [0.0] * 5), float).ravel()
+    except (TypeError, ValueError):
+        dist = np.full(6, np.nan)
     if dist.size > 5 or not np.isfinite(dist).all():
         raise InterchangeError(f"{where}.distortions: expected up to 5 finite numbers "
                                "(k1, k2, p1, p2, k3)")
@@ -140,7 +145,11 @@ def _camera_of_section(sec: dict, where: str, metres: float) -> Camera:
     if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[0, 1]) > 1e-9 * K[0, 0]:
         raise InterchangeError(f"{where}.matrix: expected [[fx, 0, cx], [0, fy, cy], "
                                "[0, 0, 1]] with fx, fy > 0 (no skew)")
-    name = str(sec.get("name", where.rsplit("[", 1)[-1].rstrip("]")))
+    name = str(sec.get("name", where.rsplit("[", 1)[-1].rstrip("]"))).strip()
+    if size.min() < 1 or size.max() > 100000 or np.any(size != np.round(size)):
+        raise InterchangeError(f"{where}.size: expected [width, height] in pixels")
+    if not name:
+        raise InterchangeError(f"{where}.name: expected a camera id")
     position = -rodrigues(rvec).T @ tvec
     return Camera(id=name, width=int(size[0]), height=int(size[1]), fx=float(K[0, 0]),
                   fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]),
@@ -172,7 +181,13 @@ def to_opencv_yaml(cameras: list[Camera]) -> str:
         fs.write("position", np.asarray(c.position, float).reshape(3, 1))
         fs.endWriteStruct()
     fs.endWriteStruct()
-    return fs.releaseAndGetString()
+    text = fs.releaseAndGetString()
+    back = [c.id for c in from_opencv_yaml(text)]
+    for c, b in zip(cameras, back):
+        if c.id != b:  # FileStorage writes strings unquoted: true, null, 1e3 come back changed
+            raise InterchangeError(f"camera id {c.id!r} does not survive OpenCV's YAML (it "
+                                   f"reads back as {b!r}): rename the camera")
+    return text
 
 
 def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
@@ -181,40 +196,65 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
 
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    except cv2.error:
-        raise InterchangeError(f"{source}: not an OpenCV FileStorage file") from None
-    node = fs.getNode("cameras")
-    if node.empty() or not node.isSeq():
-        raise InterchangeError(f"{source}: no 'cameras' sequence (expected the file "
-                               "vlpcal export --to opencv writes)")
+        node = fs.getNode("cameras")
+        ok = not node.empty() and node.isSeq()
+    except (cv2.error, SystemError):
+        ok = False
+    if not ok:
+        raise InterchangeError(f"{source}: not an OpenCV FileStorage file with a 'cameras' "
+                               "sequence (expected what vlpcal export --to opencv writes)")
+    kind = fs.getNode("format").string()
+    if kind.startswith("vlpcal"):
+        raise InterchangeError(f"{source}: a {kind} file, not an OpenCV camera file (expected "
+                               "what vlpcal export --to opencv writes)")
+    unit = fs.getNode("units").string() or "m"
+    if unit not in UNITS:
+        raise InterchangeError(f"{source}: units: expected m, cm or mm, got {unit!r}")
     cams = []
     for i in range(node.size()):
         n, where = node.at(i), f"{source}: cameras[{i}]"
-        K, dist = n.getNode("camera_matrix").mat(), n.getNode("distortion_coefficients").mat()
-        rvec, tvec = n.getNode("rvec").mat(), n.getNode("tvec").mat()
-        if any(a is None for a in (K, dist, rvec, tvec)):
-            raise InterchangeError(f"{where}: expected camera_matrix, "
-                                   "distortion_coefficients, rvec and tvec")
-        rvec, tvec = rvec.ravel(), tvec.ravel()
-        cams.append(Camera(id=n.getNode("id").string(), width=int(n.getNode("image_width")
-                                                                  .real()),
-                           height=int(n.getNode("image_height").real()), fx=K[0, 0],
-                           fy=K[1, 1], cx=K[0, 2], cy=K[1, 2],
-                           dist=tuple(float(v) for v in dist.ravel()),
-                           position=tuple(float(v) for v in -rodrigues(rvec).T @ tvec),
-                           rotation=tuple(float(v) for v in rvec)))
+
+        def mat(key, shape, n=n, where=where):
+            try:
+                a = n.getNode(key).mat() if n.isMap() else None
+            except (cv2.error, SystemError):
+                a = None
+            if a is None or a.size != int(np.prod(shape)) or not np.isfinite(a).all():
+                raise InterchangeError(f"{where}.{key}: expected a {'×'.join(map(str, shape))} "
+                                       "matrix of finite numbers")
+            return a.reshape(shape).astype(float)
+
+        K, dist = mat("camera_matrix", (3, 3)), mat("distortion_coefficients", (5,))
+        rvec, tvec = mat("rvec", (3,)), mat("tvec", (3,)) * UNITS[unit]
+        cid = n.getNode("id")
+        name = cid.string() if cid.isString() else (
+            f"{cid.real():g}" if cid.isInt() or cid.isReal() else "")
+        w, h = n.getNode("image_width").real(), n.getNode("image_height").real()
+        if not name or not (w >= 1 and h >= 1):
+            raise InterchangeError(f"{where}: expected an id, image_width and image_height")
+        cams.append(Camera(id=name, width=int(w), height=int(h), fx=K[0, 0], fy=K[1, 1],
+                           cx=K[0, 2], cy=K[1, 2], dist=tuple(dist),
+                           position=tuple(-rodrigues(rvec).T @ tvec),
+                           rotation=tuple(rvec)))
     return cams
 
 
-def check_world_frame(cameras: list[Camera], ceiling_height: float, source: str) -> None:
+def check_world_frame(cameras: list[Camera], ceiling_height: float, source: str,
+                      room_polygon=None) -> None:
     """Refuse cameras that cannot hang in a z-up room (anipose's world is often its first
-    camera's frame or a calibration board's: align it to the floor first)."""
+    camera's frame or a calibration board's: align it to the floor first): above the floor,
+    at most 0.5 m over the ceiling, within 1 m of the room in plan."""
+    from shapely.geometry import Point, Polygon
+
+    room = Polygon(room_polygon).buffer(1.0) if room_polygon is not None else None
     for c in cameras:
         z = c.position[2]
-        if not 0.0 < z <= ceiling_height + 0.5:
+        if not 0.0 < z <= ceiling_height + 0.5 or (room is not None and not room.contains(
+                Point(c.position[:2]))):
             raise InterchangeError(
-                f"{source}: camera {c.id} is at z = {z:.3g} m, not between the floor and the "
-                f"{ceiling_height:g} m ceiling: the file's world frame is not the room's (z up, "
-                "floor at z = 0) or its unit is wrong")
+                f"{source}: camera {c.id} at ({c.position[0]:.3g}, {c.position[1]:.3g}, "
+                f"{z:.3g}) m is not between the floor and the {ceiling_height:g} m ceiling of "
+                "the room: the file's world frame is not the room's (z up, floor at z = 0) or "
+                "its unit is wrong")
 
 

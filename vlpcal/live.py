@@ -130,7 +130,11 @@ class LiveGrouper:
         self.on_event = on_event or (lambda msg: None)
         self.stats = LiveStats()
         self._queue: queue.Queue = queue.Queue(maxsize=256)
+        #: sources that stopped, and why: a channel of its own, never dropped with old frames
+        self._stopped: queue.Queue = queue.Queue()
         self._stop = threading.Event()
+        self._threads: dict = {}
+        self._live: set = set()
         self.t0 = time.monotonic()
 
     def _reader(self, cid: str, factory) -> None:
@@ -142,7 +146,7 @@ class LiveGrouper:
                 item = (time.monotonic(), cid, frame)
                 try:
                     self._queue.put_nowait(item)
-                except queue.Full:  # the locator fell behind: drop the oldest, keep up
+                except queue.Full:  # the consumer fell behind: drop the oldest, keep up
                     try:
                         self._queue.get_nowait()
                         self.stats.dropped[cid] += 1
@@ -151,32 +155,60 @@ class LiveGrouper:
                     self._queue.put(item)
         except Exception as e:  # a camera's failure is a status, never a crash
             why = f"{type(e).__name__}: {e}".strip().rstrip(":")
-        self._queue.put((time.monotonic(), cid, StopIteration(why)))
+        self._stopped.put((cid, why))
+
+    def _start(self, cid: str) -> None:
+        th = threading.Thread(target=self._reader, args=(cid, self.sources[cid]), daemon=True)
+        self._threads[cid] = th
+        self._live.add(cid)
+        th.start()
+
+    def revive(self, cid: str) -> bool:
+        """Open a stopped source again (a camera back on the network); True if it was
+        stopped. Call between frame sets."""
+        if cid not in self.stats.ended or self._threads[cid].is_alive():
+            return False
+        del self.stats.ended[cid]
+        self._start(cid)
+        return True
 
     def stop(self) -> None:
         self._stop.set()
 
+    def _note_stopped(self) -> None:
+        while True:
+            try:
+                cid, why = self._stopped.get_nowait()
+            except queue.Empty:
+                return
+            self._live.discard(cid)
+            self.stats.ended[cid] = why
+            rest = "going on without it" if self._live else "no camera left"
+            self.on_event(f"camera {cid}: {why} after {self.stats.frames[cid]} frames; {rest}")
+
     def __iter__(self) -> Iterator[FrameSet]:
         t0 = self.t0 = time.monotonic()  # FrameSet.t counts from here
-        threads = [threading.Thread(target=self._reader, args=(cid, f), daemon=True)
-                   for cid, f in self.sources.items()]
-        for th in threads:
-            th.start()
-        live = set(self.sources)
+        for cid in self.sources:
+            if cid not in self._threads or not self._threads[cid].is_alive():
+                self.stats.ended.pop(cid, None)
+                self._start(cid)
         pending: dict = {}
         started = 0.0
 
         def close():
             nonlocal pending
             fs = FrameSet(self.stats.sets, started - t0, pending)
-            for cid in live | set(pending):
+            for cid in self._live | set(pending):
                 if cid not in pending:
                     self.stats.missing[cid] += 1
             self.stats.sets += 1
             pending = {}
             return fs
 
-        while live and not self._stop.is_set():
+        while not self._stop.is_set():
+            self._note_stopped()
+            if not self._live and self._queue.empty():
+                break
             if self.deadline is not None and time.monotonic() > self.deadline:
                 break
             try:
@@ -185,21 +217,13 @@ class LiveGrouper:
                 if pending and time.monotonic() - started > self.tolerance:
                     yield close()
                 continue
-            if isinstance(item, StopIteration):
-                live.discard(cid)
-                self.stats.ended[cid] = str(item) or "stream ended"
-                self.on_event(f"camera {cid}: {self.stats.ended[cid]} after "
-                              f"{self.stats.frames[cid]} frames; going on without it"
-                              if live else f"camera {cid}: {self.stats.ended[cid]} after "
-                              f"{self.stats.frames[cid]} frames; no camera left")
-                continue
             self.stats.frames[cid] += 1
             if pending and (cid in pending or t - started > self.tolerance):
                 yield close()
             if not pending:
                 started = t
             pending[cid] = item
-            if live <= set(pending):
+            if self._live <= set(pending):
                 yield close()
         if pending:
             yield close()
