@@ -77,7 +77,7 @@ MALFORMED = [
      "corrections.C7: unknown camera"),
     ("zero pixel noise", mutate(["uncertainty", "pixel_noise"], 0),
      "uncertainty.pixel_noise: expected a positive number"),
-    ("not a mapping", ["just", "a", "list"], "expected a mapping"),
+    ("not a mapping", ["just", "a", "list"], "not a vlpcal deployment (expected a YAML mapping"),
 ]
 
 

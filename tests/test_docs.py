@@ -35,7 +35,8 @@ def guide_commands() -> list[str]:
     for block in re.findall(r"```bash\n(.*?)```", guides, re.S):
         for line in block.replace("\\\n", " ").splitlines():
             line = line.split("  #")[0].strip()
-            if line and not any(t in line for t in ("deployment.yaml", "http", "/dev/video")):
+            templates = ("deployment.yaml", "http", "/dev/video")
+            if line and not line.startswith("#") and not any(t in line for t in templates):
                 cmds.append(line)
     return cmds
 

@@ -2,7 +2,7 @@ import numpy as np
 
 from vlpcal.fusion import fuse
 from vlpcal.geometry import paper_camera
-from vlpcal.survey import learn_region_map
+from vlpcal.survey import learn_region_map, plan_survey
 
 
 def test_region_map_names_the_pair_that_was_best_there(rng):
@@ -21,3 +21,19 @@ def test_region_map_names_the_pair_that_was_best_there(rng):
     e_c = np.nanmean(np.linalg.norm(fuse(cams, uv, "region", rmap).X - X, axis=1))
     e_a = np.nanmean(np.linalg.norm(fuse(cams, uv, "mean").X - X, axis=1))
     assert e_c < e_a
+
+
+def test_survey_plan_walks_a_serpentine_without_crossing_the_room():
+    """Each row is entered from the end nearer to where the last row ended: no walk back
+    across the room between consecutive points at one height."""
+    from pathlib import Path
+
+    from vlpcal.deployment import load
+
+    dep = load(Path(__file__).resolve().parents[1] / "layouts/paper-linear.planned.yaml")
+    plan = plan_survey(dep, 0.3, (0.0, 0.35, 0.7))
+    same = np.diff(plan.xyz[:, 2]) == 0
+    steps = np.linalg.norm(np.diff(plan.xyz[:, :2], axis=0), axis=1)[same]
+    width = np.ptp(np.array(dep.room)[:, 0])
+    assert steps.max() < width / 2
+    assert len(set(map(tuple, plan.xyz.round(6)))) == len(plan.ids)

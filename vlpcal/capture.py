@@ -308,12 +308,14 @@ class CaptureSession:
                 if self.unattended:
                     self.stalled = pid
                     return Step("quit")
+                step = self.ask("retry?")
+                if step.action in ("redo", "accept", "go"):
+                    continue
+                return step
             step = self.ask("accept?")
             if step.action == "redo":
                 continue
             if step.action in ("accept", "go"):
-                if not any(v.frames for v in views):
-                    continue  # nothing to accept: burst again
                 self.appender.accept(pid, xyz, {v.camera: v.frame for v in views})
                 self.spots[pid] = np.array([v.uv if v.uv else (np.nan, np.nan)
                                             for v in views])

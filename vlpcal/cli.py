@@ -54,11 +54,12 @@ def _load_deployment(path):
         raise UserError(str(e)) from None
 
 
-def _floats(text: str) -> list[float]:
+def _floats(text: str, option: str) -> list[float]:
     try:
         return [float(t) for t in text.split(",") if t.strip()]
     except ValueError:
-        raise click.BadParameter(f"expected numbers separated by commas, got {text!r}") from None
+        raise click.BadParameter(f"expected numbers separated by commas, got {text!r}",
+                                 param_hint=option) from None
 
 
 @main.command()
@@ -83,7 +84,7 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     """Simulate an install: nominal and true deployments, a survey bundle, a frames folder.
 
     Writes OUT/nominal.yaml (the cameras as planned), OUT/truth.yaml (as really installed, for
-    evaluation), OUT/survey/ (DESIGN.md survey bundle, tape-measure noise on points.csv),
+    evaluation), OUT/survey/ (a survey bundle, tape-measure noise on points.csv),
     OUT/frames/ (a locate frames folder) and OUT/frames.truth.csv.
 
     Example: vlpcal simulate --profile cheap-wide --seed 3 --out sim-cheap
@@ -118,7 +119,7 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise click.UsageError(f"{out} exists and is not empty (use --overwrite to replace)")
-    heights = _floats(survey_heights)
+    heights = _floats(survey_heights, "--survey-heights")
     top = profile.ceiling_height - 0.5
     if not heights or any(not 0 <= h <= top for h in heights):
         raise click.BadParameter(f"expected LED heights from 0 to {top:g} m (0.5 m under the "
@@ -197,7 +198,7 @@ def demo(out: str, seed: int):
 
 @main.command()
 @click.option("--deployment", "-d", "deployment_path", required=True,
-              type=click.Path(dir_okay=False), help="Deployment YAML (DESIGN.md).")
+              type=click.Path(dir_okay=False), help="Deployment YAML (docs/formats.md).")
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False),
               help="Folder of <frame_id>/<camera_id>.jpg.")
 @click.option("--observations", type=click.Path(dir_okay=False),
@@ -222,7 +223,7 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
            duration, max_sets, quiet):
     """Turn camera frames into 3D fixes (metres, world frame, z up).
 
-    One row per frame set: frame_id,x,y,z,status first (DESIGN.md), then the cameras used,
+    One row per frame set: frame_id,x,y,z,status first (the contract), then the cameras used,
     the predicted RMS error sigma_m, the worst reprojection residual and each camera's status.
     A frame set without a fix keeps its row with empty x, y, z and a status saying why.
 
@@ -261,9 +262,14 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
     except KeyboardInterrupt:
         notes.append("interrupted: the fixes so far are kept")
         n = sum(statuses.values())
-    except UserError:
+    except click.ClickException:
         writer.abort()
         raise
+    except BrokenPipeError:  # the reader of stdout has what it wanted (| head): stop quietly
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return
     writer.close()
     secs = time.perf_counter() - t0
     if n and not quiet:
@@ -285,6 +291,10 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
         folder = read_frames_folder(frames_dir)
     except DatasetError as e:
         raise UserError(str(e)) from None
+    absent = [c for c in loc.camera_ids if c not in folder.camera_ids]
+    if absent:
+        notes.append(f"{frames_dir}: no frames at all from camera(s) {', '.join(absent)} of "
+                     f"{loc.deployment.name}: is this the right deployment for these frames?")
     unknown = sorted(set(folder.camera_ids) - set(loc.camera_ids))
     if unknown:
         files = sum(1 for (_, c) in folder.files if c in unknown)
@@ -381,6 +391,9 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
     finally:
         grouper.stop()
     st = grouper.stats
+    if not n:
+        why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)
+        raise click.ClickException(f"no frames from any camera, nothing located ({why})")
     for cid in loc.camera_ids:
         if cid in sources:
             notes.append(f"camera {cid}: {st.frames[cid]} frames, absent from "
@@ -395,7 +408,7 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
 def survey():
     """Survey calibration: cameras (and region maps) from LED measurements at known points.
 
-    Example: vlpcal survey plan -d planned.yaml --out survey/points.csv
+    Example: vlpcal survey plan -d planned.yaml --out survey-plan.csv
     """
 
 
@@ -413,7 +426,7 @@ def survey():
 def survey_plan(deployment_path, out, step, heights, min_per_camera):
     """Plan the survey: where to put the LED, with ids, and a map to print.
 
-    Example: vlpcal survey plan -d nominal.yaml --out survey/points.csv
+    Example: vlpcal survey plan -d planned.yaml --out survey-plan.csv
     """
     from pathlib import Path
 
@@ -422,7 +435,7 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
     from .survey import SurveyError, plan_survey
 
     dep = _load_deployment(deployment_path)
-    hs = _floats(heights)
+    hs = _floats(heights, "--heights")
     if len(hs) < 2 or any(not 0 <= h < dep.ceiling_height - 0.3 for h in hs):
         raise click.BadParameter(f"expected two or more heights from 0 to "
                                  f"{dep.ceiling_height - 0.3:g} m, got {heights!r}",
@@ -508,6 +521,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     from pathlib import Path
 
     bundle = Path(survey_path)
+    created = not bundle.exists()
     if (bundle / "points.csv").exists() and not (bundle / ".capture").is_dir():
         raise UserError(f"{bundle}: holds a points.csv that survey capture did not write (a "
                         "survey plan? give it with --points and --survey a new folder)")
@@ -524,15 +538,19 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
         sys.stdout.flush()
 
     def ask(prompt: str) -> Step:
-        placing = not prompt.startswith("accept")
+        placing = not prompt.startswith(("accept", "retry"))
         if yes:
             if placing:
                 say(prompt)
             return Step("go" if placing else "accept")
-        keys = ("Enter: capture · s skip · b back · e extra point · q quit" if placing
-                else "Enter: accept · r redo · s skip · b back · q quit")
-        choices = {"": "go" if placing else "accept", "s": "skip", "b": "back", "q": "quit",
-                   **({"e": "extra"} if placing else {"r": "redo"})}
+        if prompt.startswith("retry"):
+            keys, choices = ("Enter: try again · s skip · b back · q quit",
+                             {"": "redo", "s": "skip", "b": "back", "q": "quit"})
+        else:
+            keys = ("Enter: capture · s skip · b back · e extra point · q quit" if placing
+                    else "Enter: accept · r redo · s skip · b back · q quit")
+            choices = {"": "go" if placing else "accept", "s": "skip", "b": "back",
+                       "q": "quit", **({"e": "extra"} if placing else {"r": "redo"})}
         while True:
             click.echo(f"{prompt}  [{keys}] > ", nl=False)
             sys.stdout.flush()
@@ -576,18 +594,24 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     try:
         n = session.run()
     except KeyboardInterrupt:
-        done = len(appender.accepted()[0])
+        n = None
+    finally:
+        grouper.stop()
+        done_ids, skipped = appender.accepted()[0], appender.skipped()
+        if created and not done_ids and not skipped:
+            import shutil
+
+            shutil.rmtree(bundle, ignore_errors=True)  # nothing captured: leave nothing
+    done = len(done_ids)
+    if n is None:
         click.echo(f"\ninterrupted: {done} points are safe in {survey_path}; run the same "
                    "command to resume", err=True)
         sys.exit(130)
-    finally:
-        grouper.stop()
-    done = len(appender.accepted()[0])
     if session.stalled:
         raise click.ClickException(
             f"no camera sent frames at {session.stalled}: stopped with {done} points safe in "
             f"{survey_path}; check the cameras and run the same command to resume")
-    left = [p for p in ids if p not in set(appender.accepted()[0]) | appender.skipped()]
+    left = [p for p in ids if p not in set(done_ids) | skipped]
     say(f"\n{n} points captured now, {done} in {survey_path}"
         + (f"; {len(left)} still to do (run again to resume)" if left else ""))
     if not left:
@@ -652,7 +676,10 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     _print_calibration(result, folds, point_sigma)
     paths = write_calibration(out, result, notes,
                               header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
-    click.echo(f"\nwrote {paths[0]} (fusion: {result.fusion}), {paths[1]}, {paths[2]}")
+    label = {"mean": "(a) mean of pairs", "nearest": "(b) nearest pair",
+             "region": "(c) region map", "robust": "all-camera LS, robust"}[result.fusion]
+    click.echo(f"\nwrote {paths[0]} (fusion: {result.fusion}, {label}), {paths[1]}, "
+               f"{paths[2]}")
 
 
 def _print_calibration(result, folds: int, point_sigma: float) -> None:
@@ -670,11 +697,18 @@ def _print_calibration(result, folds: int, point_sigma: float) -> None:
             continue
         click.echo(f"{label:32s} {st['mean'] * 100:7.2f} {st['median'] * 100:7.2f} "
                    f"{st['p90'] * 100:7.2f} {st['max'] * 100:7.2f} {st['fixed']:6.0%}")
+    click.echo("(fixed: share of the held-out points with a fix; a point one camera saw "
+               "has none)")
     click.echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'moved cm':>9s} "
                f"{'turned °':>9s}  rejected spots")
     for r in result.cameras:
         click.echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['moved_cm']:9.2f} "
                    f"{r['turned_deg']:9.2f}  {', '.join(r['outliers']) or '–'}")
+    far = [r for r in result.cameras if r["moved_cm"] > 50 or r["turned_deg"] > 20]
+    for r in far:
+        click.echo(f"warning: camera {r['camera']} moved {r['moved_cm']:.0f} cm and turned "
+                   f"{r['turned_deg']:.0f}° from the deployment: is this survey from this site, "
+                   "and are the camera ids the same?", err=True)
     if result.mismeasured:
         click.echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
                    "from its record the calibrated cameras put the LED):")
@@ -699,7 +733,7 @@ def _check_survey_positions(survey_path, dep, X, ids) -> None:
 
 @main.command()
 @click.option("--site", "site_path", required=True, type=click.Path(dir_okay=False),
-              help="Site file (DESIGN.md format vlpcal-site).")
+              help="Site file (format vlpcal-site, docs/formats.md).")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="Deployment to write; maps per LED height (.png) go beside it.")
 @click.option("--candidate", default=1, show_default=True, type=click.IntRange(1),
@@ -712,7 +746,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
 
     Searches linear, triangular and square (two spacings) grids by camera count; for each
     arrangement and yaw a CasADi/IPOPT optimiser sets spacing and offset on smooth
-    surrogates, and every result is judged by the reference model of DESIGN.md (coverage and
+    surrogates, and every result is judged by the reference model of docs/formats.md (coverage and
     predicted 95th-percentile error). Prints the ranked candidates, writes the chosen one.
 
     Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
@@ -742,8 +776,10 @@ def plan(site_path, out, candidate, max_cameras, quiet):
             f"{site_path}: no grid of up to {max_cameras} cameras meets coverage "
             f"{r.coverage:.0%} with p95 ≤ {r.max_error_p95 * 100:g} cm ({best}); relax the "
             "requirements, lower the LED heights or use a camera with more pixels")
-    click.echo(f"{site.name}: {len(result.candidates)} layouts of "
-               f"{result.candidates[0].count} cameras meet the requirements "
+    k = len(result.candidates)
+    click.echo(f"{site.name}: {k} layout{'s' if k > 1 else ''} of "
+               f"{result.candidates[0].count} cameras meet{'' if k > 1 else 's'} the "
+               "requirements "
                f"({result.tried} arrangements optimised, {result.seconds:.1f} s)\n")
     click.echo(f"{'#':>2s} {'family':10s} {'cams':>4s} {'grid':>6s} {'spacing m':>12s} "
                f"{'yaw':>4s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
@@ -753,7 +789,8 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                    f"{round(math.degrees(c.yaw)):4d} {c.evaluation.coverage:8.1%} "
                    f"{c.evaluation.mean * 100:8.2f} {c.evaluation.p95 * 100:7.2f}")
     if candidate > len(result.candidates):
-        raise UserError(f"--candidate {candidate}: only {len(result.candidates)} candidates")
+        raise UserError(f"--candidate {candidate}: the plan has {k} candidate"
+                        f"{'s' if k > 1 else ''}, numbered from 1")
     chosen = result.candidates[candidate - 1]
     dep = planned_deployment(site, chosen, candidate, site_path)
     save(dep, out, header=f"Planned by vlpcal plan from {site_path}: candidate {candidate}.")
@@ -764,8 +801,9 @@ def plan(site_path, out, candidate, max_cameras, quiet):
 @main.command("export")
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The deployment whose cameras to export.")
-@click.option("--to", "fmt", required=True, type=click.Choice(["anipose", "opencv"]),
-              help="anipose: aniposelib CameraGroup TOML; opencv: cv::FileStorage YAML.")
+@click.option("--to", "fmt", type=click.Choice(["anipose", "opencv"]), default=None,
+              help="anipose: aniposelib CameraGroup TOML; opencv: cv::FileStorage YAML  "
+                   "[default: from --out's extension, .toml or .yaml]")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="File to write (.toml for anipose, .yaml for opencv).")
 @click.option("--units", type=click.Choice(["m", "cm", "mm"]), default="m", show_default=True,
@@ -790,6 +828,16 @@ def export_cameras(deployment_path, fmt, out, units):
     out = Path(out)
     if out.is_dir() or not out.parent.is_dir():
         raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    kind = {".toml": "anipose", ".yaml": "opencv", ".yml": "opencv"}.get(out.suffix.lower())
+    if fmt is None and kind is None:
+        raise UserError(f"{out}: give --to anipose or --to opencv (or name the file .toml or "
+                        ".yaml)")
+    if fmt and kind and fmt != kind:
+        raise UserError(f"{out}: a {out.suffix} name for --to {fmt} (vlpcal import reads "
+                        f"{'.toml' if fmt == 'anipose' else '.yaml'} files as {fmt}): rename it")
+    fmt = fmt or kind
+    if fmt == "opencv" and units != "m":
+        raise UserError("--units: the OpenCV file is always in metres (--units is for anipose)")
     if fmt == "anipose":
         text = to_anipose_toml(dep.cameras, units, {"deployment": dep.name})
     else:
@@ -807,14 +855,16 @@ def export_cameras(deployment_path, fmt, out, units):
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="Deployment to write.")
 @click.option("--units", type=click.Choice(["m", "cm", "mm"]), default=None,
-              help="Length unit of the TOML's translations, if its [metadata] does not say.")
+              help="Length unit of an aniposelib TOML that does not state one in [metadata] "
+                   "(aniposelib's own files do not).")
 def import_cameras(cameras_path, base_path, out, units):
     """Make a deployment from cameras calibrated by another tool.
 
     The cameras' world frame must be the room's (z up, floor at z = 0, metres once scaled):
     an anipose calibration is in its first camera's or its board's frame until aligned to
-    the floor. The room, keep-out areas and settings come from --base; a region map or pixel
-    corrections naming cameras the file lacks are dropped, with a note.
+    the floor. Cameras must hang between the floor and 0.5 m above the ceiling, within 1 m
+    of the room in plan. The room, keep-out areas and settings come from --base; its region
+    map and pixel corrections are dropped, with a note, unless the cameras are the base's.
 
     Example: vlpcal import --cameras calibration.toml --units mm -b site.yaml -o cams.yaml
     """
@@ -860,6 +910,9 @@ def import_cameras(cameras_path, base_path, out, units):
         if path.suffix.lower() == ".toml":
             cams = from_anipose_toml(text, str(path), units)
         elif path.suffix.lower() in (".yaml", ".yml"):
+            if units:
+                raise InterchangeError("--units: the OpenCV file states its unit (units:); "
+                                       "--units is for aniposelib TOML")
             cams = from_opencv_yaml(text, str(path))
         else:
             raise InterchangeError(f"{path}: unknown kind (expected .toml for anipose or .yaml "

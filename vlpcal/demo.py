@@ -144,6 +144,8 @@ def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
     stage = out.with_name(f".{out.name}.partial")
     shutil.rmtree(stage, ignore_errors=True)
     stage.mkdir(parents=True)
+    if out.exists():
+        say(f"{given}/ holds an earlier demo's files: they will be replaced")
     t_start = time.perf_counter()
     try:
         result = _run(stage, seed, say)

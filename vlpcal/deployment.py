@@ -157,7 +157,9 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
 
     try:
         if not isinstance(doc, dict):
-            fail(f"expected a mapping with format: {FORMAT}, got {type(doc).__name__}")
+            kind = {"str": "a line of text", "list": "a list", "NoneType": "an empty file"}
+            fail(f"not a vlpcal deployment (expected a YAML mapping with format: {FORMAT}; "
+                 f"the file holds {kind.get(type(doc).__name__, type(doc).__name__)})")
         if doc.get("format") != FORMAT:
             fail(f"format: expected {FORMAT!r}, got {doc.get('format')!r}")
         if type(doc.get("version")) is not int or doc.get("version") != VERSION:

@@ -91,7 +91,11 @@ def from_anipose_toml(text: str, source: str = "<toml>", units: str | None = Non
     meta = doc.get("metadata", {})
     if not isinstance(meta, dict):
         raise InterchangeError(f"{source}: metadata: expected a [metadata] table")
-    units = units or meta.get("units")
+    stated = meta.get("units")
+    if units and stated and units != stated:
+        raise InterchangeError(f"{source}: its [metadata] says units = {stated!r}; the unit "
+                               f"given ({units!r}) disagrees: leave it out")
+    units = units or stated
     if not isinstance(units, (str, type(None))) or units not in UNITS:
         raise InterchangeError(
             f"{source}: the length unit is not stated in [metadata] (aniposelib does not "

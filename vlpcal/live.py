@@ -96,6 +96,22 @@ def open_source(spec: str) -> Callable[[], Iterator]:
     return lambda: device_frames(spec)
 
 
+def failure(e: Exception) -> str:
+    """Why a source stopped, in a few words (not Python's repr of the exception)."""
+    import socket
+    import urllib.error
+
+    if isinstance(e, urllib.error.HTTPError):
+        return f"HTTP {e.code} {e.reason}"
+    if isinstance(e, urllib.error.URLError):
+        e = e.reason if isinstance(e.reason, Exception) else ValueError(str(e.reason))
+    if isinstance(e, (socket.timeout, TimeoutError)):
+        return f"no data for {READ_TIMEOUT:g} s"
+    if isinstance(e, OSError) and e.strerror:
+        return e.strerror.lower()
+    return str(e) or type(e).__name__
+
+
 @dataclass
 class FrameSet:
     """Frames of one instant: camera id → frame (missing cameras absent), and when."""
@@ -135,6 +151,7 @@ class LiveGrouper:
         self._stop = threading.Event()
         self._threads: dict = {}
         self._live: set = set()
+        self._said: dict = {}  # camera id → the last stop reason reported
         self.t0 = time.monotonic()
 
     def _reader(self, cid: str, factory) -> None:
@@ -154,7 +171,7 @@ class LiveGrouper:
                         pass
                     self._queue.put(item)
         except Exception as e:  # a camera's failure is a status, never a crash
-            why = f"{type(e).__name__}: {e}".strip().rstrip(":")
+            why = failure(e)
         self._stopped.put((cid, why))
 
     def _start(self, cid: str) -> None:
@@ -183,6 +200,9 @@ class LiveGrouper:
                 return
             self._live.discard(cid)
             self.stats.ended[cid] = why
+            if self._said.get(cid) == why:  # tried again, same answer: said already
+                continue
+            self._said[cid] = why
             rest = "going on without it" if self._live else "no camera left"
             self.on_event(f"camera {cid}: {why} after {self.stats.frames[cid]} frames; {rest}")
 

@@ -570,6 +570,6 @@ def planned_deployment(site: Site, cand: Candidate, rank: int = 1, source: str =
               "origin_m": [float(v) for v in cand.origin],
               "yaw_rad": float(cand.yaw), "rank": rank},
         predicted={"coverage": ev.coverage, "mean_error_m": ev.mean, "p95_error_m": ev.p95,
-                   "model": "DESIGN.md reference model", "pixel_noise_px": r.pixel_noise})
+                   "model": "reference model (docs/formats.md)", "pixel_noise_px": r.pixel_noise})
     return Deployment(site.name, site.ceiling_height, site.room, cand.cameras, site.keep_out,
                       {"uncertainty": {"pixel_noise": r.pixel_noise}, "provenance": prov})

@@ -327,10 +327,11 @@ def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
             spots = detect_spots(frames, deployment.detector, deployment.detector_settings,
                                  shape=(cam.height, cam.width))
             uv[k] = spots.uv
-            bad = sum(1 for r in spots.reasons if r not in (None, "missing", "no_spot"))
+            bad = [f"{p} {r.replace('_', ' ')}" for p, r in zip(ids, spots.reasons)
+                   if r not in (None, "missing", "no_spot")]
             if bad:
-                notes.append(f"camera {cam.id}: {bad} frames unusable "
-                             "(corrupt, wrong size, too dim or at the edge)")
+                notes.append(f"camera {cam.id}: {len(bad)} frames not used: "
+                             + ", ".join(bad[:8]) + (" …" if len(bad) > 8 else ""))
         else:
             for i, p in enumerate(ids):
                 if (p, cam.id) in bundle.observations:
@@ -413,9 +414,7 @@ def plan_survey(deployment, step: float = 0.3, heights=(0.0, 0.35, 0.7),
         if seen[k].sum() < MIN_POINTS_POSE:
             raise SurveyError(f"camera {cam.id}: sees only {int(seen[k].sum())} points of the "
                               "room at these heights (is it looking at the floor?)")
-    # walking order: by height, then rows (y) with x alternating direction
-    row = np.unique(np.round(pts[:, 1], 4), return_inverse=True)[1].ravel()  # row number
-    order = np.lexsort((np.where(row % 2 == 0, pts[:, 0], -pts[:, 0]), row, pts[:, 2]))
+    order = _walking_order(pts)
     pts, seen = pts[order], seen[:, order]
     ids = [f"S{i + 1:04d}" for i in range(len(pts))]
     return SurveyPlan(ids, pts, seen, [c.id for c in cams])
@@ -489,3 +488,21 @@ def calibrate_survey(dep, X, uv, ids, intrinsics: bool = False, folds: int = 5,
                             extra)
     return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
                         np.asarray(X, float))
+
+
+def _walking_order(pts: np.ndarray) -> np.ndarray:
+    """The order an installer walks the points: height by height, row by row (rows of equal
+    y), each row entered from the end nearer to where the last one left off — a serpentine
+    even where the finer grid makes rows of unequal extent."""
+    order: list = []
+    x_at = None
+    for z in np.unique(np.round(pts[:, 2], 6)):
+        on = np.flatnonzero(np.isclose(pts[:, 2], z))
+        for y in np.unique(np.round(pts[on, 1], 4)):
+            row = on[np.isclose(np.round(pts[on, 1], 4), y)]
+            row = row[np.argsort(pts[row, 0], kind="stable")]
+            if x_at is not None and abs(pts[row[-1], 0] - x_at) < abs(pts[row[0], 0] - x_at):
+                row = row[::-1]
+            order.extend(row.tolist())
+            x_at = pts[row[-1], 0]
+    return np.array(order, int)
