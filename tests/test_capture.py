@@ -268,11 +268,12 @@ def test_interactive_capture_through_a_terminal(site, tmp_path):
     assert SurveyAppender(survey).skipped() == {b}
 
 
-def test_a_camera_that_dies_is_reported_and_the_others_are_captured(site, tmp_path):
+def capture_six(site, tmp_path, **rig_options):
+    """An unattended capture of the plan's first six points; the run and the point ids."""
     scene, root = site
     ids, xyz = read_points(root / "points.csv")
     write_truth_csv(tmp_path / "six.csv", ids[:6], xyz[:6], id_column="point_id")
-    rig = Rig(scene, tmp_path, die={"C2": 60})  # C2 stops after 1.5 s of frames
+    rig = Rig(scene, tmp_path, **rig_options)
     cmd = capture_cmd(root, rig, tmp_path / "survey", "--yes", "--delay", "0.3")
     cmd[cmd.index("--points") + 1] = str(tmp_path / "six.csv")
     try:
@@ -280,6 +281,11 @@ def test_a_camera_that_dies_is_reported_and_the_others_are_captured(site, tmp_pa
     finally:
         rig.close()
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    return res, ids
+
+
+def test_a_camera_that_dies_is_reported_and_the_others_are_captured(site, tmp_path):
+    res, ids = capture_six(site, tmp_path, die={"C2": 60})  # C2 stops after 1.5 s of frames
     assert "camera C2:" in res.stdout and "going on without it" in res.stdout
     assert "C2     no frames (stopped" in res.stdout
     bundle = read_survey_bundle(tmp_path / "survey")
@@ -349,17 +355,7 @@ def test_capture_never_takes_over_a_folder_it_did_not_start(tmp_path):
 
 
 def test_a_camera_back_on_the_network_is_used_again(site, tmp_path):
-    scene, root = site
-    ids, xyz = read_points(root / "points.csv")
-    write_truth_csv(tmp_path / "six.csv", ids[:6], xyz[:6], id_column="point_id")
-    rig = Rig(scene, tmp_path, die={"C2": 30}, comes_back=True)
-    cmd = capture_cmd(root, rig, tmp_path / "survey", "--yes", "--delay", "0.3")
-    cmd[cmd.index("--points") + 1] = str(tmp_path / "six.csv")
-    try:
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    finally:
-        rig.close()
-    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    res, _ = capture_six(site, tmp_path, die={"C2": 30}, comes_back=True)
     assert "camera C2:" in res.stdout and "camera C2: trying it again" in res.stdout
     bundle = read_survey_bundle(tmp_path / "survey")
     assert (bundle.point_ids[-1], "C2") in bundle.frames

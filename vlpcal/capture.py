@@ -261,36 +261,24 @@ class CaptureSession:
                 continue
             where = f"{pid} ({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f} m)"
             step = self.ask(f"[{i + 1}/{len(self.plan)}] place the LED at {where}")
+            if step.action == "go":
+                step = self._burst_until_decided(pid, xyz)
+            elif step.action == "extra":
+                step = self._extra(step.xyz)
+                if step.action == "accept":
+                    n_new += 1
+                    self._maybe_check()
+                if step.action in ("accept", "skip"):
+                    continue  # back at the same planned point (a skipped extra is not kept)
             if step.action == "quit":
                 break
             if step.action == "skip":
                 self.appender.skip(pid)
                 self.say(f"  {pid} skipped")
                 i += 1
-                continue
-            if step.action == "back":
+            elif step.action == "back":
                 i = self._back(i)
-                continue
-            if step.action == "extra":
-                step = self._extra(step.xyz)
-                if step.action == "accept":
-                    n_new += 1
-                    self._maybe_check()
-                elif step.action == "quit":
-                    break
-                elif step.action == "back":
-                    i = self._back(i)
-                continue  # skip at an extra point: it is simply not kept
-            decision = self._burst_until_decided(pid, xyz)
-            if decision.action == "quit":
-                break
-            if decision.action == "skip":
-                self.appender.skip(pid)
-                self.say(f"  {pid} skipped")
-                i += 1
-            elif decision.action == "back":
-                i = self._back(i)
-            else:  # accepted
+            elif step.action == "accept":
                 n_new += 1
                 i += 1
                 self._maybe_check()
