@@ -54,6 +54,16 @@ def _load_deployment(path):
         raise UserError(str(e)) from None
 
 
+def _output_file(path):
+    """``path`` as a file to write, checked before any work: not a folder, in one that exists."""
+    from pathlib import Path
+
+    out = Path(path)
+    if out.is_dir() or not out.parent.is_dir():
+        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    return out
+
+
 def _floats(text: str, option: str) -> list[float]:
     try:
         return [float(t) for t in text.split(",") if t.strip()]
@@ -645,20 +655,17 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
 
     Example: vlpcal survey calibrate -d nominal.yaml --survey survey/ --out calibrated.yaml
     """
-    from pathlib import Path
 
     from .datasets import DatasetError, read_survey_bundle
     from .reports import write_calibration
-    from .survey import SurveyError, calibrate_survey, survey_spots
+    from .survey import FUSION_OF, SurveyError, calibrate_survey, survey_spots
 
     dep = _load_deployment(deployment_path)
     try:
         bundle = read_survey_bundle(survey_path)
     except DatasetError as e:
         raise UserError(str(e)) from None
-    out = Path(out)
-    if out.is_dir() or not out.parent.is_dir():
-        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    out = _output_file(out)
     uv, notes = survey_spots(dep, bundle)
     for note in notes:
         click.echo(note, err=True)
@@ -676,10 +683,9 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     _print_calibration(result, folds, point_sigma)
     paths = write_calibration(out, result, notes,
                               header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
-    label = {"mean": "(a) mean of pairs", "nearest": "(b) nearest pair",
-             "region": "(c) region map", "robust": "all-camera LS, robust"}[result.fusion]
-    click.echo(f"\nwrote {paths[0]} (fusion: {result.fusion}, {label}), {paths[1]}, "
-               f"{paths[2]}")
+    label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
+    click.echo(f"\nwrote {paths[0]} (fusion: {result.fusion}, the row '{label}'), "
+               f"{paths[1]}, {paths[2]}")
 
 
 def _print_calibration(result, folds: int, point_sigma: float) -> None:
@@ -751,7 +757,6 @@ def plan(site_path, out, candidate, max_cameras, quiet):
 
     Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
     """
-    from pathlib import Path
 
     from .deployment import save
     from .planning import SiteError, load_site, plan_site, planned_deployment
@@ -761,9 +766,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         site = load_site(site_path)
     except SiteError as e:
         raise UserError(str(e)) from None
-    out = Path(out)
-    if out.is_dir() or not out.parent.is_dir():
-        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    out = _output_file(out)
     say = (lambda m: None) if quiet else (lambda m: click.echo(m, err=True))
     result = plan_site(site, max_cameras, progress=lambda n: say(f"  tried {n} cameras"))
     r = site.requirements
@@ -819,15 +822,12 @@ def export_cameras(deployment_path, fmt, out, units):
 
     Example: vlpcal export -d planned.yaml --to anipose -o calibration.toml
     """
-    from pathlib import Path
 
     from .deployment import atomic_write_text
     from .interchange import to_anipose_toml, to_opencv_yaml
 
     dep = _load_deployment(deployment_path)
-    out = Path(out)
-    if out.is_dir() or not out.parent.is_dir():
-        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    out = _output_file(out)
     kind = {".toml": "anipose", ".yaml": "opencv", ".yml": "opencv"}.get(out.suffix.lower())
     if fmt is None and kind is None:
         raise UserError(f"{out}: give --to anipose or --to opencv (or name the file .toml or "
@@ -872,14 +872,15 @@ def import_cameras(cameras_path, base_path, out, units):
 
     import yaml
 
-    from .deployment import Deployment, DeploymentError, provenance, save
+    from .deployment import Deployment, DeploymentError, from_dict, provenance, save
     from .interchange import (
         InterchangeError,
         check_world_frame,
         from_anipose_toml,
         from_opencv_yaml,
+        same_cameras,
     )
-    from .planning import load_site
+    from .planning import site_from_dict
 
     path = Path(cameras_path)
     try:
@@ -895,17 +896,17 @@ def import_cameras(cameras_path, base_path, out, units):
     except (UnicodeDecodeError, yaml.YAMLError):
         base_doc = None
     kind = base_doc.get("format") if isinstance(base_doc, dict) else None
-    try:
-        if kind == "vlpcal-site":
-            site = load_site(base_path)
-            base = Deployment(site.name, site.ceiling_height, site.room, [], site.keep_out)
-        else:
-            base = _load_deployment(base_path) if kind else None
-    except DeploymentError as e:
-        raise UserError(str(e)) from None
-    if base is None:
+    if kind not in ("vlpcal-site", "vlpcal-deployment"):
         raise UserError(f"{base_path}: not a vlpcal deployment or site file (expected YAML "
                         "with format: vlpcal-deployment or vlpcal-site)")
+    try:
+        if kind == "vlpcal-site":
+            site = site_from_dict(base_doc, str(base_path))
+            base = Deployment(site.name, site.ceiling_height, site.room, [], site.keep_out)
+        else:
+            base = from_dict(base_doc, str(base_path))
+    except DeploymentError as e:
+        raise UserError(str(e)) from None
     try:
         if path.suffix.lower() == ".toml":
             cams = from_anipose_toml(text, str(path), units)
@@ -921,7 +922,7 @@ def import_cameras(cameras_path, base_path, out, units):
     except InterchangeError as e:
         raise UserError(str(e)) from None
     extra = {k: v for k, v in base.extra.items() if k != "provenance"}
-    if not _same_cameras(cams, base.cameras):
+    if not same_cameras(cams, base.cameras):
         # a region map and pixel corrections were learned for the base's cameras: with other
         # cameras (or the same ones calibrated anew) they no longer hold
         dropped = [k for k in ("corrections",) if k in extra]
@@ -937,9 +938,7 @@ def import_cameras(cameras_path, base_path, out, units):
                        "cameras (run survey calibrate to learn them again)", err=True)
     extra["provenance"] = provenance("vlpcal import", **{"from": {"cameras": str(path),
                                                                   "base": str(base_path)}})
-    out = Path(out)
-    if out.is_dir() or not out.parent.is_dir():
-        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    out = _output_file(out)
     dep = Deployment(base.name, base.ceiling_height, base.room, cams, base.keep_out, extra)
     try:
         save(dep, out, header=f"Cameras imported by vlpcal import from {path}.")
@@ -948,20 +947,3 @@ def import_cameras(cameras_path, base_path, out, units):
     click.echo(f"wrote {out}: {len(cams)} cameras ({', '.join(c.id for c in cams)}) in the room "
                f"of {base.name}")
 
-
-def _same_cameras(a, b, metres: float = 1e-4, radians: float = 1e-5) -> bool:
-    """Same ids in the same order, poses within ``metres`` / ``radians`` and the same lenses."""
-    import numpy as np
-
-    from .geometry import rodrigues
-
-    if [c.id for c in a] != [c.id for c in b]:
-        return False
-    for p, q in zip(a, b):
-        lens_p = np.r_[p.width, p.height, p.fx, p.fy, p.cx, p.cy, p.dist]
-        lens_q = np.r_[q.width, q.height, q.fx, q.fy, q.cx, q.cy, q.dist]
-        if (not np.allclose(lens_p, lens_q, rtol=1e-6, atol=1e-9)
-                or np.linalg.norm(np.subtract(p.position, q.position)) > metres
-                or np.abs(rodrigues(p.rotation) - rodrigues(q.rotation)).max() > radians):
-            return False
-    return True

@@ -262,3 +262,15 @@ def check_world_frame(cameras: list[Camera], ceiling_height: float, source: str,
                 "its unit is wrong")
 
 
+def same_cameras(a, b, metres: float = 1e-4, radians: float = 1e-5) -> bool:
+    """Same ids in the same order, poses within ``metres`` / ``radians`` and the same lenses."""
+    if [c.id for c in a] != [c.id for c in b]:
+        return False
+    for p, q in zip(a, b):
+        lens_p = np.r_[p.width, p.height, p.fx, p.fy, p.cx, p.cy, p.dist]
+        lens_q = np.r_[q.width, q.height, q.fx, q.fy, q.cx, q.cy, q.dist]
+        if (not np.allclose(lens_p, lens_q, rtol=1e-6, atol=1e-9)
+                or np.linalg.norm(np.subtract(p.position, q.position)) > metres
+                or np.abs(rodrigues(p.rotation) - rodrigues(q.rotation)).max() > radians):
+            return False
+    return True
