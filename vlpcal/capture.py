@@ -21,7 +21,7 @@ import numpy as np
 
 from .deployment import Deployment
 from .detection import detect_spots
-from .survey import MIN_POINTS_POSE, SurveyError, fit_camera
+from .survey import MIN_POINTS_POSE, SurveyError, fit_camera, survey_spots
 
 #: frame sets grabbed per point, and sets skipped first (frames of the LED's old place)
 BURST, SETTLE = 5, 1
@@ -198,13 +198,14 @@ class Step:
 
 
 class CaptureSession:
-    """Runs a capture: ``ask(prompt) -> Step`` and ``say(line)`` are the person (a terminal,
-    or ``--yes``); ``on_point(id, xyz)`` moves a scripted rig before each burst."""
+    """Runs a capture: ``ask(kind, text) -> Step`` and ``say(line)`` are the person (a
+    terminal, or ``--yes``); ``kind`` is ``place`` (go, skip, back, extra, quit), ``accept``
+    (accept, redo, skip, back, quit) or ``retry`` (redo, skip, back, quit).
+    ``on_point(id, xyz)`` moves a scripted rig before each burst."""
 
     def __init__(self, dep: Deployment, plan_ids: list, plan_xyz, appender, burst: Burst,
                  ask: Callable, say: Callable, on_point: Callable | None = None,
-                 delay: float = 0.0, check_every: int = 5, stopped: dict | None = None,
-                 unattended: bool = False):
+                 delay: float = 0.0, check_every: int = 5, unattended: bool = False):
         self.dep = dep
         self.plan = list(zip(plan_ids, np.asarray(plan_xyz, float)))
         self.appender = appender
@@ -213,7 +214,6 @@ class CaptureSession:
         self.on_point = on_point
         self.delay = delay
         self.check_every = check_every
-        self.stopped = stopped if stopped is not None else {}
         self.camera_ids = [c.id for c in dep.cameras]
         self.planned = {p for p, _ in self.plan}
         self.spots: dict = {}  # point id → C×2 spots of the accepted points
@@ -222,15 +222,20 @@ class CaptureSession:
         self.stalled: str | None = None  # the point where no camera sent frames (--yes)
 
     def _load_spots(self) -> None:
-        """Spots of the points already in the bundle (a resumed session)."""
-        ids, _ = self.appender.accepted()
-        for pid in ids:
-            views = [summarise(c, [self._stored(pid, c.id)], self.dep) for c in self.dep.cameras]
-            self.spots[pid] = np.array([v.uv if v.uv else (np.nan, np.nan) for v in views])
+        """Spots of the points already in the bundle (a resumed session), as the calibration
+        will see them."""
+        from .datasets import read_survey_bundle
 
-    def _stored(self, pid, cid):
-        path = self.appender.frames / pid / f"{cid}.jpg"
-        return path.read_bytes() if path.exists() else None
+        ids, _ = self.appender.accepted()
+        if ids:
+            uv, _ = survey_spots(self.dep, read_survey_bundle(self.appender.root))
+            self.spots.update({pid: uv[:, i] for i, pid in enumerate(ids)})
+
+    def _spots_of(self, views: list[CameraView]) -> np.ndarray:
+        """C×2 spots of a burst, with the deployment's pixel corrections (as survey_spots)."""
+        offsets = self.dep.pixel_offsets
+        return np.array([np.subtract(v.uv, offsets.get(v.camera, (0.0, 0.0))) if v.uv
+                         else (np.nan, np.nan) for v in views])
 
     def capture(self, pid: str, xyz) -> list[CameraView]:
         for cid in self.burst.revive():
@@ -240,8 +245,8 @@ class CaptureSession:
         if self.delay:
             time.sleep(self.delay)
         got = self.burst.grab(self.camera_ids)
-        return [summarise(c, got[c.id], self.dep, self.stopped.get(c.id))
-                for c in self.dep.cameras]
+        stopped = self.burst.grouper.stats.ended
+        return [summarise(c, got[c.id], self.dep, stopped.get(c.id)) for c in self.dep.cameras]
 
     def run(self) -> int:
         """Capture until every planned point is accepted or skipped; returns points accepted
@@ -260,7 +265,7 @@ class CaptureSession:
                 i += 1
                 continue
             where = f"{pid} ({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f} m)"
-            step = self.ask(f"[{i + 1}/{len(self.plan)}] place the LED at {where}")
+            step = self.ask("place", f"[{i + 1}/{len(self.plan)}] place the LED at {where}")
             if step.action == "go":
                 step = self._burst_until_decided(pid, xyz)
             elif step.action == "extra":
@@ -296,17 +301,16 @@ class CaptureSession:
                 if self.unattended:
                     self.stalled = pid
                     return Step("quit")
-                step = self.ask("retry?")
+                step = self.ask("retry", "try again?")
                 if step.action in ("redo", "accept", "go"):
                     continue
                 return step
-            step = self.ask("accept?")
+            step = self.ask("accept", "accept?")
             if step.action == "redo":
                 continue
             if step.action in ("accept", "go"):
                 self.appender.accept(pid, xyz, {v.camera: v.frame for v in views})
-                self.spots[pid] = np.array([v.uv if v.uv else (np.nan, np.nan)
-                                            for v in views])
+                self.spots[pid] = self._spots_of(views)
                 self.recent.append(pid)
                 seen = sum(v.uv is not None for v in views)
                 self.say(f"  {pid} saved ({seen} of {len(views)} cameras saw the LED)")

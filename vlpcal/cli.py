@@ -532,9 +532,6 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
 
     bundle = Path(survey_path)
     created = not bundle.exists()
-    if (bundle / "points.csv").exists() and not (bundle / ".capture").is_dir():
-        raise UserError(f"{bundle}: holds a points.csv that survey capture did not write (a "
-                        "survey plan? give it with --points and --survey a new folder)")
     try:
         appender = SurveyAppender(survey_path)
     except DatasetError as e:
@@ -547,22 +544,22 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
         click.echo(line)
         sys.stdout.flush()
 
-    def ask(prompt: str) -> Step:
-        placing = not prompt.startswith(("accept", "retry"))
+    # per prompt: the keys shown, and what each means (Enter is "")
+    keys = {"place": ("Enter: capture · s skip · b back · e extra point · q quit",
+                      {"": "go", "e": "extra"}),
+            "accept": ("Enter: accept · r redo · s skip · b back · q quit",
+                       {"": "accept", "r": "redo"}),
+            "retry": ("Enter: try again · s skip · b back · q quit", {"": "redo"})}
+
+    def ask(kind: str, prompt: str) -> Step:
         if yes:
-            if placing:
+            if kind == "place":
                 say(prompt)
-            return Step("go" if placing else "accept")
-        if prompt.startswith("retry"):
-            keys, choices = ("Enter: try again · s skip · b back · q quit",
-                             {"": "redo", "s": "skip", "b": "back", "q": "quit"})
-        else:
-            keys = ("Enter: capture · s skip · b back · e extra point · q quit" if placing
-                    else "Enter: accept · r redo · s skip · b back · q quit")
-            choices = {"": "go" if placing else "accept", "s": "skip", "b": "back",
-                       "q": "quit", **({"e": "extra"} if placing else {"r": "redo"})}
+            return Step("go" if kind == "place" else "accept")
+        shown, own = keys[kind]
+        choices = {**own, "s": "skip", "b": "back", "q": "quit"}
         while True:
-            click.echo(f"{prompt}  [{keys}] > ", nl=False)
+            click.echo(f"{prompt}  [{shown}] > ", nl=False)
             sys.stdout.flush()
             line = sys.stdin.readline()
             if not line:  # end of input: stop, resumable
@@ -599,8 +596,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: say(f"! {m}"))
     session = CaptureSession(dep, ids, xyz, appender, Burst(grouper, burst), ask, say,
                              on_point=move if on_point else None, delay=delay,
-                             check_every=check_every, stopped=grouper.stats.ended,
-                             unattended=yes)
+                             check_every=check_every, unattended=yes)
     try:
         n = session.run()
     except KeyboardInterrupt:

@@ -206,7 +206,7 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
     return root
 
 
-def read_points(path) -> tuple[list[str], np.ndarray]:
+def read_points(path, allow_empty: bool = False) -> tuple[list[str], np.ndarray]:
     """A ``point_id,x,y,z`` file (a survey's ``points.csv``, or ``survey plan``'s output):
     ids in file order and ``N×3`` positions, m."""
     path = Path(path)
@@ -218,7 +218,7 @@ def read_points(path) -> tuple[list[str], np.ndarray]:
             raise DatasetError(f"{where}: duplicate point_id {pid!r}")
         ids.append(pid)
         xyz.append([_finite(row[c], f"{where} {c}") for c in ("x", "y", "z")])
-    if not ids:
+    if not ids and not allow_empty:
         raise DatasetError(f"{path}: no points")
     return ids, np.array(xyz, dtype=float).reshape(-1, 3)
 
@@ -357,8 +357,9 @@ class SurveyAppender:
         self.state = self.root / ".capture"
         self.journal = self.state / "journal.csv"
         if self.root.is_dir() and any(self.root.iterdir()) and not self.state.is_dir():
-            raise DatasetError(f"{self.root}: a folder that survey capture did not start "
-                               "(choose a new folder for the survey)")
+            raise DatasetError(f"{self.root}: a folder that survey capture did not start (a "
+                               "survey plan's points.csv is read with --points): choose a new "
+                               "folder for the survey")
         self.root.mkdir(parents=True, exist_ok=True)
         self.state.mkdir(exist_ok=True)
         self.frames.mkdir(exist_ok=True)
@@ -390,10 +391,7 @@ class SurveyAppender:
 
     def accepted(self) -> tuple[list[str], np.ndarray]:
         """Ids and positions committed so far, in order."""
-        rows = _read_csv(self.points, POINTS_COLUMNS)
-        if not rows:
-            return [], np.zeros((0, 3))
-        return read_points(self.points)
+        return read_points(self.points, allow_empty=True)
 
     def skipped(self) -> set:
         """Ids the person chose to skip (and has not captured since)."""
