@@ -27,14 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .datasets import read_frames_folder, write_truth_csv
-from .deployment import Deployment, atomic_write_text, provenance, save
+from .datasets import read_frames_folder, read_survey_bundle, write_truth_csv
+from .deployment import Deployment, atomic_write_text, save
 from .locator import FixWriter, Locator
 from .planning import plan_site, planned_deployment, site_from_dict
 from .reports import demo_figure, plan_maps, survey_plan_figure, write_calibration
 from .sim.profiles import get_profile
 from .sim.scene import InstallErrors, make_scene
-from .sim.writers import simulate_frames, simulate_survey, trajectory
+from .sim.writers import deployment_of, simulate_frames, simulate_survey, trajectory
 from .survey import calibrate_survey, learn_region_map, plan_survey, survey_spots
 
 DEG = math.pi / 180.0
@@ -191,9 +191,7 @@ def _run(root: Path, seed: int, say) -> DemoResult:
                       nominal=tuple(cand.cameras), room=tuple(map(tuple, site.room)),
                       ceiling_height=site.ceiling_height, errors=DEMO_ERRORS)
     scene = make_scene(profile, seed)
-    truth = Deployment(site.name, site.ceiling_height, site.room, list(scene.true),
-                       extra={"provenance": provenance("vlpcal demo", seed=seed,
-                                                       cameras="as really hung")})
+    truth = deployment_of(scene, "true")
     save(truth, root / "installed-truth.yaml",
          header="The cameras as really hung (simulated; for evaluation only).")
     step(2, f"{cand.count} cameras ({cand.family}, {cand.nx}×{cand.ny}) hung with half a "
@@ -203,13 +201,12 @@ def _run(root: Path, seed: int, say) -> DemoResult:
     sp = plan_survey(planned, 0.3, (0.0, 0.35, 0.7))
     write_truth_csv(root / "survey-plan.csv", sp.ids, sp.xyz, id_column="point_id")
     survey_plan_figure(root / "survey-plan.png", planned, sp)
-    measured = simulate_survey(scene, root / "survey", sp.xyz, seed=seed)
-    from .datasets import read_survey_bundle
-
-    bundle = read_survey_bundle(root / "survey")
+    simulate_survey(scene, root / "survey", sp.xyz, seed=seed)
+    bundle = read_survey_bundle(root / "survey")  # from here on, as a user would have it
+    measured = bundle.xyz
     uv, notes = survey_spots(planned, bundle)
     step(3, f"{len(sp.ids)} survey points measured at h = 0, 0.35, 0.7 m; calibrating…")
-    result = calibrate_survey(planned, measured, uv, sp.ids, intrinsics=True,
+    result = calibrate_survey(planned, measured, uv, bundle.point_ids, intrinsics=True,
                               sources={"deployment": "planned.yaml", "survey": "survey"})
     write_calibration(root / "calibrated.yaml", result, notes,
                       header="Calibrated by vlpcal demo (vlpcal survey calibrate).")
