@@ -432,7 +432,7 @@ def survey():
 @click.option("--heights", default="0,0.35,0.7", show_default=True,
               help="LED heights to survey, m, comma-separated (two or more).")
 @click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6),
-              help="Points each camera must see (12 lets --intrinsics fit the lens).")
+              help="Points each camera must see (more let the calibration fit more of its lens).")
 def survey_plan(deployment_path, out, step, heights, min_per_camera):
     """Plan the survey: where to put the LED, with ids, and a map to print.
 
@@ -625,6 +625,24 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
             "--out calibrated.yaml")
 
 
+class PointSigma(click.ParamType):
+    """``auto`` or a positive length in metres."""
+
+    name = "auto|metres"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, float) or value == "auto":
+            return value
+        try:
+            v = float(value)
+        except ValueError:
+            v = float("nan")
+        if not (v > 0 and v < float("inf")):
+            self.fail(f"expected 'auto' or a positive length in metres, got {value!r}", param,
+                      ctx)
+        return v
+
+
 @survey.command("calibrate")
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The nominal deployment (as installed).")
@@ -632,22 +650,29 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
               help="Survey bundle: points.csv and frames/ (or observations.csv).")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="Calibrated deployment to write; a report (.report.json, .png) goes beside.")
-@click.option("--intrinsics", is_flag=True,
-              help="Also fit focal lengths, principal point and distortion (needs points at "
-                   "two or more heights).")
+@click.option("--lens", default="auto", show_default=True,
+              type=click.Choice(("auto", "pose", "focal", "principal", "k1", "k2", "full")),
+              help="Lens model per camera: auto chooses by held-out error among the nested "
+                   "models pose (lens as in the deployment), focal (+ fx, fy), principal "
+                   "(+ cx, cy), k1, k2 (+ k2, p1, p2), full (+ k3); others force one.")
+@click.option("--intrinsics", is_flag=True, help="The same as --lens full.")
 @click.option("--folds", default=5, show_default=True, type=click.IntRange(2, 20),
               help="Held-out accuracy: k-fold by survey point.")
-@click.option("--point-sigma", default=0.003, show_default=True, type=click.FloatRange(0.0001),
-              help="Measurement uncertainty of a surveyed position, m per axis.")
+@click.option("--point-sigma", default="auto", show_default=True, type=PointSigma(),
+              help="Measurement uncertainty of a surveyed position, m per axis; auto "
+                   "estimates it from the fit (a tape measure or a machined target).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
-def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point_sigma, quiet):
+def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds, point_sigma,
+                     quiet):
     """Calibrate the cameras from a survey and report held-out accuracy.
 
-    Each camera's pose (and with --intrinsics its lens) is fitted to the survey points it saw,
-    robustly (wrong spots and mis-measured points are reported by id), then all cameras and
-    all surveyed positions are refined together, each position within --point-sigma. The
-    accuracy printed is measured on survey points left out of the fit (k-fold), never on the
-    fitted ones.
+    Each camera's pose and as much of its lens as the survey supports and needs (--lens auto:
+    the nested models compared on held-out error, the simpler kept unless the richer is
+    clearly better) are fitted to the survey points it saw, robustly (wrong spots and
+    mis-measured points are reported by id); then all cameras and all surveyed positions are
+    refined together, each position within its measurement precision (--point-sigma auto:
+    estimated from the fit). The accuracy printed is measured on survey points left out of
+    the fit (k-fold), never on the fitted ones.
 
     Example: vlpcal survey calibrate -d nominal.yaml --survey survey/ --out calibrated.yaml
     """
@@ -656,6 +681,10 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     from .reports import write_calibration
     from .survey import FUSION_OF, SurveyError, calibrate_survey, survey_spots
 
+    if intrinsics:
+        if lens not in ("auto", "full"):
+            raise UserError(f"--intrinsics is --lens full; it contradicts --lens {lens}")
+        lens = "full"
     dep = _load_deployment(deployment_path)
     try:
         bundle = read_survey_bundle(survey_path)
@@ -668,15 +697,16 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
     X, ids = bundle.xyz, bundle.point_ids
     _check_survey_positions(survey_path, dep, X, ids)
     try:
-        with click.progressbar(length=folds + 1, label="calibrating (all, then k-fold)",
+        with click.progressbar(length=folds + 1, label="calibrating (lens choice and all, "
+                               "then k-fold)",
                                file=None if not quiet else open("/dev/null", "w")) as bar:
             result = calibrate_survey(
-                dep, X, uv, ids, intrinsics, folds, point_sigma,
+                dep, X, uv, ids, lens, folds, point_sigma,
                 progress=lambda i, n: bar.update(1),
                 sources={"deployment": str(deployment_path), "survey": str(survey_path)})
     except SurveyError as e:
         raise UserError(f"{survey_path}: {e}") from None
-    _print_calibration(result, folds, point_sigma)
+    _print_calibration(result, folds)
     paths = write_calibration(out, result, notes,
                               header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
     label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
@@ -684,53 +714,71 @@ def survey_calibrate(deployment_path, survey_path, out, intrinsics, folds, point
                f"{paths[1]}, {paths[2]}")
 
 
-def _print_calibration(result, folds: int, point_sigma: float) -> None:
-    """The held-out table, the per-camera verdicts and the mis-measured points."""
+def _print_calibration(result, folds: int) -> None:
+    """The lens decisions, the held-out table, the per-camera verdicts and the mis-measured
+    points."""
     import numpy as np
 
+    from .survey.calibration import format_length
+
     n = len(result.points)
+    prec = result.precision
+    click.echo("\nlens, per camera (chosen by held-out reprojection error unless --lens forces "
+               "one):")
+    for sentence in result.lens:
+        click.echo(f"  {sentence}")
+    how = "estimated from the fit" if prec["estimated"] else "as stated"
+    click.echo(f"survey positions: ±{format_length(prec['point_sigma_m'])} per axis ({how}); spots "
+               f"±{prec['pixel_sigma_px']:.2g} px")
     click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), cm; the "
-               f"reference is the measured position itself (±{point_sigma * 1000:g} mm per "
-               f"axis ≈ {point_sigma * 173:.2f} cm in 3D):")
+               f"reference is the measured position itself (±{format_length(prec['point_sigma_m'])} "
+               f"per axis ≈ {format_length(prec['point_sigma_m'] * 3 ** 0.5)} in 3D):")
     click.echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p90':>7s} {'max':>7s} {'fixed':>6s}")
     for label, st in result.stats.items():
         if st["mean"] is None:
             click.echo(f"{label:32s} {'–':>7s}")
             continue
-        click.echo(f"{label:32s} {st['mean'] * 100:7.2f} {st['median'] * 100:7.2f} "
-                   f"{st['p90'] * 100:7.2f} {st['max'] * 100:7.2f} {st['fixed']:6.0%}")
+        click.echo(f"{label:32s} {st['mean'] * 100:7.3g} {st['median'] * 100:7.3g} "
+                   f"{st['p90'] * 100:7.3g} {st['max'] * 100:7.3g} {st['fixed']:6.0%}")
     click.echo("(fixed: share of the held-out points with a fix; a point one camera saw "
                "has none)")
-    click.echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'moved cm':>9s} "
+    click.echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'lens':>9s} {'moved':>9s} "
                f"{'turned °':>9s}  rejected spots")
     for r in result.cameras:
-        click.echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['moved_cm']:9.2f} "
-                   f"{r['turned_deg']:9.2f}  {', '.join(r['outliers']) or '–'}")
-    far = [r for r in result.cameras if r["moved_cm"] > 50 or r["turned_deg"] > 20]
-    for r in far:
-        click.echo(f"warning: camera {r['camera']} moved {r['moved_cm']:.0f} cm and turned "
-                   f"{r['turned_deg']:.0f}° from the deployment: is this survey from this site, "
-                   "and are the camera ids the same?", err=True)
+        click.echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['lens_model']:>9s} "
+                   f"{format_length(r['moved_m']):>9s} {r['turned_deg']:9.2f}  "
+                   f"{', '.join(r['outliers']) or '–'}")
+    for r in result.cameras:
+        if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
+            click.echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
+                       f"({r['moved_share']:.0%} of its distance to the survey) and turned "
+                       f"{r['turned_deg']:.0f}° from the deployment: is this survey from this "
+                       "site, and are the camera ids the same?", err=True)
     if result.mismeasured:
         click.echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
                    "from its record the calibrated cameras put the LED):")
         for pid, off in result.mismeasured:
-            click.echo(f"  {pid}: {off * 100:.1f} cm" if np.isfinite(off) else f"  {pid}: –")
+            click.echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
+
 
 def _check_survey_positions(survey_path, dep, X, ids) -> None:
-    """Refuse positions that cannot be in this room (millimetres read as metres, a typo)."""
+    """Refuse positions that cannot be in this room (millimetres read as metres, a typo): a
+    margin of a fifth of the room's size around it, and under its ceiling."""
     import numpy as np
     from shapely import contains_xy
     from shapely.geometry import Polygon
 
-    room = Polygon(dep.room).buffer(0.5)
-    inside = contains_xy(room, X[:, 0], X[:, 1]) & (X[:, 2] > -0.1) \
+    size = max(float(np.ptp(np.asarray(dep.room, float), axis=0).max()), dep.ceiling_height)
+    margin = 0.2 * size
+    room = Polygon(dep.room).buffer(margin)
+    inside = contains_xy(room, X[:, 0], X[:, 1]) & (X[:, 2] > -margin) \
         & (X[:, 2] < dep.ceiling_height)
     if not inside.all():
         i = int(np.flatnonzero(~inside)[0])
         raise UserError(f"{survey_path}: point {ids[i]} at ({X[i, 0]:g}, {X[i, 1]:g}, "
-                        f"{X[i, 2]:g}) m is not in the room of {dep.name} (0.5 m margin) or "
-                        f"under its {dep.ceiling_height:g} m ceiling: metres expected")
+                        f"{X[i, 2]:g}) m is not in the room of {dep.name} (a margin of a fifth "
+                        f"of its size) or under its {dep.ceiling_height:g} m ceiling: metres "
+                        "expected")
 
 
 @main.command()

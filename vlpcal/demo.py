@@ -83,7 +83,7 @@ REDO = {
     "survey/": ("the survey bundle: points.csv as measured, frames/", ""),
     "calibrated.yaml": ("calibrated deployment + .report.json, .png",
                         "vlpcal survey calibrate -d planned.yaml --survey survey --out "
-                        "calibrated.yaml --intrinsics"),
+                        "calibrated.yaml"),
     "robot/": ("the robot's frames; robot.truth.csv: where it was", ""),
     "fixes.csv": ("the calibrated locator's fixes of the robot",
                   "vlpcal locate -d calibrated.yaml --frames robot --out fixes.csv"),
@@ -206,7 +206,7 @@ def _run(root: Path, seed: int, say) -> DemoResult:
     measured = bundle.xyz
     uv, notes = survey_spots(planned, bundle)
     step(3, f"{len(sp.ids)} survey points measured at h = 0, 0.35, 0.7 m; calibrating…")
-    result = calibrate_survey(planned, measured, uv, bundle.point_ids, intrinsics=True,
+    result = calibrate_survey(planned, measured, uv, bundle.point_ids,
                               sources={"deployment": "planned.yaml", "survey": "survey"})
     write_calibration(root / "calibrated.yaml", result, notes,
                       header="Calibrated by vlpcal demo (vlpcal survey calibrate).")

@@ -1,0 +1,481 @@
+"""Cameras fitted to a survey: each camera on its own, its lens model chosen by held-out error,
+then every camera and every surveyed position together, with the survey's measurement
+precision estimated from the fit when it is not stated.
+
+Every decision is relative to the scene: outliers against the fit's own residual spread and
+the image size, lens support against the survey's perspective (:mod:`.lens`), the positions'
+precision against the spot noise. The same survey scaled by any factor calibrates the same.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import Camera
+from .lens import (
+    LENS_MODELS,
+    MIN_POINTS_POSE,
+    Support,
+    from_vector,
+    lens_params,
+    lens_support,
+    min_points,
+    to_vector,
+)
+
+
+class SurveyError(ValueError):
+    """The survey cannot support what was asked (one line: which camera, what is missing)."""
+
+
+#: an observation further off than this many robust standard deviations is an outlier …
+OUTLIER_SIGMAS = 5.0
+#: … and never closer than this share of the image diagonal (a spot's own blur)
+OUTLIER_IMAGE_SHARE = 0.005
+
+
+@dataclass
+class CameraFit:
+    """One camera's calibration: the camera, its reprojection RMS (px) and its outliers."""
+
+    camera: Camera
+    rms_px: float
+    used: int
+    outliers: list  # point ids whose spot was rejected for this camera
+    model: str = "pose"
+    resid_px: float = float("nan")  # robust standard deviation of a residual component
+    support: Support | None = None
+    keep: np.ndarray | None = field(default=None, repr=False)  # mask over the points given
+
+
+def robust_sigma(r) -> float:
+    """Standard deviation of residual components from their median absolute value."""
+    r = np.asarray(r, float).ravel()
+    r = r[np.isfinite(r)]
+    return float(1.4826 * np.median(np.abs(r))) if len(r) else float("nan")
+
+
+def _outlier_limit(cam: Camera, sigma: float) -> float:
+    diag = float(np.hypot(cam.width, cam.height))
+    return max(OUTLIER_SIGMAS * np.sqrt(2) * sigma, OUTLIER_IMAGE_SHARE * diag)
+
+
+def _pnp_start(nominal: Camera, X, uv) -> Camera:
+    """OpenCV's SQPnP on the nominal lens, unless it lands worse than the nominal pose."""
+    import cv2
+
+    from dataclasses import replace
+
+    xy = nominal.normalise(uv)
+    good = np.isfinite(xy).all(axis=1)
+    if good.sum() < MIN_POINTS_POSE:
+        return nominal
+    ok, rvec, tvec = cv2.solvePnP(X[good].reshape(-1, 1, 3), xy[good].reshape(-1, 1, 2),
+                                  np.eye(3), None, flags=cv2.SOLVEPNP_SQPNP)
+    if not ok or not np.isfinite(rvec).all():
+        return nominal
+    R = cv2.Rodrigues(rvec)[0]
+    start = replace(nominal, rotation=rvec.ravel(), position=-R.T @ tvec.ravel())
+
+    def med(c):
+        e = np.linalg.norm(c.project(X)[0] - uv, axis=1)
+        return np.median(np.where(np.isfinite(e), e, np.inf))
+    return start if med(start) <= med(nominal) else nominal
+
+
+def fit_camera(nominal: Camera, X, uv, ids, model: str = "pose", outlier_px: float | None = None,
+               start: Camera | None = None, intrinsics: bool | None = None) -> CameraFit:
+    """Pose (and the lens numbers ``model`` frees) of one camera from survey points it saw.
+
+    Starts from OpenCV's SQPnP on the nominal lens (so a rough or tilted nominal guess does
+    not matter) or from ``start``, then robust least squares on the reprojection error
+    (soft-L1 at the fit's own scale); observations further off than ``outlier_px`` (default:
+    :data:`OUTLIER_SIGMAS` robust standard deviations, at least
+    :data:`OUTLIER_IMAGE_SHARE` of the image diagonal) are dropped and the fit repeated (a
+    wrong spot, a mis-measured point), and reported by point id. ``intrinsics=True`` is
+    ``model="full"``.
+    """
+    from scipy.optimize import least_squares
+
+    if intrinsics is not None:
+        model = "full" if intrinsics else model
+    X = np.asarray(X, float)
+    uv = np.asarray(uv, float)
+    need = min_points(model)
+    if len(X) < need:
+        raise SurveyError(f"camera {nominal.id}: sees {len(X)} survey points, needs at least "
+                          f"{need}" + (f" to fit its lens ({model})" if model != "pose" else ""))
+    cam0 = start if start is not None else _pnp_start(nominal, X, uv)
+    keep = np.ones(len(X), bool)
+    scale = 1.0
+
+    def solve(c0, mask):
+        def resid(p):
+            r = from_vector(nominal, p, model).project(X[mask])[0] - uv[mask]
+            return np.nan_to_num(r, nan=1e3 * scale).ravel()
+
+        sol = least_squares(resid, to_vector(c0, model), loss="soft_l1", f_scale=scale,
+                            x_scale="jac", max_nfev=200)
+        return from_vector(nominal, sol.x, model), sol
+
+    cam, sol = solve(cam0, keep)
+    for _ in range(4):
+        err = np.linalg.norm(cam.project(X)[0] - uv, axis=1)
+        sigma = robust_sigma(cam.project(X[keep])[0] - uv[keep])
+        limit = outlier_px if outlier_px is not None else _outlier_limit(cam, sigma)
+        new = err <= limit
+        scale_new = max(sigma, 1e-6 * np.hypot(cam.width, cam.height))
+        if new.sum() < need or (np.array_equal(new, keep) and scale_new >= scale / 2):
+            break
+        keep, scale = new, scale_new
+        cam, sol = solve(cam, keep)
+    r = cam.project(X[keep])[0] - uv[keep]
+    sigma = robust_sigma(r)
+    rms = float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))
+    support = lens_support(cam, model, sol.jac, sigma, X[keep], uv[keep])
+    return CameraFit(cam, rms, int(keep.sum()), [i for i, k in zip(ids, keep) if not k],
+                     model, sigma, support, keep)
+
+
+# -- the lens model, chosen by held-out error -----------------------------------------------
+
+@dataclass
+class LensChoice:
+    """One camera's lens decision: the candidates' held-out figures and the one chosen."""
+
+    camera_id: str
+    chosen: str
+    forced: bool
+    #: model → {"held_out_px": RMS px or None, "supported": bool, "reason": str}
+    candidates: dict
+    depth_rel_range: float = float("nan")
+    scene_per_px: float = float("nan")  # m per px at the camera's points (distance / f)
+
+
+def _held_out_px(nominal, X, uv, model, fold, start) -> np.ndarray:
+    """Per point: reprojection error (px) when the point's fold was left out of the fit."""
+    err = np.full(len(X), np.nan)
+    for f in np.unique(fold):
+        test = fold == f
+        try:
+            fit = fit_camera(nominal, X[~test], uv[~test], [""] * int((~test).sum()), model,
+                             start=start)
+        except SurveyError:
+            return np.full(len(X), np.nan)
+        err[test] = np.linalg.norm(fit.camera.project(X[test])[0] - uv[test], axis=1)
+    return err
+
+
+def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[CameraFit,
+                                                                                LensChoice]:
+    """Fit ``models`` (nested, simplest first) to one camera's points and choose by held-out
+    reprojection error over the folds ``fold`` (N fold indices): the simplest model within one
+    standard error of the best (paired over the points; errors capped at the outlier limit so
+    that a wrong spot cannot decide). A model the survey does not determine
+    (:func:`~.lens.lens_support`) is not a candidate, nor is any richer one.
+    Returns the chosen model's full fit and the decision."""
+    X = np.asarray(X, float)
+    uv = np.asarray(uv, float)
+    fits, errs, cand = {}, {}, {}
+    for model in models:
+        if len(X) < min_points(model):
+            cand[model] = {"held_out_px": None, "supported": False,
+                           "reason": f"needs {min_points(model)} points, sees {len(X)}"}
+            break
+        fit = fit_camera(nominal, X, uv, ids, model,
+                         start=fits[prev].camera if fits else None)
+        if not fit.support.ok:
+            cand[model] = {"held_out_px": None, "supported": False,
+                           "reason": fit.support.reason}
+            break
+        fits[model] = fit
+        errs[model] = _held_out_px(nominal, X, uv, model, fold, fit.camera)
+        prev = model
+    errs = {m: e for m, e in errs.items() if np.isfinite(e).any()} or {"pose": errs["pose"]}
+    richest = fits[list(errs)[-1]]
+    cap = _outlier_limit(richest.camera, richest.resid_px)
+    loss = {m: np.minimum(e, cap) ** 2 for m, e in errs.items()}
+    ok = np.logical_and.reduce([np.isfinite(v) for v in loss.values()])
+    for m, v in loss.items():
+        cand[m] = {"held_out_px": float(np.sqrt(np.mean(v[ok]))) if ok.any() else None,
+                   "supported": True, "reason": ""}
+    chosen = "pose"
+    if ok.sum() > 1:
+        best = min(loss, key=lambda m: loss[m][ok].mean())
+        for m in loss:  # simplest first: the first within one standard error of the best
+            d = loss[m][ok] - loss[best][ok]
+            se = float(d.std(ddof=1) / np.sqrt(len(d)))
+            if d.mean() <= se:
+                chosen = m
+                break
+    fit = fits[chosen]
+    depth = fit.camera.to_camera(X[fit.keep])[:, 2]
+    choice = LensChoice(nominal.id, chosen, False, cand, fit.support.depth_rel_range,
+                        float(np.median(depth) / (0.5 * (fit.camera.fx + fit.camera.fy))))
+    return fit, choice
+
+
+# -- every camera and position together -----------------------------------------------------
+
+def _sparsity(npars, obs, n_pts):
+    """The Jacobian's pattern: each observation touches its camera and its point; each
+    position prior its point."""
+    from scipy.sparse import coo_matrix
+
+    rows, cols = [], []
+    off = np.concatenate([[0], np.cumsum(npars)])
+    base_pts = off[-1]
+    row = 0
+    for k, (idx, _) in enumerate(obs):
+        n = len(idx)
+        r = row + np.arange(2 * n)
+        rows.append(np.repeat(r, npars[k]))
+        cols.append(np.tile(np.arange(off[k], off[k + 1]), 2 * n))
+        pr = np.repeat(r, 3)
+        pc = base_pts + 3 * np.repeat(idx, 2)[:, None] + np.arange(3)
+        rows.append(pr)
+        cols.append(pc.ravel())
+        row += 2 * n
+    rows.append(row + np.arange(3 * n_pts))
+    cols.append(base_pts + np.arange(3 * n_pts))
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    return coo_matrix((np.ones(len(rows), int), (rows, cols)),
+                      shape=(row + 3 * n_pts, base_pts + 3 * n_pts)).tocsr()
+
+
+def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
+                   point_sigma: float = 0.003, pixel_sigma: float = 0.1,
+                   models: list[str] | None = None):
+    """Bundle adjustment: every camera's pose (and the lens its model frees) and every
+    surveyed position together, each position free within its measurement uncertainty
+    (``point_sigma`` m per axis) against spots of ``pixel_sigma`` px.
+
+    ``obs``: list per camera of (point indices, uv K×2) — the observations kept by
+    :func:`fit_camera`. Returns (cameras, adjusted positions N×3).
+    """
+    from scipy.optimize import least_squares
+
+    X = np.asarray(X, float)
+    if models is None:
+        models = ["full" if intrinsics else "pose"] * len(cameras)
+    npars = [6 + len(lens_params(m)) for m in models]
+    off = np.concatenate([[0], np.cumsum(npars)])
+    p0 = np.concatenate([*(to_vector(c, m) for c, m in zip(cameras, models)), X.ravel()])
+
+    def resid(p):
+        pts = p[off[-1]:].reshape(-1, 3)
+        out = []
+        for k, (idx, uv) in enumerate(obs):
+            cam = from_vector(cameras[k], p[off[k]:off[k + 1]], models[k])
+            r = (cam.project(pts[idx])[0] - uv) / pixel_sigma
+            out.append(np.nan_to_num(r, nan=1e4).ravel())
+        out.append(((pts - X) / point_sigma).ravel())
+        return np.concatenate(out)
+
+    sol = least_squares(resid, p0, jac_sparsity=_sparsity(npars, obs, len(X)), loss="soft_l1",
+                        f_scale=3.0, x_scale="jac", max_nfev=100)
+    cams = [from_vector(c, sol.x[off[k]:off[k + 1]], m)
+            for k, (c, m) in enumerate(zip(cameras, models))]
+    return cams, sol.x[off[-1]:].reshape(-1, 3)
+
+
+def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params):
+    """How many of each group's residuals are free to show its noise (the redundancy
+    numbers of a variance-component estimate): per point, the share of its position that its
+    observations determine, tr(I_obs (I_prior + I_obs)⁻¹), with I_obs = Σ JᵀJ / σ_px² over the
+    cameras that saw it and I_prior = I / σ_X²; the cameras' own parameters come out of the
+    pixels' share. Returns (r_points, r_pixels)."""
+    n = len(adjusted)
+    info = np.zeros((n, 3, 3))
+    n_px = 0
+    for cam, (idx, _) in zip(cameras, obs):
+        J = np.nan_to_num(cam.jacobian(adjusted[idx]))  # K×2×3
+        np.add.at(info, idx, np.einsum("kai,kaj->kij", J, J) / pixel_sigma ** 2)
+        n_px += 2 * len(idx)
+    M = info + np.eye(3) / point_sigma ** 2
+    t = np.einsum("nij,nji->n", info, np.linalg.inv(M))
+    return float(t.sum()), float(n_px - n_cam_params - t.sum())
+
+
+def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: int = 5):
+    """The survey positions' measurement precision (m per axis) and the spots' (px), by
+    variance components: refine jointly, compare each group's residuals with its redundancy,
+    rescale, repeat. Bounded below by what the spots can resolve — a tenth of a point's
+    spot-noise precision (distance / f · σ_px) — since finer position noise cannot be told from
+    none. Returns (point_sigma, pixel_sigma, cameras, adjusted)."""
+    X = np.asarray(X, float)
+    npars = sum(6 + len(lens_params(m)) for m in models)
+    per_px = np.median(np.concatenate([
+        np.linalg.norm(c.to_camera(X[idx]), axis=1) / (0.5 * (c.fx + c.fy))
+        for c, (idx, _) in zip(cameras, obs) if len(idx)]))  # m per px at the points
+    floor = 0.1 * per_px * pixel_sigma
+    s_px = pixel_sigma
+    s_x = max(per_px * pixel_sigma, floor)
+    cams, adj = cameras, X
+    for _ in range(iterations):
+        cams, adj = refine_jointly(cameras, X, obs, point_sigma=s_x, pixel_sigma=s_px,
+                                   models=models)
+        r_x, r_px = _redundancy(cams, adj, obs, s_x, s_px, npars)
+        v_px = np.concatenate([(c.project(adj[idx])[0] - uv).ravel()
+                               for c, (idx, uv) in zip(cams, obs)])
+        v_px = np.clip(v_px, -3 * s_px, 3 * s_px)  # as robust as the fit's loss
+        v_x = np.clip((adj - X).ravel(), -3 * s_x, 3 * s_x)
+        new_px = float(np.sqrt(np.sum(v_px ** 2) / max(r_px, 1.0)))
+        new_x = float(np.sqrt(np.sum(v_x ** 2) / max(r_x, 1e-9))) if r_x > 0.5 else s_x
+        new_x = max(new_x, floor)
+        done = abs(np.log(new_x / s_x)) < 0.05 and abs(np.log(new_px / s_px)) < 0.05
+        s_x, s_px = new_x, max(new_px, 1e-6)
+        floor = 0.1 * per_px * s_px
+        if done:
+            break
+    return s_x, s_px, cams, adj
+
+
+@dataclass
+class Calibration:
+    """The cameras fitted to a survey, and what the fit found."""
+
+    cameras: list[Camera]
+    fits: list[CameraFit]
+    adjusted: np.ndarray  # N×3 survey positions after the joint refinement
+    mismeasured: list  # (point id, how far the cameras put it from its record, m)
+    lens: list = field(default_factory=list)  # LensChoice per camera
+    point_sigma: float = float("nan")  # m per axis, as stated or estimated
+    pixel_sigma: float = float("nan")  # px, the spots' estimated scatter
+    point_sigma_estimated: bool = False
+
+    @property
+    def models(self) -> dict:
+        return {f.camera.id: f.model for f in self.fits}
+
+
+def fold_of(n: int, folds: int, seed: int = 0) -> np.ndarray:
+    """Each of ``n`` points' fold (0 … folds − 1): a seeded shuffle cut into equal parts."""
+    order = np.random.default_rng(seed).permutation(n)
+    fold = np.empty(n, int)
+    for f, part in enumerate(np.array_split(order, folds)):
+        fold[part] = f
+    return fold
+
+
+def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
+              point_sigma: float | str = 0.003, outlier_px: float | None = None,
+              lens: str | dict | None = None, folds: int = 5, seed: int = 0) -> Calibration:
+    """Calibrate every camera from the survey: ``X`` N×3 measured positions, ``uv`` C×N×2
+    spots (NaN: not seen), ``ids`` the point ids.
+
+    ``lens``: ``"auto"`` (each camera's model chosen by :func:`choose_lens` over ``folds``
+    folds), one of :data:`~.lens.LENS_MODELS` for every camera, or camera id → model; default
+    ``"full"`` with ``intrinsics`` else ``"pose"``. A forced model the survey does not determine
+    is refused. ``point_sigma``: metres, or ``"auto"`` (:func:`estimate_precision`).
+
+    Per camera, then jointly (:func:`refine_jointly`). A point rejected by two or more of the
+    cameras that saw it is reported as mis-measured (a wrong tape reading moves it in every
+    view), with how far from its record the calibrated cameras put it (NaN when fewer than two
+    cameras saw it)."""
+    X = np.asarray(X, float)
+    uv = np.asarray(uv, float)
+    if lens is None:
+        lens = "full" if intrinsics else "pose"
+    fold = fold_of(len(X), folds, seed) if lens == "auto" else None
+    fits, obs, choices = [], [], []
+    rejected: dict = {}
+    for k, cam in enumerate(nominal):
+        seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
+        if not len(seen):
+            raise SurveyError(f"camera {cam.id}: saw none of the {len(X)} survey points "
+                              "(check its frames, its id, or where it looks)")
+        pid = [ids[i] for i in seen]
+        if lens == "auto":
+            if len(seen) < min_points("pose"):
+                raise SurveyError(f"camera {cam.id}: sees {len(seen)} survey points, needs at "
+                                  f"least {min_points('pose')}")
+            fit, choice = choose_lens(cam, X[seen], uv[k, seen], pid, fold[seen])
+            choices.append(choice)
+        else:
+            model = lens.get(cam.id, "pose") if isinstance(lens, dict) else lens
+            fit = fit_camera(cam, X[seen], uv[k, seen], pid, model, outlier_px)
+            if not fit.support.ok:
+                raise SurveyError(f"camera {cam.id}: cannot fit its lens ({model}): "
+                                  f"{fit.support.reason} (or let --lens auto decide)")
+            depth = fit.camera.to_camera(X[seen][fit.keep])[:, 2]
+            choices.append(LensChoice(cam.id, model, True, {}, fit.support.depth_rel_range,
+                                      float(np.median(depth) / (0.5 * (fit.camera.fx
+                                                                       + fit.camera.fy)))))
+        fits.append(fit)
+        for p in fit.outliers:
+            rejected[p] = rejected.get(p, 0) + 1
+        keep = seen[fit.keep]
+        obs.append((keep, uv[k, keep]))
+    models = [f.model for f in fits]
+    pixel_sigma = float(np.sqrt(np.mean([f.resid_px ** 2 for f in fits])))
+    pixel_sigma = max(pixel_sigma, 1e-6)
+    estimated = isinstance(point_sigma, str)
+    if estimated:
+        if point_sigma != "auto":
+            raise ValueError(f"point_sigma: expected metres or 'auto', got {point_sigma!r}")
+        point_sigma, pixel_sigma, cams, adjusted = estimate_precision(
+            [f.camera for f in fits], X, obs, models, pixel_sigma)
+    else:
+        cams, adjusted = refine_jointly([f.camera for f in fits], X, obs,
+                                        point_sigma=float(point_sigma), pixel_sigma=pixel_sigma,
+                                        models=models)
+    seen_by = np.isfinite(uv).all(axis=2).sum(axis=0)
+    suspects = [i for i, pid in enumerate(ids)
+                if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]
+    # how far off the record is: where the calibrated cameras see the LED, against it
+    from ..triangulation import triangulate
+
+    where = triangulate(cams, uv[:, suspects]).X if suspects else np.zeros((0, 3))
+    bad = [(ids[i], float(np.linalg.norm(w - X[i]))) for i, w in zip(suspects, where)]
+    for k, (fit, cam) in enumerate(zip(fits, cams)):
+        idx, uvk = obs[k]
+        err = np.linalg.norm(cam.project(adjusted[idx])[0] - uvk, axis=1)
+        fit.camera, fit.rms_px = cam, float(np.sqrt(np.mean(err ** 2))) if len(err) else 0.0
+    return Calibration(cams, fits, adjusted, bad, choices, float(point_sigma),
+                       float(pixel_sigma), estimated)
+
+
+def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
+    """The lens decision for one camera in a surveyor's words, with the held-out figures
+    behind it (px, and what that is at the camera's points)."""
+    from .lens import LENS_WORDS, describe_lens
+
+    def fig(model):
+        px = choice.candidates.get(model, {}).get("held_out_px")
+        if px is None:
+            return None
+        return f"{px:.2f} px ({format_length(px * choice.scene_per_px)} at its points)"
+
+    cid, chosen = choice.camera_id, choice.chosen
+    if choice.forced:
+        return f"{cid}: lens model {chosen} as asked ({LENS_WORDS[chosen]}): " \
+               f"{describe_lens(camera, nominal, chosen)}"
+    if chosen != "pose":
+        return (f"{cid}: lens fitted ({describe_lens(camera, nominal, chosen)}): held-out "
+                f"{fig(chosen)} instead of {fig('pose')} with the lens as in the deployment")
+    refused = [m for m, c in choice.candidates.items() if not c["supported"]]
+    tried = [m for m, c in choice.candidates.items() if c["supported"] and m != "pose"]
+    if tried:
+        best = min(tried, key=lambda m: choice.candidates[m]["held_out_px"])
+        why = (f"fitting it did not clearly help: held-out {fig('pose')} as in the deployment, "
+               f"{fig(best)} with {best}")
+    else:
+        why = "the survey cannot fit it"
+    if refused:
+        why += f"; {refused[0]} not fitted: {choice.candidates[refused[0]]['reason']}"
+    return f"{cid}: lens kept as in the deployment ({why})"
+
+
+def format_length(m: float) -> str:
+    """A length in the unit that suits it (the same scene at any scale reads naturally)."""
+    a = abs(m)
+    if a >= 1:
+        return f"{m:.2f} m"
+    if a >= 0.01:
+        return f"{m * 100:.2f} cm"
+    if a >= 1e-5:
+        return f"{m * 1000:.3g} mm"
+    return f"{m * 1e6:.3g} µm"

@@ -1,0 +1,134 @@
+"""Lens models for survey calibration: which of a camera's numbers a fit may change.
+
+Nested, simplest first (each adds to the one before): ``pose`` (rotation and position, the lens
+as in the deployment), ``focal`` (+ fx, fy), ``principal`` (+ cx, cy), ``k1`` (+ the first radial
+term), ``k2`` (+ k2 and the tangential p1, p2), ``full`` (+ k3). A fit's parameters are a flat
+vector: rotation (3), position (3), then the model's lens numbers in that order.
+
+Whether a survey *determines* a model is judged from the fit itself, never in metres. Free
+focal lengths trade against the camera's distance unless the points spread in depth: the
+perspective the survey shows — its depth range relative to the distance, times the points'
+radius in the image — must stand :data:`PERSPECTIVE_SNR` times above the fit's own residual
+spread, and the fit's information matrix (columns scaled to unit norm) must not be singular.
+Both are ratios of the scene to itself: the same survey at any scale gets the same verdict.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..geometry import Camera
+
+#: the nested lens models, simplest first
+LENS_MODELS = ("pose", "focal", "principal", "k1", "k2", "full")
+_ADDS = {"pose": (), "focal": ("fx", "fy"), "principal": ("cx", "cy"), "k1": ("k1",),
+         "k2": ("k2", "p1", "p2"), "full": ("k3",)}
+_DIST = {"k1": 0, "k2": 1, "p1": 2, "p2": 3, "k3": 4}
+#: in words, for the terminal and the report
+LENS_WORDS = {"pose": "pose only (lens as in the deployment)", "focal": "+ focal lengths",
+              "principal": "+ principal point", "k1": "+ radial k1",
+              "k2": "+ k2 and tangential p1, p2", "full": "+ k3 (the full OpenCV lens)"}
+#: the fewest points a camera must see to be posed (6 unknowns, 2 equations a point, with room
+#: to spot a wrong one)
+MIN_POINTS_POSE = 6
+#: the survey's perspective (px) must exceed the fit's residual spread this many times
+PERSPECTIVE_SNR = 4.0
+#: reciprocal condition number of the scaled information matrix below which a fit is singular
+SINGULAR = 1e-12
+
+
+def lens_params(model: str) -> tuple[str, ...]:
+    """The lens numbers ``model`` frees, in vector order (``pose``: none)."""
+    if model not in LENS_MODELS:
+        raise ValueError(f"unknown lens model {model!r}; expected one of "
+                         f"{', '.join(LENS_MODELS)}")
+    names: tuple[str, ...] = ()
+    for m in LENS_MODELS[:LENS_MODELS.index(model) + 1]:
+        names += _ADDS[m]
+    return names
+
+
+def min_points(model: str) -> int:
+    """Points a camera must see to fit ``model``: at least as many as unknowns (and 6)."""
+    return max(MIN_POINTS_POSE, 6 + len(lens_params(model)))
+
+
+def to_vector(cam: Camera, model: str) -> np.ndarray:
+    """The fit's parameters of ``cam`` under ``model``."""
+    p = [*cam.rotation, *cam.position]
+    for name in lens_params(model):
+        p.append(cam.dist[_DIST[name]] if name in _DIST else getattr(cam, name))
+    return np.array(p, float)
+
+
+def from_vector(base: Camera, p, model: str) -> Camera:
+    """``base`` with the numbers of the vector ``p`` (as :func:`to_vector` lays them out)."""
+    kw: dict = {"rotation": p[0:3], "position": p[3:6]}
+    dist = list(base.dist)
+    for k, name in enumerate(lens_params(model), start=6):
+        if name in _DIST:
+            dist[_DIST[name]] = p[k]
+        else:
+            kw[name] = p[k]
+    if len(p) > 6:
+        kw["dist"] = dist
+    return replace(base, **kw)
+
+
+@dataclass
+class Support:
+    """Whether a fit determines its lens: the perspective its points show (px), the fit's
+    residual spread (px), the reciprocal condition of its scaled information, the verdict."""
+
+    ok: bool
+    perspective_px: float  # depth range / mean depth × RMS image radius
+    depth_rel_range: float  # depth range (5th–95th percentile) / mean depth
+    resid_px: float
+    rcond: float
+    reason: str = ""
+
+
+def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv) -> Support:
+    """Judge whether a fit of ``model`` (its Jacobian ``jac`` at the solution, residual spread
+    ``resid_px``) on points ``X`` seen at ``uv`` determines its lens (module docstring)."""
+    depth = cam.to_camera(np.asarray(X, float))[:, 2]
+    lo, hi = np.percentile(depth, [5, 95])
+    rel = float((hi - lo) / np.mean(depth))
+    radius = float(np.sqrt(np.mean((np.asarray(uv, float) - [cam.cx, cam.cy]) ** 2) * 2))
+    persp = rel * radius
+    if model == "pose":
+        return Support(True, persp, rel, resid_px, 1.0)
+    J = np.asarray(jac.toarray() if hasattr(jac, "toarray") else jac, float)
+    scale = np.linalg.norm(J, axis=0)
+    scale[scale == 0] = 1.0
+    sv = np.linalg.svd(J / scale, compute_uv=False)
+    rcond = float((sv[-1] / sv[0]) ** 2) if sv[0] > 0 else 0.0
+    if not rcond > SINGULAR:
+        return Support(False, persp, rel, resid_px, rcond,
+                       "its survey points cannot separate the lens from the pose (the fit is "
+                       "singular, as when they all lie on one plane): survey at more heights")
+    ok = bool(persp >= PERSPECTIVE_SNR * resid_px)
+    reason = "" if ok else (
+        f"its points span {rel:.2%} of their distance in depth: {persp:.2g} px of perspective "
+        f"against {resid_px:.2g} px of spot scatter (needs {PERSPECTIVE_SNR:g}×) cannot tell "
+        "its focal length from its distance; survey at more heights to fit its lens")
+    return Support(ok, persp, rel, resid_px, rcond, reason)
+
+
+def describe_lens(cam: Camera, nominal: Camera, model: str) -> str:
+    """What a fit changed in the lens, in a surveyor's words: ``k1 −0.21, f +1.2 %, …``."""
+    names = lens_params(model)
+    if not names:
+        return "lens as in the deployment"
+    parts = []
+    if "fx" in names:
+        f0 = 0.5 * (nominal.fx + nominal.fy)
+        parts.append(f"f {100 * (0.5 * (cam.fx + cam.fy) - f0) / f0:+.1f} %")
+    if "cx" in names:
+        parts.append(f"centre {cam.cx - nominal.cx:+.1f}, {cam.cy - nominal.cy:+.1f} px")
+    for name in ("k1", "k2", "p1", "p2", "k3"):
+        if name in names:
+            parts.append(f"{name} {cam.dist[_DIST[name]]:+.3g}")
+    return ", ".join(parts).replace("-", "−")

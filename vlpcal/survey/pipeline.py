@@ -1,0 +1,99 @@
+"""The whole calibration, as ``vlpcal survey calibrate`` runs it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .calibration import calibrate
+from .held_out import held_out
+from .regions import learn_region_map
+
+
+#: held-out label → the fusion the calibrated deployment would then use
+FUSION_OF = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest pair": "nearest",
+             "calibrated, (c) region map": "region", "calibrated, all-camera LS": "robust"}
+
+
+@dataclass
+class SurveyResult:
+    """A calibrated deployment and the report behind it (all lengths in metres)."""
+
+    deployment: object  #: the calibrated :class:`~vlpcal.deployment.Deployment`
+    stats: dict  #: held-out label → :func:`error_stats`
+    per_point: dict  #: held-out label → N errors
+    cameras: list  #: per camera: rms_px, points, outliers, moved, turned, lens and its choice
+    mismeasured: list  #: (point id, m)
+    fusion: str  #: the fusion chosen by held-out mean
+    points: np.ndarray  #: N×3 the survey positions as measured
+    precision: dict = field(default_factory=dict)  #: point_sigma_m, estimated, pixel_sigma_px
+    lens: list = field(default_factory=list)  #: per camera, the lens decision in words
+
+    def report(self, notes=()) -> dict:
+        return {"held_out_m": self.stats, "cameras": self.cameras, "fusion": self.fusion,
+                "lens": self.lens, "precision": self.precision,
+                "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
+                "notes": list(notes)}
+
+
+def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
+                     point_sigma: float | str = "auto", progress=None,
+                     sources: dict | None = None, intrinsics: bool | None = None
+                     ) -> SurveyResult:
+    """Calibrate ``dep``'s cameras from a survey — each camera's lens model chosen by held-out
+    error (``lens="auto"``) or as given, the positions' precision estimated
+    (``point_sigma="auto"``) or as given (m) — measure the held-out accuracy (k-fold) with
+    those choices, learn the region map (approach (c)) and choose the fusion with the lowest
+    held-out mean; returns the calibrated deployment, its provenance naming ``sources``.
+    ``progress(i, n)`` counts the full fit and each fold. ``intrinsics=True``: ``lens="full"``.
+    """
+    from ..deployment import Deployment, provenance
+    from ..geometry import rodrigues
+    from .calibration import lens_sentence
+
+    if intrinsics:
+        lens = "full"
+    cams = dep.cameras
+    cal = calibrate(cams, X, uv, ids, point_sigma=point_sigma, lens=lens, folds=folds)
+    if progress:
+        progress(1, folds + 1)
+    per_point: dict = {}
+    stats = held_out(cams, X, uv, ids, dep.room, cal.models, folds, cal.point_sigma,
+                     progress=(lambda i, n: progress(i + 1, n + 1)) if progress else None,
+                     per_point=per_point, pair_method=dep.pair_method,
+                     max_residual=dep.max_residual)
+    rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
+    best = min(FUSION_OF, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
+               else np.inf)
+    extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
+    extra["fusion"] = {**extra.get("fusion", {}), "method": FUSION_OF[best],
+                       "region_map": rmap.to_dict()}
+    precision = {"point_sigma_m": cal.point_sigma, "estimated": cal.point_sigma_estimated,
+                 "pixel_sigma_px": cal.pixel_sigma}
+    extra["provenance"] = provenance(
+        "vlpcal survey calibrate", **{"from": {**(sources or {}), "points": len(ids)}},
+        lens={c.camera_id: c.chosen for c in cal.lens}, point_sigma_m=cal.point_sigma,
+        point_sigma_estimated=cal.point_sigma_estimated,
+        held_out_mean_m={k: v["mean"] for k, v in stats.items()})
+    rows, words = [], []
+    for nom, fit, choice in zip(cams, cal.fits, cal.lens):
+        c = fit.camera
+        dR = rodrigues(c.rotation) @ rodrigues(nom.rotation).T
+        angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
+        seen = np.isfinite(np.asarray(uv, float)[cams.index(nom)]).all(axis=1)
+        distance = float(np.median(np.linalg.norm(np.asarray(X, float)[seen] - c.center,
+                                                  axis=1))) if seen.any() else float("nan")
+        moved = float(np.linalg.norm(np.subtract(c.position, nom.position)))
+        sentence = lens_sentence(choice, c, nom)
+        words.append(sentence)
+        rows.append({"camera": c.id, "rms_px": fit.rms_px, "points": fit.used,
+                     "outliers": fit.outliers, "moved_m": moved, "moved_cm": moved * 100,
+                     "moved_share": moved / distance, "turned_deg": angle,
+                     "lens_model": fit.model, "lens_forced": choice.forced,
+                     "lens_candidates": choice.candidates, "lens": sentence,
+                     "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
+    calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
+                            extra)
+    return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
+                        np.asarray(X, float), precision, words)
