@@ -22,6 +22,7 @@ from .lens import (
     lens_params,
     lens_support,
     min_points,
+    project_with_jacobian,
     to_vector,
 )
 
@@ -112,12 +113,18 @@ def fit_camera(nominal: Camera, X, uv, ids, model: str = "pose", outlier_px: flo
     scale = 1.0
 
     def solve(c0, mask):
+        Xm, uvm = X[mask], uv[mask]
+
         def resid(p):
-            r = from_vector(nominal, p, model).project(X[mask])[0] - uv[mask]
+            r = from_vector(nominal, p, model).project(Xm)[0] - uvm
             return np.nan_to_num(r, nan=1e3 * scale).ravel()
 
-        sol = least_squares(resid, to_vector(c0, model), loss="soft_l1", f_scale=scale,
-                            x_scale="jac", max_nfev=200)
+        def jac(p):
+            J = project_with_jacobian(from_vector(nominal, p, model), Xm, model)[1]
+            return J.reshape(2 * len(Xm), -1)
+
+        sol = least_squares(resid, to_vector(c0, model), jac=jac, loss="soft_l1",
+                            f_scale=scale, x_scale="jac", max_nfev=200)
         return from_vector(nominal, sol.x, model), sol
 
     cam, sol = solve(cam0, keep)
@@ -219,30 +226,23 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
 
 # -- every camera and position together -----------------------------------------------------
 
-def _sparsity(npars, obs, n_pts):
-    """The Jacobian's pattern: each observation touches its camera and its point; each
-    position prior its point."""
-    from scipy.sparse import coo_matrix
-
+def _pattern(npars, obs, n_pts):
+    """Rows and columns of the bundle adjustment's Jacobian, in the order :func:`refine_jointly`
+    fills its values: per camera, each observation row against the camera's parameters, then
+    against its point's three coordinates; last, each position prior against its point."""
     rows, cols = [], []
     off = np.concatenate([[0], np.cumsum(npars)])
     base_pts = off[-1]
     row = 0
     for k, (idx, _) in enumerate(obs):
-        n = len(idx)
-        r = row + np.arange(2 * n)
-        rows.append(np.repeat(r, npars[k]))
-        cols.append(np.tile(np.arange(off[k], off[k + 1]), 2 * n))
-        pr = np.repeat(r, 3)
-        pc = base_pts + 3 * np.repeat(idx, 2)[:, None] + np.arange(3)
-        rows.append(pr)
-        cols.append(pc.ravel())
-        row += 2 * n
+        r = row + np.arange(2 * len(idx))
+        rows += [np.repeat(r, npars[k]), np.repeat(r, 3)]
+        cols += [np.tile(np.arange(off[k], off[k + 1]), 2 * len(idx)),
+                 (base_pts + 3 * np.repeat(idx, 2)[:, None] + np.arange(3)).ravel()]
+        row += 2 * len(idx)
     rows.append(row + np.arange(3 * n_pts))
     cols.append(base_pts + np.arange(3 * n_pts))
-    rows, cols = np.concatenate(rows), np.concatenate(cols)
-    return coo_matrix((np.ones(len(rows), int), (rows, cols)),
-                      shape=(row + 3 * n_pts, base_pts + 3 * n_pts)).tocsr()
+    return np.concatenate(rows), np.concatenate(cols), (row + 3 * n_pts, base_pts + 3 * n_pts)
 
 
 def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
@@ -264,21 +264,78 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
     off = np.concatenate([[0], np.cumsum(npars)])
     p0 = np.concatenate([*(to_vector(c, m) for c, m in zip(cameras, models)), X.ravel()])
 
-    def resid(p):
+    rows, cols, shape = _pattern(npars, obs, len(X))
+    prior = np.full(3 * len(X), 1.0 / point_sigma)
+
+    def unpack(p):
         pts = p[off[-1]:].reshape(-1, 3)
-        out = []
-        for k, (idx, uv) in enumerate(obs):
-            cam = from_vector(cameras[k], p[off[k]:off[k + 1]], models[k])
-            r = (cam.project(pts[idx])[0] - uv) / pixel_sigma
-            out.append(np.nan_to_num(r, nan=1e4).ravel())
+        return pts, [from_vector(cameras[k], p[off[k]:off[k + 1]], models[k])
+                     for k in range(len(cameras))]
+
+    def resid(p):
+        pts, cams = unpack(p)
+        out = [np.nan_to_num((c.project(pts[idx])[0] - uv) / pixel_sigma, nan=1e4).ravel()
+               for c, (idx, uv) in zip(cams, obs)]
         out.append(((pts - X) / point_sigma).ravel())
         return np.concatenate(out)
 
-    sol = least_squares(resid, p0, jac_sparsity=_sparsity(npars, obs, len(X)), loss="soft_l1",
-                        f_scale=3.0, x_scale="jac", max_nfev=100)
-    cams = [from_vector(c, sol.x[off[k]:off[k + 1]], m)
+    def jac(p):
+        from scipy.sparse import csr_matrix
+
+        pts, cams = unpack(p)
+        data = []
+        for c, m, (idx, _) in zip(cams, models, obs):
+            _, Jc, Jp = project_with_jacobian(c, pts[idx], m)
+            data += [Jc.reshape(-1) / pixel_sigma, Jp.reshape(-1) / pixel_sigma]
+        data.append(prior)
+        return csr_matrix((np.concatenate(data), (rows, cols)), shape=shape)
+
+    x = _sparse_levenberg_marquardt(resid, jac, p0, f_scale=3.0)
+    cams = [from_vector(c, x[off[k]:off[k + 1]], m)
             for k, (c, m) in enumerate(zip(cameras, models))]
-    return cams, sol.x[off[-1]:].reshape(-1, 3)
+    return cams, x[off[-1]:].reshape(-1, 3)
+
+
+def _sparse_levenberg_marquardt(resid, jac, p0, f_scale: float, iterations: int = 60):
+    """Minimise the soft-L1 cost of ``resid`` (scale ``f_scale``) from ``p0``: Levenberg–
+    Marquardt on the sparse normal equations, reweighted at each step (the robust loss's
+    weights ρ′). A bundle adjustment's normal matrix is small and sparse (the points' 3 × 3
+    blocks and the cameras' rows), so a direct sparse solve per step beats an iterative one."""
+    from scipy.sparse import diags
+    from scipy.sparse.linalg import spsolve
+
+    def cost_of(r):
+        z = (r / f_scale) ** 2
+        return f_scale ** 2 * np.sum(np.sqrt(1 + z) - 1)
+
+    p = np.asarray(p0, float).copy()
+    r = resid(p)
+    cost = cost_of(r)
+    lam = 1e-3
+    for _ in range(iterations):
+        J = jac(p)
+        w = 1.0 / np.sqrt(1 + (r / f_scale) ** 2)
+        A = (J.T @ diags(w) @ J).tocsc()
+        g = J.T @ (w * r)
+        d = A.diagonal()
+        d = np.where(d > 0, d, 1.0)
+        while True:
+            step = spsolve((A + diags(lam * d)).tocsc(), -g)
+            trial = p + step
+            r_new = resid(trial)
+            new = cost_of(r_new)
+            if np.isfinite(new) and new <= cost:
+                break
+            lam *= 4
+            if lam > 1e12:
+                return p
+        small = cost - new <= 1e-10 * max(cost, 1e-300) or \
+            np.linalg.norm(step) <= 1e-12 * (np.linalg.norm(p) + 1e-12)
+        p, r, cost = trial, r_new, new
+        lam = max(lam / 3, 1e-9)
+        if small:
+            break
+    return p
 
 
 def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params):

@@ -132,3 +132,52 @@ def describe_lens(cam: Camera, nominal: Camera, model: str) -> str:
         if name in names:
             parts.append(f"{name} {cam.dist[_DIST[name]]:+.3g}")
     return ", ".join(parts).replace("-", "−")
+
+
+def project_with_jacobian(cam: Camera, X, model: str):
+    """Pixels of world points ``X`` (N×3) and their analytic derivatives: ``(uv N×2,
+    J_params N×2×P in :func:`to_vector`'s order, J_points N×2×3)``. Rows where the point does
+    not project (behind the camera, past the lens's fold) are NaN in ``uv`` and zero in both
+    Jacobians. Analytic so that a bundle adjustment over hundreds of points and cameras costs
+    one projection per step instead of one per parameter."""
+    import cv2
+
+    X = np.asarray(X, float)
+    uv, _, _ = cam.project(X)
+    d = X - cam.center
+    Xc = d @ cam.R.T
+    z = Xc[:, 2]
+    good = np.isfinite(uv).all(axis=1) & (z > 0)
+    iz = np.where(good, 1.0 / np.where(good, z, 1.0), 0.0)
+    x, y = Xc[:, 0] * iz, Xc[:, 1] * iz
+    J_pts = np.nan_to_num(cam.jacobian(np.where(good[:, None], X, cam.center + cam.axis)))
+    J_pts[~good] = 0.0
+    A = J_pts @ cam.R.T  # d pixel / d camera-frame point (N×2×3), as J_X = A · R
+    names = lens_params(model)
+    J = np.zeros((len(X), 2, 6 + len(names)))
+    dR = cv2.Rodrigues(np.asarray(cam.rotation, float))[1].reshape(3, 3, 3)  # i, a, b
+    for i in range(3):
+        J[:, :, i] = np.einsum("nak,nk->na", A, d @ dR[i].T)
+    J[:, :, 3:6] = -J_pts
+    r2 = x * x + y * y
+    k1, k2, p1, p2, k3 = cam.dist
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    dd = {"k1": (x * r2, y * r2), "k2": (x * r2 ** 2, y * r2 ** 2),
+          "k3": (x * r2 ** 3, y * r2 ** 3), "p1": (2 * x * y, r2 + 2 * y * y),
+          "p2": (r2 + 2 * x * x, 2 * x * y)}
+    for k, name in enumerate(names, start=6):
+        if name == "fx":
+            J[:, 0, k] = xd
+        elif name == "fy":
+            J[:, 1, k] = yd
+        elif name == "cx":
+            J[:, 0, k] = 1.0
+        elif name == "cy":
+            J[:, 1, k] = 1.0
+        else:
+            J[:, 0, k] = cam.fx * dd[name][0]
+            J[:, 1, k] = cam.fy * dd[name][1]
+    J[~good] = 0.0
+    return uv, J, J_pts
