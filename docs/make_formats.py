@@ -134,8 +134,12 @@ Example: `surveys/paper-2024/survey/`.
 
 Beside the calibrated deployment: `held_out_m` (per comparison — nominal or calibrated cameras
 × fusion — the k-fold `mean`, `median`, `p90`, `max` in metres and the share `fixed`),
-`cameras` (per camera `rms_px`, `points`, `outliers`, `moved_cm`, `turned_deg` and the fitted
-intrinsics), `fusion` (the one chosen), `mismeasured` (`point_id`, `moved_m`) and `notes`.
+`cameras` (per camera `rms_px`, `points`, `outliers`, `moved_m` (and `moved_cm`),
+`moved_share` (of its distance to the survey), `turned_deg`, the fitted intrinsics,
+`lens_model` (the one used), `lens_forced`, `lens_candidates` (per lens model `held_out_px`,
+`supported` and the `reason` when not) and `lens`, the decision in words), `lens` (those
+sentences), `precision` (`point_sigma_m`, whether it was `estimated`, `pixel_sigma_px`),
+`fusion` (the one chosen), `mismeasured` (`point_id`, `moved_m`) and `notes`.
 
 ## Interchange
 

@@ -111,9 +111,9 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv) -> Suppor
                        "singular, as when they all lie on one plane): survey at more heights")
     ok = bool(persp >= PERSPECTIVE_SNR * resid_px)
     reason = "" if ok else (
-        f"its points span {rel:.2%} of their distance in depth: {persp:.2g} px of perspective "
-        f"against {resid_px:.2g} px of spot scatter (needs {PERSPECTIVE_SNR:g}×) cannot tell "
-        "its focal length from its distance; survey at more heights to fit its lens")
+        f"its points span {rel:.2%} of their distance in depth: {persp:.2g} px of perspective, "
+        f"under {PERSPECTIVE_SNR:g}× its {resid_px:.2g} px of spot scatter, cannot tell its "
+        "focal length from its distance; survey at more heights to fit its lens")
     return Support(ok, persp, rel, resid_px, rcond, reason)
 
 
