@@ -81,7 +81,7 @@ def test_too_little_depth_spread_keeps_the_lens_and_says_why_at_every_scale(rng)
         for cam, words in zip(res.cameras, res.lens):
             assert cam["lens_model"] == "pose", words
             focal = cam["lens_candidates"]["focal"]
-            assert not focal["supported"] and "cannot tell its focal length" in focal["reason"]
+            assert not focal["supported"] and "focal length cannot be told" in focal["reason"]
             assert "lens kept as in the deployment" in words and "survey at more heights" \
                 in words
         # forcing the lens on such a survey is refused, in one line naming the camera

@@ -197,13 +197,17 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
             cand[model] = {"held_out_px": None, "supported": False,
                            "reason": fit.support.reason}
             break
-        fits[model] = fit
-        errs[model] = _held_out_px(nominal, X, uv, model, fold, fit.camera)
+        err = _held_out_px(nominal, X, uv, model, fold, fit.camera)
+        if not np.isfinite(err).any():
+            cand[model] = {"held_out_px": None, "supported": False,
+                           "reason": f"a held-out fold leaves fewer than {min_points(model)} "
+                                     "points to fit it"}
+            break
+        fits[model], errs[model] = fit, err
         prev = model
-    errs = {m: e for m, e in errs.items() if np.isfinite(e).any()} or {"pose": errs["pose"]}
     richest = fits[list(errs)[-1]]
     cap = _outlier_limit(richest.camera, richest.resid_px)
-    loss = {m: np.minimum(e, cap) ** 2 for m, e in errs.items()}
+    loss = {m: np.fmin(e, cap) ** 2 for m, e in errs.items()}  # a failed prediction: the cap
     ok = np.logical_and.reduce([np.isfinite(v) for v in loss.values()])
     for m, v in loss.items():
         cand[m] = {"held_out_px": float(np.sqrt(np.mean(v[ok]))) if ok.any() else None,
@@ -390,6 +394,36 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     return s_x, s_px, cams, adj
 
 
+def _references(cams, X, uv, obs, point_sigma: float, pixel_sigma: float) -> list:
+    """Per camera, the survey positions as the *other* cameras see them: each point
+    triangulated from the other cameras' kept spots, averaged with its measured position by
+    their precisions (the triangulation's predicted error, the survey's ``point_sigma``), the
+    measured position alone where fewer than two others saw it. A lens judged against these
+    is judged below the tape's noise, without its own spots in the reference."""
+    from ..triangulation import predicted_rms_error, triangulate
+
+    clean = np.full_like(uv, np.nan)
+    for k, (idx, uvk) in enumerate(obs):
+        clean[k, idx] = uvk
+    w_m = 1.0 / (3 * point_sigma ** 2)
+    refs = []
+    for k in range(len(cams)):
+        others = clean.copy()
+        others[k] = np.nan
+        tri = triangulate(cams, others)
+        ok = np.isfinite(tri.X).all(axis=1) & (tri.used.sum(axis=0) >= 2)
+        R = X.copy()
+        if ok.any():
+            sig = predicted_rms_error(cams, np.where(ok[:, None], tri.X, X), tri.used & ok,
+                                      pixel_sigma)
+            good = ok & np.isfinite(sig) & (sig > 0)
+            w_t = np.where(good, 1.0 / np.where(good, sig, 1.0) ** 2, 0.0)
+            R = np.where(good[:, None], (w_t[:, None] * np.nan_to_num(tri.X) + w_m * X)
+                         / (w_t + w_m)[:, None], X)
+        refs.append(R)
+    return refs
+
+
 @dataclass
 class Calibration:
     """The cameras fitted to a survey, and what the fit found."""
@@ -436,7 +470,9 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     uv = np.asarray(uv, float)
     if lens is None:
         lens = "full" if intrinsics else "pose"
-    fold = fold_of(len(X), folds, seed) if lens == "auto" else None
+    if not isinstance(point_sigma, str) and not (0 < float(point_sigma) < np.inf):
+        raise ValueError(f"point_sigma: expected a positive length in metres or 'auto', got "
+                         f"{point_sigma!r}")
     fits, obs, choices = [], [], []
     rejected: dict = {}
     for k, cam in enumerate(nominal):
@@ -449,11 +485,16 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
             if len(seen) < min_points("pose"):
                 raise SurveyError(f"camera {cam.id}: sees {len(seen)} survey points, needs at "
                                   f"least {min_points('pose')}")
-            fit, choice = choose_lens(cam, X[seen], uv[k, seen], pid, fold[seen])
+            fit, choice = choose_lens(cam, X[seen], uv[k, seen], pid, fold_of(len(seen), folds,
+                                                                              seed))
             choices.append(choice)
         else:
             model = lens.get(cam.id, "pose") if isinstance(lens, dict) else lens
             fit = fit_camera(cam, X[seen], uv[k, seen], pid, model, outlier_px)
+            while isinstance(lens, dict) and model != "pose" and not fit.support.ok:
+                # a fold of an automatic choice: the next simpler model, as the choice would
+                model = LENS_MODELS[LENS_MODELS.index(model) - 1]
+                fit = fit_camera(cam, X[seen], uv[k, seen], pid, model, outlier_px)
             if not fit.support.ok:
                 raise SurveyError(f"camera {cam.id}: cannot fit its lens ({model}): "
                                   f"{fit.support.reason} (or let --lens auto decide)")
@@ -467,8 +508,8 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
         keep = seen[fit.keep]
         obs.append((keep, uv[k, keep]))
     models = [f.model for f in fits]
-    pixel_sigma = float(np.sqrt(np.mean([f.resid_px ** 2 for f in fits])))
-    pixel_sigma = max(pixel_sigma, 1e-6)
+    pixel_sigma = float(np.sqrt(np.nanmean([f.resid_px ** 2 for f in fits])))
+    pixel_sigma = float(np.fmax(pixel_sigma, 1e-6))
     estimated = isinstance(point_sigma, str)
     if estimated:
         if point_sigma != "auto":
@@ -479,6 +520,20 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
         cams, adjusted = refine_jointly([f.camera for f in fits], X, obs,
                                         point_sigma=float(point_sigma), pixel_sigma=pixel_sigma,
                                         models=models)
+    if lens == "auto" and len(nominal) >= 3:
+        # again, against references free of the tape: where the other cameras see each point
+        refs = _references(cams, X, uv, obs, point_sigma, pixel_sigma)
+        choices, starts = [], []
+        for k, cam in enumerate(nominal):
+            seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
+            fit2, choice = choose_lens(cam, refs[k][seen], uv[k, seen], [ids[i] for i in seen],
+                                       fold_of(len(seen), folds, seed))
+            choices.append(choice)
+            fits[k].model, fits[k].support = fit2.model, fit2.support
+            starts.append(fit2.camera)
+        models = [f.model for f in fits]
+        cams, adjusted = refine_jointly(starts, X, obs, point_sigma=float(point_sigma),
+                                        pixel_sigma=pixel_sigma, models=models)
     seen_by = np.isfinite(uv).all(axis=2).sum(axis=0)
     suspects = [i for i, pid in enumerate(ids)
                 if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]
@@ -514,13 +569,14 @@ def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
         return (f"{cid}: lens fitted ({describe_lens(camera, nominal, chosen)}): held-out "
                 f"{fig(chosen)} instead of {fig('pose')} with the lens as in the deployment")
     refused = [m for m, c in choice.candidates.items() if not c["supported"]]
-    tried = [m for m, c in choice.candidates.items() if c["supported"] and m != "pose"]
-    if tried:
+    tried = [m for m, c in choice.candidates.items() if c["supported"] and m != "pose"
+             and c["held_out_px"] is not None]
+    if tried and fig("pose"):
         best = min(tried, key=lambda m: choice.candidates[m]["held_out_px"])
         why = (f"fitting it did not clearly help: held-out {fig('pose')} as in the deployment, "
                f"{fig(best)} with {best}")
     else:
-        why = "the survey cannot fit it"
+        why = "nothing richer could be fitted"
     if refused:
         why += f"; {refused[0]} not fitted: {choice.candidates[refused[0]]['reason']}"
     return f"{cid}: lens kept as in the deployment ({why})"

@@ -8,8 +8,10 @@ vector: rotation (3), position (3), then the model's lens numbers in that order.
 Whether a survey *determines* a model is judged from the fit itself, never in metres. Free
 focal lengths trade against the camera's distance unless the points spread in depth: the
 perspective the survey shows — its depth range relative to the distance, times the points'
-radius in the image — must stand :data:`PERSPECTIVE_SNR` times above the fit's own residual
-spread, and the fit's information matrix (columns scaled to unit norm) must not be singular.
+radius from the image centre — must stand :data:`PERSPECTIVE_SNR` times above the fit's own residual
+spread, the fit's information matrix (columns scaled to unit norm) must not be singular, and
+its covariance must pin the focal length (relative standard error) more finely than the
+depth span relative to the distance.
 Both are ratios of the scene to itself: the same survey at any scale gets the same verdict.
 """
 
@@ -96,7 +98,9 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv) -> Suppor
     depth = cam.to_camera(np.asarray(X, float))[:, 2]
     lo, hi = np.percentile(depth, [5, 95])
     rel = float((hi - lo) / np.mean(depth))
-    radius = float(np.sqrt(np.mean((np.asarray(uv, float) - [cam.cx, cam.cy]) ** 2) * 2))
+    # from the image's centre, not the fitted principal point: a fit cannot inflate its own lever
+    centre = [(cam.width - 1) / 2, (cam.height - 1) / 2]
+    radius = float(np.sqrt(np.mean((np.asarray(uv, float) - centre) ** 2) * 2))
     persp = rel * radius
     if model == "pose":
         return Support(True, persp, rel, resid_px, 1.0)
@@ -104,16 +108,27 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv) -> Suppor
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0] = 1.0
     sv = np.linalg.svd(J / scale, compute_uv=False)
+    A = (J / scale).T @ (J / scale)
     rcond = float((sv[-1] / sv[0]) ** 2) if sv[0] > 0 else 0.0
     if not rcond > SINGULAR:
         return Support(False, persp, rel, resid_px, rcond,
                        "its survey points cannot separate the lens from the pose (the fit is "
                        "singular, as when they all lie on one plane): survey at more heights")
+    # and the fit must pin the focal length more finely than the depth span it has to go by
+    cov = np.linalg.pinv(A) / np.outer(scale, scale) * resid_px ** 2
+    f = 0.5 * (cam.fx + cam.fy)
+    focal_se = float(np.sqrt(max((cov[6, 6] + cov[7, 7] + 2 * cov[6, 7]) / 4, 0.0)) / f)
+    if persp >= PERSPECTIVE_SNR * resid_px and focal_se > rel:
+        return Support(False, persp, rel, resid_px, rcond,
+                       f"its points span only {rel:.2%} of their distance in depth, which pins "
+                       f"its focal length only to ±{focal_se:.2%} with this lens model: survey "
+                       "at more heights to fit its lens")
     ok = bool(persp >= PERSPECTIVE_SNR * resid_px)
     reason = "" if ok else (
-        f"its points span {rel:.2%} of their distance in depth: {persp:.2g} px of perspective, "
-        f"under {PERSPECTIVE_SNR:g}× its {resid_px:.2g} px of spot scatter, cannot tell its "
-        "focal length from its distance; survey at more heights to fit its lens")
+        f"its points span only {rel:.2%} of their distance in depth, giving {persp:.2g} px of "
+        f"perspective, less than {PERSPECTIVE_SNR:g}× its {resid_px:.2g} px of spot scatter, so "
+        "its focal length cannot be told from its distance; survey at more heights to fit its "
+        "lens")
     return Support(ok, persp, rel, resid_px, rcond, reason)
 
 
@@ -137,8 +152,7 @@ def describe_lens(cam: Camera, nominal: Camera, model: str) -> str:
 def project_with_jacobian(cam: Camera, X, model: str):
     """Pixels of world points ``X`` (N×3) and their analytic derivatives: ``(uv N×2,
     J_params N×2×P in :func:`to_vector`'s order, J_points N×2×3)``. Rows where the point does
-    not project (behind the camera, past the lens's fold) are NaN in ``uv`` and zero in both
-    Jacobians. Analytic so that a bundle adjustment over hundreds of points and cameras costs
+    not project (behind the camera) are NaN in ``uv`` and zero in both Jacobians. Analytic so that a bundle adjustment over hundreds of points and cameras costs
     one projection per step instead of one per parameter."""
     import cv2
 
