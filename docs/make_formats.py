@@ -128,7 +128,10 @@ Example: `surveys/paper-2024/survey/`.
   (predicted RMS 3D error, m), `residual_px` (worst reprojection error) and `camera_status`
   (`C1:ok C2:corrupt_frame …`). A set without a fix keeps its row with empty x, y, z and the
   reason: `one_camera`, `degenerate`, `corrupt_frame`, `wrong_size`, `too_dim`, `at_edge`,
-  `no_spot`, `no_frames`.
+  `no_spot`, `no_frames`, `inconsistent` (the cameras that saw a spot disagree by more than
+  `fusion.max_residual`, and no two of them agree: a reflection or a lamp), `outside_room` (the
+  fix would lie under the floor, over the ceiling or beyond the walls by more than five times
+  its own predicted error: e.g. a floor reflection taken for the LED).
 
 ## Calibration report (`<calibrated>.report.json`)
 

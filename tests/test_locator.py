@@ -159,7 +159,9 @@ def test_a_wild_spot_is_dropped_and_max_residual_is_the_deployments(site):
     loose = Locator(deployment.Deployment(dep.name, dep.ceiling_height, dep.room, dep.cameras,
                                           extra={"fusion": {"max_residual": 100.0}}))
     lenient = loose.locate_pixels(off)[i]
-    assert strict.camera_status["C3"] == "dropped" and "C3" in lenient.cameras
+    # (the lenient fix, 9 px off in C3, may then be refused as outside the room: kept or not,
+    # C3 is not dropped)
+    assert strict.camera_status["C3"] == "dropped" and lenient.camera_status["C3"] != "dropped"
 
 
 def test_out_to_a_folder_is_a_one_line_error_leaving_nothing(site, tmp_path):

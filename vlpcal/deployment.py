@@ -74,8 +74,13 @@ class Deployment:
 
     @property
     def max_residual(self) -> float:
-        """px: the robust fusion's limit on an observation's reprojection error."""
-        return float(self.extra.get("fusion", {}).get("max_residual", 2.0))
+        """px: the robust fusion's limit on an observation's reprojection error; unless the
+        file states it (a survey calibration does, from its held-out residuals), 1 % of the
+        smallest camera's image diagonal (2 px for the paper's 160 × 120)."""
+        stated = self.extra.get("fusion", {}).get("max_residual")
+        if stated is not None:
+            return float(stated)
+        return 0.01 * min(math.hypot(c.width, c.height) for c in self.cameras)
 
     @property
     def region_map(self) -> RegionMap | None:

@@ -9,7 +9,9 @@ Methods by name (:data:`FUSIONS`), on ``uv`` shaped ``C×N×2`` (NaN = not seen)
   floor region the draft fix falls in; outside every region, or when that subset did not all see
   the LED, it falls back to (b).
 - ``all``: N-view least squares over every camera that sees the LED.
-- ``robust``: ``all`` with inconsistent observations dropped (a reflection seen by one camera).
+- ``robust``: ``all`` with inconsistent observations dropped (a reflection seen by one camera);
+  a point whose cameras still disagree beyond ``max_residual`` gets no fix but the status
+  ``inconsistent`` (two views that disagree cannot say which one is wrong).
 
 Pairs are solved with the paper's pair method by default (``pair_method="paper"``) or with
 two-view least squares (``"lsq"``).
@@ -35,6 +37,8 @@ PAIR_METHODS = ("paper", "lsq")
 
 #: statuses of a fused point
 OK, NO_SPOT, ONE_CAMERA, DEGENERATE = "ok", "no_spot", "one_camera", "degenerate"
+#: the robust fusion found no subset of two or more cameras that agree (a reflection, a lamp)
+INCONSISTENT = "inconsistent"
 
 
 @dataclass
@@ -188,10 +192,17 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
                     pts = redo & (nearest == k)
                     X[pts] = Xp[k, pts]
                     used[np.ix_(list(pairs[k]), pts)] = True
+    disagree = np.zeros(N, bool)
+    if method == "robust":
+        with np.errstate(invalid="ignore"):
+            worst = np.nanmax(np.where(used, residual, -np.inf), axis=0, initial=-np.inf)
+        disagree = np.isfinite(X).all(axis=1) & (worst > max_residual)
+        X[disagree] = np.nan
     fixed = np.isfinite(X).all(axis=1)
     used &= fixed[None, :]
     status = np.where(fixed, OK, np.where(views == 0, NO_SPOT,
                                           np.where(views == 1, ONE_CAMERA, DEGENERATE)))
+    status = np.where(disagree, INCONSISTENT, status)
     if residual is None:  # the pair methods: measure the fused point in every camera used
         residual = reprojection_errors(cameras, uv, X)
     residual = np.where(used, residual, np.nan)

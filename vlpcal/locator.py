@@ -24,7 +24,12 @@ from .triangulation import predicted_rms_error
 #: fix statuses beyond the fusion's (ok, one_camera, degenerate, no_spot): the most telling
 #: per-camera reason when no fix was possible
 FIX_STATUSES = ("ok", "one_camera", "degenerate", "corrupt_frame", "wrong_size", "too_dim",
-                "at_edge", "no_spot", "no_frames")
+                "at_edge", "no_spot", "no_frames", "inconsistent", "outside_room")
+#: a fix further than this many of its predicted errors, plus :data:`ROOM_SLACK` of the ceiling
+#: height (what the prediction at the assumed spot noise leaves out: the calibration's own
+#: error), under the floor, over the ceiling or beyond the walls is no fix (``outside_room``)
+PLAUSIBLE_SIGMAS = 5.0
+ROOM_SLACK = 0.02
 #: per-camera statuses: ``ok`` or a detection reason (``no_spot``, ``too_dim``, ``at_edge``,
 #: ``corrupt_frame``, ``wrong_size``, ``missing``), or ``dropped`` (robust fusion rejected it)
 
@@ -111,6 +116,9 @@ class Locator:
         self.max_residual = deployment.max_residual
         self.region_map = deployment.region_map
         self.pixel_noise = deployment.pixel_noise
+        import shapely
+
+        self._room = shapely.Polygon(deployment.room)
         offsets = deployment.pixel_offsets
         self._offset = np.array([offsets.get(c, (0.0, 0.0)) for c in self.camera_ids])
 
@@ -152,6 +160,12 @@ class Locator:
                    pair_method=self.pair_method, max_residual=self.max_residual)
         sigma = predicted_rms_error(self.cameras, res.X, res.used, self.pixel_noise)
         status = res.status.copy()
+        out = self._outside(res.X, sigma)
+        if out.any():  # e.g. a floor reflection taken for the LED: a fix under the floor
+            res.X[out] = np.nan
+            res.used[:, out] = False
+            sigma[out] = np.nan
+            status[out] = "outside_room"
         seen = np.isfinite(uv).all(axis=2)
         dropped = seen & ~res.used & np.isfinite(res.X).all(axis=1)[None, :]
         if self.fusion == "robust":
@@ -166,6 +180,23 @@ class Locator:
         ids = list(frame_ids) if frame_ids is not None else [None] * N
         return FixBatch(self.camera_ids, ids, res.X, status, res.used, res.residual, sigma,
                         camera_status)
+
+    def _outside(self, X, sigma) -> np.ndarray:
+        """Fixes that cannot be the LED: under the floor, over the ceiling or beyond the
+        room's walls by more than :data:`PLAUSIBLE_SIGMAS` of their own predicted error and
+        :data:`ROOM_SLACK` of the ceiling height."""
+        import shapely
+
+        fixed = np.isfinite(X).all(axis=1)
+        if not fixed.any():
+            return fixed
+        slack = PLAUSIBLE_SIGMAS * np.where(np.isfinite(sigma), sigma, 0.0) \
+            + ROOM_SLACK * self.deployment.ceiling_height
+        z = np.where(fixed, X[:, 2], 0.0)
+        out = (z < -slack) | (z > self.deployment.ceiling_height + slack)
+        pts = shapely.points(np.where(fixed[:, None], X[:, :2], 0.0))
+        away = shapely.distance(self._room, pts)
+        return fixed & (out | (away > slack))
 
     def unknown_cameras(self, framesets) -> Counter:
         """How often each camera id the deployment does not know appears in ``framesets``."""

@@ -161,18 +161,22 @@ class LensChoice:
     scene_per_px: float = float("nan")  # m per px at the camera's points (distance / f)
 
 
-def _held_out_px(nominal, X, uv, model, fold, start) -> np.ndarray:
-    """Per point: reprojection error (px) when the point's fold was left out of the fit."""
+def _held_out_px(nominal, X, uv, model, fold, starts: dict):
+    """Per point: reprojection error (px) when the point's fold was left out of the fit; and
+    each fold's fitted camera. Each fold's fit starts from ``starts[fold]`` (the simpler
+    model's fit on the same fold) or from PnP, never from a fit that saw its test points."""
     err = np.full(len(X), np.nan)
+    cams = {}
     for f in np.unique(fold):
         test = fold == f
         try:
             fit = fit_camera(nominal, X[~test], uv[~test], [""] * int((~test).sum()), model,
-                             start=start)
+                             start=starts.get(f))
         except SurveyError:
-            return np.full(len(X), np.nan)
+            return np.full(len(X), np.nan), {}
+        cams[f] = fit.camera
         err[test] = np.linalg.norm(fit.camera.project(X[test])[0] - uv[test], axis=1)
-    return err
+    return err, cams
 
 
 def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[CameraFit,
@@ -185,7 +189,7 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
     Returns the chosen model's full fit and the decision."""
     X = np.asarray(X, float)
     uv = np.asarray(uv, float)
-    fits, errs, cand = {}, {}, {}
+    fits, errs, cand, fold_cams = {}, {}, {}, {}
     for model in models:
         if len(X) < min_points(model):
             cand[model] = {"held_out_px": None, "supported": False,
@@ -197,7 +201,7 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
             cand[model] = {"held_out_px": None, "supported": False,
                            "reason": fit.support.reason}
             break
-        err = _held_out_px(nominal, X, uv, model, fold, fit.camera)
+        err, fold_cams = _held_out_px(nominal, X, uv, model, fold, fold_cams)
         if not np.isfinite(err).any():
             cand[model] = {"held_out_px": None, "supported": False,
                            "reason": f"a held-out fold leaves fewer than {min_points(model)} "
@@ -360,12 +364,15 @@ def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params):
     return float(t.sum()), float(n_px - n_cam_params - t.sum())
 
 
-def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: int = 5):
+def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: int = 5,
+                       point_sigma: float | None = None):
     """The survey positions' measurement precision (m per axis) and the spots' (px), by
     variance components: refine jointly, compare each group's residuals with its redundancy,
     rescale, repeat. Bounded below by what the spots can resolve — a tenth of a point's
     spot-noise precision (distance / f · σ_px) — since finer position noise cannot be told from
-    none. Returns (point_sigma, pixel_sigma, cameras, adjusted)."""
+    none. A stated ``point_sigma`` is kept and only the spots' precision estimated (weighting
+    the spots by a scatter that includes the tape's would waste them).
+    Returns (point_sigma, pixel_sigma, cameras, adjusted)."""
     X = np.asarray(X, float)
     npars = sum(6 + len(lens_params(m)) for m in models)
     per_px = np.median(np.concatenate([
@@ -373,10 +380,10 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
         for c, (idx, _) in zip(cameras, obs) if len(idx)]))  # m per px at the points
     floor = 0.1 * per_px * pixel_sigma
     s_px = pixel_sigma
-    s_x = max(per_px * pixel_sigma, floor)
+    s_x = point_sigma if point_sigma is not None else max(per_px * pixel_sigma, floor)
     cams, adj = cameras, X
     for _ in range(iterations):
-        cams, adj = refine_jointly(cameras, X, obs, point_sigma=s_x, pixel_sigma=s_px,
+        cams, adj = refine_jointly(cams, X, obs, point_sigma=s_x, pixel_sigma=s_px,
                                    models=models)
         r_x, r_px = _redundancy(cams, adj, obs, s_x, s_px, npars)
         v_px = np.concatenate([(c.project(adj[idx])[0] - uv).ravel()
@@ -385,7 +392,7 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
         v_x = np.clip((adj - X).ravel(), -3 * s_x, 3 * s_x)
         new_px = float(np.sqrt(np.sum(v_px ** 2) / max(r_px, 1.0)))
         new_x = float(np.sqrt(np.sum(v_x ** 2) / max(r_x, 1e-9))) if r_x > 0.5 else s_x
-        new_x = max(new_x, floor)
+        new_x = max(new_x, floor) if point_sigma is None else point_sigma
         done = abs(np.log(new_x / s_x)) < 0.05 and abs(np.log(new_px / s_px)) < 0.05
         s_x, s_px = new_x, max(new_px, 1e-6)
         floor = 0.1 * per_px * s_px
@@ -511,15 +518,11 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     pixel_sigma = float(np.sqrt(np.nanmean([f.resid_px ** 2 for f in fits])))
     pixel_sigma = float(np.fmax(pixel_sigma, 1e-6))
     estimated = isinstance(point_sigma, str)
-    if estimated:
-        if point_sigma != "auto":
-            raise ValueError(f"point_sigma: expected metres or 'auto', got {point_sigma!r}")
-        point_sigma, pixel_sigma, cams, adjusted = estimate_precision(
-            [f.camera for f in fits], X, obs, models, pixel_sigma)
-    else:
-        cams, adjusted = refine_jointly([f.camera for f in fits], X, obs,
-                                        point_sigma=float(point_sigma), pixel_sigma=pixel_sigma,
-                                        models=models)
+    if estimated and point_sigma != "auto":
+        raise ValueError(f"point_sigma: expected metres or 'auto', got {point_sigma!r}")
+    stated = None if estimated else float(point_sigma)
+    point_sigma, pixel_sigma, cams, adjusted = estimate_precision(
+        [f.camera for f in fits], X, obs, models, pixel_sigma, point_sigma=stated)
     if lens == "auto" and len(nominal) >= 3:
         # again, against references free of the tape: where the other cameras see each point
         refs = _references(cams, X, uv, obs, point_sigma, pixel_sigma)
@@ -532,8 +535,8 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
             fits[k].model, fits[k].support = fit2.model, fit2.support
             starts.append(fit2.camera)
         models = [f.model for f in fits]
-        cams, adjusted = refine_jointly(starts, X, obs, point_sigma=float(point_sigma),
-                                        pixel_sigma=pixel_sigma, models=models)
+        point_sigma, pixel_sigma, cams, adjusted = estimate_precision(
+            starts, X, obs, models, pixel_sigma, point_sigma=stated)
     seen_by = np.isfinite(uv).all(axis=2).sum(axis=0)
     suspects = [i for i, pid in enumerate(ids)
                 if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]

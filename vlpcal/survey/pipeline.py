@@ -16,6 +16,21 @@ FUSION_OF = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest p
              "calibrated, (c) region map": "region", "calibrated, all-camera LS": "robust"}
 
 
+#: the calibrated file's residual limit, in held-out residuals of its worst camera
+RESIDUAL_LIMIT = 5.0
+
+
+def residual_limit(cal) -> float:
+    """px: :data:`RESIDUAL_LIMIT` times the worst camera's held-out reprojection error (its
+    in-sample RMS when its lens was forced): a camera further off than that on a new point is
+    not seeing the LED (a reflection, a lamp)."""
+    worst = 0.0
+    for fit, choice in zip(cal.fits, cal.lens):
+        px = choice.candidates.get(choice.chosen, {}).get("held_out_px")
+        worst = max(worst, px if px is not None else fit.rms_px)
+    return RESIDUAL_LIMIT * worst
+
+
 @dataclass
 class SurveyResult:
     """A calibrated deployment and the report behind it (all lengths in metres)."""
@@ -59,16 +74,17 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     if progress:
         progress(1, folds + 1)
     per_point: dict = {}
+    stated = dep.extra.get("fusion", {}).get("max_residual")
+    limit = float(stated) if stated is not None else residual_limit(cal)
     stats = held_out(cams, X, uv, ids, dep.room, cal.models, folds, cal.point_sigma,
                      progress=(lambda i, n: progress(i + 1, n + 1)) if progress else None,
-                     per_point=per_point, pair_method=dep.pair_method,
-                     max_residual=dep.max_residual)
+                     per_point=per_point, pair_method=dep.pair_method, max_residual=limit)
     rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
     best = min(FUSION_OF, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
                else np.inf)
     extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
     extra["fusion"] = {**extra.get("fusion", {}), "method": FUSION_OF[best],
-                       "region_map": rmap.to_dict()}
+                       "max_residual": limit, "region_map": rmap.to_dict()}
     precision = {"point_sigma_m": cal.point_sigma, "estimated": cal.point_sigma_estimated,
                  "pixel_sigma_px": cal.pixel_sigma}
     extra["provenance"] = provenance(
