@@ -136,13 +136,17 @@ Example: `surveys/paper-2024/survey/`.
 ## Calibration report (`<calibrated>.report.json`)
 
 Beside the calibrated deployment: `held_out_m` (per comparison — nominal or calibrated cameras
-× fusion — the k-fold `mean`, `median`, `p90`, `max` in metres and the share `fixed`),
-`cameras` (per camera `rms_px`, `points`, `outliers`, `moved_m` (and `moved_cm`),
-`moved_share` (of its distance to the survey), `turned_deg`, the fitted intrinsics,
-`lens_model` (the one used), `lens_forced`, `lens_candidates` (per lens model `held_out_px`,
-`supported` and the `reason` when not) and `lens`, the decision in words), `lens` (those
+× fusion — the k-fold `mean`, `median`, `p90`, `p95`, `max` in metres, `null` where no held-out
+point got a fix, and `fixed`, the share of held-out points with a fix), `folds`, `cameras` (per
+camera `rms_px`, `points`, `outliers`, `moved_m` (and `moved_cm`), `moved_share` (of its
+distance to the survey), `turned_deg`, the fitted intrinsics, `lens_model` (the one used),
+`lens_forced`, `lens_candidates` (per lens model tried: `held_out_px`, `supported` and the
+`reason` when not, and for the models compared `excess_px2` — its mean squared held-out error
+above the best model's — with its standard error `se_px2`: the simplest model whose excess is
+within one standard error is chosen) and `lens`, the decision in words), `lens` (those
 sentences), `precision` (`point_sigma_m`, whether it was `estimated`, `pixel_sigma_px`),
-`fusion` (the one chosen), `mismeasured` (`point_id`, `moved_m`) and `notes`.
+`fusion` (the one chosen; its region map and residual limit are in the deployment's `fusion`
+block), `mismeasured` (`point_id`, `moved_m`) and `notes`.
 
 ## Interchange
 

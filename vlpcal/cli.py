@@ -656,7 +656,8 @@ class PointSigma(click.ParamType):
               type=click.Choice(("auto", "pose", "focal", "principal", "k1", "k2", "full")),
               help="Lens model per camera: auto chooses by held-out error among the nested "
                    "models pose (lens as in the deployment), focal (+ fx, fy), principal "
-                   "(+ cx, cy), k1, k2 (+ k2, p1, p2), full (+ k3); others force one.")
+                   "(+ cx, cy), k1 (+ radial k1), k2 (+ radial k2, tangential p1, p2), full "
+                   "(+ radial k3); the others force one for every camera.")
 @click.option("--intrinsics", is_flag=True, help="The same as --lens full.")
 @click.option("--folds", default=5, show_default=True, type=click.IntRange(2, 20),
               help="Held-out accuracy: k-fold by survey point.")
@@ -732,16 +733,22 @@ def _print_calibration(result, folds: int) -> None:
     how = "estimated from the fit" if prec["estimated"] else "as stated"
     click.echo(f"survey positions: ±{format_length(prec['point_sigma_m'])} per axis ({how}); spots "
                f"±{prec['pixel_sigma_px']:.2g} px")
-    click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), cm; the "
+    # one unit for the table, chosen so that the best row reads with three figures
+    means = [st["mean"] for st in result.stats.values() if st["mean"] is not None]
+    unit, scale = next(((u, f) for u, f in (("m", 1.0), ("cm", 100.0), ("mm", 1000.0),
+                                            ("µm", 1e6)) if means and min(means) * f >= 0.1),
+                       ("µm", 1e6))
+    click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), {unit}; the "
                f"reference is the measured position itself (±{format_length(prec['point_sigma_m'])} "
                f"per axis ≈ {format_length(prec['point_sigma_m'] * 3 ** 0.5)} in 3D):")
-    click.echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p90':>7s} {'max':>7s} {'fixed':>6s}")
+    click.echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p95':>7s} {'max':>7s} {'fixed':>6s}")
     for label, st in result.stats.items():
         if st["mean"] is None:
-            click.echo(f"{label:32s} {'–':>7s}")
+            click.echo(f"{label:32s} {'–':>7s} {'':23s} {st['fixed']:6.0%}")
             continue
-        click.echo(f"{label:32s} {st['mean'] * 100:7.3g} {st['median'] * 100:7.3g} "
-                   f"{st['p90'] * 100:7.3g} {st['max'] * 100:7.3g} {st['fixed']:6.0%}")
+        cells = " ".join(f"{st[k] * scale:7.3f}" if st[k] * scale < 10 else
+                         f"{st[k] * scale:7.1f}" for k in ("mean", "median", "p95", "max"))
+        click.echo(f"{label:32s} {cells} {st['fixed']:6.0%}")
     click.echo("(fixed: share of the held-out points with a fix; a point one camera saw "
                "has none)")
     click.echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'lens':>9s} {'moved':>9s} "

@@ -62,21 +62,33 @@ def survey_plan_figure(path, dep, plan) -> None:
     save_figure(fig, path, dpi=130)
 
 
-def calibration_figure(path, stats, per_point, X, cameras) -> None:
-    """Held-out errors: map over the floor (nominal vs calibrated, all-camera LS) and CDF."""
+def calibration_figure(path, stats, per_point, X, cameras, lens_rows=()) -> None:
+    """Held-out errors: map over the floor (nominal vs calibrated, all-camera LS) and CDF; with
+    ``lens_rows`` (the report's per-camera rows) a panel of each camera's lens models and
+    their held-out reprojection error, the chosen one marked."""
     plt = _pyplot()
     nom = per_point["nominal, all-camera LS"] * 100
     cal = per_point["calibrated, all-camera LS"] * 100
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), constrained_layout=True)
-    vmax = np.nanpercentile(nom, 95) if np.isfinite(nom).any() else 1.0
+    panels = 4 if lens_rows else 3
+    fig, axes = plt.subplots(1, panels, figsize=(4.7 * panels, 4.2), constrained_layout=True)
+    both = np.concatenate([nom, cal])
+    vmax = np.nanpercentile(both, 95) if np.isfinite(both).any() else 1.0
     for ax, err, title in ((axes[0], nom, "nominal cameras"), (axes[1], cal, "calibrated")):
         ok = np.isfinite(err)
         sc = ax.scatter(X[ok, 0], X[ok, 1], c=err[ok], cmap="viridis", vmin=0, vmax=vmax, s=18)
+        ax.scatter(X[~ok, 0], X[~ok, 1], marker="x", c="0.6", s=12, lw=0.8,
+                   label="no fix (seen by one camera, or refused)")
         for c in cameras:
             ax.plot(*c.position[:2], "rs", ms=6)
-        ax.set_title(f"held-out error, {title}: mean {np.nanmean(err):.2f} cm", fontsize=9)
+            ax.annotate(c.id, c.position[:2], fontsize=7, xytext=(3, 3),
+                        textcoords="offset points")
+        mean = f"{np.mean(err[ok]):.3g} cm" if ok.any() else "no fix"
+        ax.set_title(f"held-out error (all-camera LS), {title}: mean {mean}", fontsize=9)
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        if (~ok).any():
+            ax.legend(fontsize=6, loc="lower right")
     fig.colorbar(sc, ax=axes[:2].tolist(), label="3D error (cm)", shrink=0.8)
     for label, err in per_point.items():
         e = np.sort(err[np.isfinite(err)] * 100)
@@ -88,7 +100,33 @@ def calibration_figure(path, stats, per_point, X, cameras) -> None:
     axes[2].set_ylabel("CDF")
     axes[2].grid(alpha=0.3)
     axes[2].legend(fontsize=6)
+    if lens_rows:
+        _lens_panel(axes[3], lens_rows)
     save_figure(fig, path, dpi=110)
+
+
+def _lens_panel(ax, rows) -> None:
+    """Per camera, the held-out reprojection error (px) of each lens model tried; the chosen
+    model filled, the others hollow; models the survey could not support are not drawn."""
+    from .survey import LENS_MODELS
+
+    width = 0.8 / len(LENS_MODELS)
+    for j, model in enumerate(LENS_MODELS):
+        xs, ys, chosen = [], [], []
+        for i, r in enumerate(rows):
+            px = r.get("lens_candidates", {}).get(model, {}).get("held_out_px")
+            if px is not None:
+                xs.append(i - 0.4 + (j + 0.5) * width)
+                ys.append(px)
+                chosen.append(model == r.get("lens_model"))
+        colour = f"C{j}"
+        ax.bar(xs, ys, width, color=[colour if c else "none" for c in chosen],
+               edgecolor=colour, label=model)
+    ax.set_xticks(range(len(rows)), [r["camera"] for r in rows], fontsize=7)
+    ax.set_ylabel("held-out reprojection error (px)")
+    ax.set_title("lens model per camera (filled: chosen)", fontsize=9)
+    ax.legend(fontsize=6, ncol=2)
+    ax.grid(alpha=0.3, axis="y")
 
 
 def plan_maps(path, site, cand) -> None:
@@ -131,7 +169,8 @@ def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Pa
     save(result.deployment, out, header=header)
     atomic_write_text(paths[1], json.dumps(result.report(notes), indent=2))
     cal = result.deployment.cameras
-    calibration_figure(paths[2], result.stats, result.per_point, result.points, cal)
+    calibration_figure(paths[2], result.stats, result.per_point, result.points, cal,
+                       [r for r in result.cameras if r.get("lens_candidates")])
     return paths
 
 

@@ -110,7 +110,7 @@ def fit_camera(nominal: Camera, X, uv, ids, model: str = "pose", outlier_px: flo
                           f"{need}" + (f" to fit its lens ({model})" if model != "pose" else ""))
     cam0 = start if start is not None else _pnp_start(nominal, X, uv)
     keep = np.ones(len(X), bool)
-    scale = 1.0
+    scale = OUTLIER_IMAGE_SHARE * float(np.hypot(nominal.width, nominal.height))  # 1 px at 160 px
 
     def solve(c0, mask):
         Xm, uvm = X[mask], uv[mask]
@@ -155,7 +155,9 @@ class LensChoice:
     camera_id: str
     chosen: str
     forced: bool
-    #: model → {"held_out_px": RMS px or None, "supported": bool, "reason": str}
+    #: model → {"held_out_px": RMS px or None, "supported": bool, "reason": str, and for the
+    #: models compared "excess_px2" (mean squared error above the best model's, px²) and
+    #: "se_px2" (its standard error): the simplest with excess ≤ se is chosen}
     candidates: dict
     depth_rel_range: float = float("nan")
     scene_per_px: float = float("nan")  # m per px at the camera's points (distance / f)
@@ -222,9 +224,8 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
         for m in loss:  # simplest first: the first within one standard error of the best
             d = loss[m][ok] - loss[best][ok]
             se = float(d.std(ddof=1) / np.sqrt(len(d)))
-            if d.mean() <= se:
-                chosen = m
-                break
+            cand[m]["excess_px2"], cand[m]["se_px2"] = float(d.mean()), se
+        chosen = next(m for m in loss if cand[m]["excess_px2"] <= cand[m]["se_px2"])
     fit = fits[chosen]
     depth = fit.camera.to_camera(X[fit.keep])[:, 2]
     choice = LensChoice(nominal.id, chosen, False, cand, fit.support.depth_rel_range,
@@ -337,8 +338,7 @@ def _sparse_levenberg_marquardt(resid, jac, p0, f_scale: float, iterations: int 
             lam *= 4
             if lam > 1e12:
                 return p
-        small = cost - new <= 1e-10 * max(cost, 1e-300) or \
-            np.linalg.norm(step) <= 1e-12 * (np.linalg.norm(p) + 1e-12)
+        small = cost - new <= 1e-10 * max(cost, 1e-300)
         p, r, cost = trial, r_new, new
         lam = max(lam / 3, 1e-9)
         if small:
@@ -569,8 +569,15 @@ def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
         return f"{cid}: lens model {chosen} as asked ({LENS_WORDS[chosen]}): " \
                f"{describe_lens(camera, nominal, chosen)}"
     if chosen != "pose":
+        off = ""
+        if "cx" in lens_params(chosen) and not (-0.5 <= camera.cx <= camera.width - 0.5
+                                                and -0.5 <= camera.cy <= camera.height - 0.5):
+            off = ("; its principal point lands outside the image: in a view this narrow it "
+                   "trades against the camera's tilt, which is harmless for fixes inside the "
+                   "surveyed volume but says nothing about the lens itself")
         return (f"{cid}: lens fitted ({describe_lens(camera, nominal, chosen)}): held-out "
-                f"{fig(chosen)} instead of {fig('pose')} with the lens as in the deployment")
+                f"{fig(chosen)} instead of {fig('pose')} with the lens as in the deployment"
+                + off)
     refused = [m for m, c in choice.candidates.items() if not c["supported"]]
     tried = [m for m, c in choice.candidates.items() if c["supported"] and m != "pose"
              and c["held_out_px"] is not None]

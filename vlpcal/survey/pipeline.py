@@ -44,9 +44,11 @@ class SurveyResult:
     points: np.ndarray  #: N×3 the survey positions as measured
     precision: dict = field(default_factory=dict)  #: point_sigma_m, estimated, pixel_sigma_px
     lens: list = field(default_factory=list)  #: per camera, the lens decision in words
+    folds: int = 5  #: of the held-out check
 
     def report(self, notes=()) -> dict:
-        return {"held_out_m": self.stats, "cameras": self.cameras, "fusion": self.fusion,
+        return {"held_out_m": self.stats, "folds": self.folds, "cameras": self.cameras,
+                "fusion": self.fusion,
                 "lens": self.lens, "precision": self.precision,
                 "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
                 "notes": list(notes)}
@@ -78,7 +80,8 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     limit = float(stated) if stated is not None else residual_limit(cal)
     stats = held_out(cams, X, uv, ids, dep.room, cal.models, folds, cal.point_sigma,
                      progress=(lambda i, n: progress(i + 1, n + 1)) if progress else None,
-                     per_point=per_point, pair_method=dep.pair_method, max_residual=limit)
+                     per_point=per_point, pair_method=dep.pair_method, max_residual=limit,
+                     nominal_max_residual=dep.max_residual)
     rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
     best = min(FUSION_OF, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
                else np.inf)
@@ -112,4 +115,4 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
                             extra)
     return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
-                        np.asarray(X, float), precision, words)
+                        np.asarray(X, float), precision, words, folds)
