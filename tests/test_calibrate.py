@@ -229,3 +229,34 @@ def test_survey_plan_covers_every_camera_and_pair_and_prints_a_map(tmp_path):
     bad = CliRunner().invoke(main, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--out",
                                     str(tmp_path / "x.csv"), "--heights", "0"])
     assert bad.exit_code == 2 and "two or more heights" in bad.output
+
+
+def test_hostile_surveys_and_outputs_are_refused_in_one_line(tmp_path, rng):
+    """A survey along one line, a camera of random spots, an output that is an input or not a
+    YAML file: one-line refusals, nothing written, the inputs unchanged."""
+    true = [look_at(f"C{k + 1}", (x, 0.9, 2.3), (x, 0.9, 0.0)) for k, x in
+            enumerate((1.2, 1.8, 2.4))]
+    X = survey_grid()
+    ids = [f"S{i:03d}" for i in range(len(X))]
+    line = np.c_[np.linspace(0.5, 3.1, 40), np.full(40, 0.9), np.full(40, 0.35)]
+    with pytest.raises(SurveyError, match="camera C1: its survey points cannot fix its pose"):
+        calibrate(true, line, observe(true, line, rng), [f"L{i}" for i in range(40)])
+    uv = observe(true, X, rng)
+    noisy = uv.copy()
+    seen = np.isfinite(noisy[2]).all(axis=1)
+    noisy[2, seen] = rng.uniform([0, 0], [160, 120], (seen.sum(), 2))
+    with pytest.raises(SurveyError, match="camera C3: its spots fit no pose"):
+        calibrate(true, X, noisy, ids)
+    room = [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]
+    nominal = tmp_path / "nominal.yaml"
+    deployment.save(deployment.Deployment("lab", 2.3, room, true), nominal)
+    write_survey_bundle(tmp_path / "survey", ids, X,
+                        observations={c.id: uv[k] for k, c in enumerate(true)})
+    before = {p: p.read_bytes() for p in (nominal, tmp_path / "survey" / "points.csv")}
+    for out, why in ((nominal, "own input"), (tmp_path / "survey" / "cal.yaml", "own input"),
+                     (tmp_path / "cal.png", "is a YAML file")):
+        res = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(nominal), "--survey",
+                                        str(tmp_path / "survey"), "--out", str(out), "-q"])
+        assert res.exit_code == 2 and why in res.output and len(res.output.splitlines()) == 1
+    assert {p: p.read_bytes() for p in before} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nominal.yaml", "survey"]

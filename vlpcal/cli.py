@@ -54,13 +54,34 @@ def _load_deployment(path):
         raise UserError(str(e)) from None
 
 
-def _output_file(path):
-    """``path`` as a file to write, checked before any work: not a folder, in one that exists."""
+def _output_file(path, inputs=(), beside=()):
+    """``path`` as a file to write, checked before any work: not a folder, in a folder that
+    exists and takes a new file, none of the command's ``inputs`` (files or folders: the output
+    may not be one of them or lie inside one), and neither are the files it writes ``beside``
+    it (suffixes, e.g. ``.png``) folders or inputs."""
+    import os
+    import tempfile
     from pathlib import Path
 
     out = Path(path)
     if out.is_dir() or not out.parent.is_dir():
         raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    targets = [out] + [out.with_suffix(s) for s in beside]
+    for t in targets:
+        r = t.resolve()
+        for src in inputs:
+            src = Path(src).resolve()
+            if r == src or src in r.parents:
+                raise UserError(f"{out}: is (or would write {t.name} over) the command's own "
+                                f"input {src}; choose another output file")
+        if t != out and t.is_dir():
+            raise UserError(f"{out}: would write {t} beside it, which is a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".probe", dir=out.parent)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise UserError(f"{out}: cannot write in {out.parent} ({e.strerror})") from None
     return out
 
 
@@ -694,7 +715,13 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
         bundle = read_survey_bundle(survey_path)
     except DatasetError as e:
         raise UserError(str(e)) from None
-    out = _output_file(out)
+    from pathlib import Path
+
+    if Path(out).suffix.lower() not in (".yaml", ".yml"):
+        raise UserError(f"{out}: the calibrated deployment is a YAML file (.yaml); its report "
+                        "(.report.json) and figure (.png) go beside it")
+    out = _output_file(out, inputs=(deployment_path, survey_path),
+                       beside=(".report.json", ".png"))
     uv, notes = survey_spots(dep, bundle)
     for note in notes:
         click.echo(note, err=True)

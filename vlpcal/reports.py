@@ -99,7 +99,8 @@ def calibration_figure(path, stats, per_point, X, cameras, lens_rows=()) -> None
     axes[2].set_xlabel("held-out 3D error (cm)")
     axes[2].set_ylabel("CDF")
     axes[2].grid(alpha=0.3)
-    axes[2].legend(fontsize=6)
+    if axes[2].get_legend_handles_labels()[0]:
+        axes[2].legend(fontsize=6)
     if lens_rows:
         _lens_panel(axes[3], lens_rows)
     save_figure(fig, path, dpi=110)
@@ -161,16 +162,30 @@ def plan_maps(path, site, cand) -> None:
 
 def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Path, Path]:
     """A survey calibration's files: the calibrated deployment ``out``, ``.report.json`` and
-    ``.png`` beside it (each written atomically). ``result`` is a ``survey.SurveyResult``."""
+    ``.png`` beside it, as one set: all three are written to staging files first and renamed
+    into place only when all exist (the deployment last), so an error or a kill leaves the
+    previous set whole. ``result`` is a ``survey.SurveyResult``."""
+    import os
+    import tempfile
+
     from .deployment import atomic_write_text, save
 
     out = Path(out)
     paths = out, out.with_suffix(".report.json"), out.with_suffix(".png")
-    save(result.deployment, out, header=header)
-    atomic_write_text(paths[1], json.dumps(result.report(notes), indent=2))
-    cal = result.deployment.cameras
-    calibration_figure(paths[2], result.stats, result.per_point, result.points, cal,
-                       [r for r in result.cameras if r.get("lens_candidates")])
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        staged = [stage / p.name for p in paths]
+        save(result.deployment, staged[0], header=header)
+        atomic_write_text(staged[1], json.dumps(result.report(notes), indent=2))
+        cal = result.deployment.cameras
+        calibration_figure(staged[2], result.stats, result.per_point, result.points, cal,
+                           [r for r in result.cameras if r.get("lens_candidates")])
+        for src, dst in zip(reversed(staged), reversed(paths)):
+            os.replace(src, dst)
+    finally:
+        for f in stage.iterdir():
+            f.unlink()
+        stage.rmdir()
     return paths
 
 

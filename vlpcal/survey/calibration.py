@@ -35,6 +35,9 @@ class SurveyError(ValueError):
 OUTLIER_SIGMAS = 5.0
 #: … and never closer than this share of the image diagonal (a spot's own blur)
 OUTLIER_IMAGE_SHARE = 0.005
+#: a camera whose spots scatter about its best fit by more than this share of its image
+#: diagonal is not seeing the LED (random spots, a wrong id)
+GARBAGE_IMAGE_SHARE = 0.025
 
 
 @dataclass
@@ -73,8 +76,11 @@ def _pnp_start(nominal: Camera, X, uv) -> Camera:
     good = np.isfinite(xy).all(axis=1)
     if good.sum() < MIN_POINTS_POSE:
         return nominal
-    ok, rvec, tvec = cv2.solvePnP(X[good].reshape(-1, 1, 3), xy[good].reshape(-1, 1, 2),
-                                  np.eye(3), None, flags=cv2.SOLVEPNP_SQPNP)
+    try:
+        ok, rvec, tvec = cv2.solvePnP(X[good].reshape(-1, 1, 3), xy[good].reshape(-1, 1, 2),
+                                      np.eye(3), None, flags=cv2.SOLVEPNP_SQPNP)
+    except cv2.error:  # degenerate points (all at one place): the fit below will say so
+        return nominal
     if not ok or not np.isfinite(rvec).all():
         return nominal
     R = cv2.Rodrigues(rvec)[0]
@@ -141,7 +147,7 @@ def fit_camera(nominal: Camera, X, uv, ids, model: str = "pose", outlier_px: flo
     r = cam.project(X[keep])[0] - uv[keep]
     sigma = robust_sigma(r)
     rms = float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))
-    support = lens_support(cam, model, sol.jac, sigma, X[keep], uv[keep])
+    support = lens_support(cam, model, sol.jac, sigma, X[keep], uv[keep], nominal)
     return CameraFit(cam, rms, int(keep.sum()), [i for i, k in zip(ids, keep) if not k],
                      model, sigma, support, keep)
 
@@ -205,12 +211,19 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
             break
         err, fold_cams = _held_out_px(nominal, X, uv, model, fold, fold_cams)
         if not np.isfinite(err).any():
+            if model == "pose":
+                fits[model] = fit
             cand[model] = {"held_out_px": None, "supported": False,
                            "reason": f"a held-out fold leaves fewer than {min_points(model)} "
                                      "points to fit it"}
             break
         fits[model], errs[model] = fit, err
         prev = model
+    if not errs:  # not even the pose could be checked on held-out points: keep the pose
+        fit = fits.get("pose") or fit_camera(nominal, X, uv, ids, "pose")
+        cand.setdefault("pose", {"held_out_px": None, "supported": True, "reason": ""})
+        return fit, LensChoice(nominal.id, "pose", False, cand, fit.support.depth_rel_range,
+                               float("nan"))
     richest = fits[list(errs)[-1]]
     cap = _outlier_limit(richest.camera, richest.resid_px)
     loss = {m: np.fmin(e, cap) ** 2 for m, e in errs.items()}  # a failed prediction: the cap
@@ -360,7 +373,7 @@ def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params):
         np.add.at(info, idx, np.einsum("kai,kaj->kij", J, J) / pixel_sigma ** 2)
         n_px += 2 * len(idx)
     M = info + np.eye(3) / point_sigma ** 2
-    t = np.einsum("nij,nji->n", info, np.linalg.inv(M))
+    t = np.einsum("nij,nji->n", info, np.linalg.pinv(M))
     return float(t.sum()), float(n_px - n_cam_params - t.sum())
 
 
@@ -477,9 +490,12 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     uv = np.asarray(uv, float)
     if lens is None:
         lens = "full" if intrinsics else "pose"
-    if not isinstance(point_sigma, str) and not (0 < float(point_sigma) < np.inf):
-        raise ValueError(f"point_sigma: expected a positive length in metres or 'auto', got "
-                         f"{point_sigma!r}")
+    extent = float(np.linalg.norm(np.ptp(X, axis=0))) if len(X) else 0.0
+    if not isinstance(point_sigma, str) and not (
+            1e-9 * extent < float(point_sigma) < extent):
+        raise SurveyError(f"the stated precision of the survey positions, ±{point_sigma} m, is "
+                          f"not between a billionth of the survey's extent ({extent:.3g} m) and "
+                          "the extent itself: metres expected (or 'auto')")
     fits, obs, choices = [], [], []
     rejected: dict = {}
     for k, cam in enumerate(nominal):
@@ -514,6 +530,12 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
             rejected[p] = rejected.get(p, 0) + 1
         keep = seen[fit.keep]
         obs.append((keep, uv[k, keep]))
+    for cam, fit in zip(nominal, fits):
+        diag = float(np.hypot(cam.width, cam.height))
+        if not fit.resid_px <= GARBAGE_IMAGE_SHARE * diag:
+            raise SurveyError(f"camera {cam.id}: its spots fit no pose (scatter ±"
+                              f"{fit.resid_px:.3g} px, {fit.resid_px / diag:.1%} of its image "
+                              "diagonal): check its frames, its id, or what it sees")
     models = [f.model for f in fits]
     pixel_sigma = float(np.sqrt(np.nanmean([f.resid_px ** 2 for f in fits])))
     pixel_sigma = float(np.fmax(pixel_sigma, 1e-6))

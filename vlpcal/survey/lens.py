@@ -92,7 +92,8 @@ class Support:
     reason: str = ""
 
 
-def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv) -> Support:
+def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv,
+                 nominal: Camera | None = None) -> Support:
     """Judge whether a fit of ``model`` (its Jacobian ``jac`` at the solution, residual spread
     ``resid_px``) on points ``X`` seen at ``uv`` determines its lens (module docstring)."""
     depth = cam.to_camera(np.asarray(X, float))[:, 2]
@@ -102,11 +103,14 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv) -> Suppor
     centre = [(cam.width - 1) / 2, (cam.height - 1) / 2]
     radius = float(np.sqrt(np.mean((np.asarray(uv, float) - centre) ** 2) * 2))
     persp = rel * radius
-    if model == "pose":
-        return Support(True, persp, rel, resid_px, 1.0)
     J = np.asarray(jac.toarray() if hasattr(jac, "toarray") else jac, float)
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0] = 1.0
+    pose_sv = np.linalg.svd(J[:, :6] / scale[:6], compute_uv=False)
+    if not (pose_sv[0] > 0 and (pose_sv[-1] / pose_sv[0]) ** 2 > SINGULAR):
+        raise _pose_error(cam)
+    if model == "pose":
+        return Support(True, persp, rel, resid_px, 1.0)
     sv = np.linalg.svd(J / scale, compute_uv=False)
     A = (J / scale).T @ (J / scale)
     rcond = float((sv[-1] / sv[0]) ** 2) if sv[0] > 0 else 0.0
@@ -124,12 +128,27 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv) -> Suppor
                        f"its focal length only to ±{focal_se:.2%} with this lens model: survey "
                        "at more heights to fit its lens")
     ok = bool(persp >= PERSPECTIVE_SNR * resid_px)
+    if ok and nominal is not None:
+        ratio = (cam.fx + cam.fy) / (nominal.fx + nominal.fy)
+        if not 0.5 <= ratio <= 2.0:
+            return Support(False, persp, rel, resid_px, rcond,
+                           f"the fit moved its focal length {ratio:.2g} times the deployment's "
+                           "(a lens this far off is a degenerate fit, not a lens): survey at "
+                           "more heights to fit its lens")
     reason = "" if ok else (
         f"its points span only {rel:.2%} of their distance in depth, giving {persp:.2g} px of "
         f"perspective, less than {PERSPECTIVE_SNR:g}× its {resid_px:.2g} px of spot scatter, so "
         "its focal length cannot be told from its distance; survey at more heights to fit its "
         "lens")
     return Support(ok, persp, rel, resid_px, rcond, reason)
+
+
+def _pose_error(cam: Camera):
+    from .calibration import SurveyError
+
+    return SurveyError(f"camera {cam.id}: its survey points cannot fix its pose (they lie on "
+                       "a line or at one place as it sees them): spread them over the floor "
+                       "and at two or more heights")
 
 
 def describe_lens(cam: Camera, nominal: Camera, model: str) -> str:

@@ -38,6 +38,8 @@ def learn_region_map(cameras: list[Camera], uv, X, room, cell: float | None = No
     if cell is None:
         cell = region_cell(cameras, room)
     pairs, Xp = pair_estimates(cameras, uv, pair_method)
+    if not pairs:  # one camera: no pair to choose
+        return RegionMap([])
     err = np.linalg.norm(Xp - X[None], axis=2)  # P×N, NaN where the pair has no estimate
     room_poly = Polygon(room)
     x0, y0, x1, y1 = room_poly.bounds
