@@ -757,6 +757,20 @@ def _print_calibration(result, folds: int) -> None:
                "one):")
     for sentence in result.lens:
         click.echo(f"  {sentence}")
+    rows = [r for r in result.cameras if r.get("lens_candidates")]
+    if rows:
+        from .survey import LENS_MODELS
+
+        click.echo(f"held-out reprojection error per lens model, px (* chosen; – not "
+                   f"supported or not tried):\n  {'camera':8s}"
+                   + "".join(f"{m:>11s}" for m in LENS_MODELS))
+        for r in rows:
+            cells = []
+            for m in LENS_MODELS:
+                px = r["lens_candidates"].get(m, {}).get("held_out_px")
+                cell = "–" if px is None else f"{px:.3g}" + ("*" if m == r["lens_model"] else "")
+                cells.append(f"{cell:>11s}")
+            click.echo(f"  {r['camera']:8s}" + "".join(cells))
     how = "estimated from the fit" if prec["estimated"] else "as stated"
     click.echo(f"survey positions: ±{format_length(prec['point_sigma_m'])} per axis ({how}); spots "
                f"±{prec['pixel_sigma_px']:.2g} px")
