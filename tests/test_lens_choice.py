@@ -8,13 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_calibrate import look_at, nudge, observe, survey_grid
 
 from vlpcal.deployment import Deployment
 from vlpcal.fusion import fuse
 from vlpcal.geometry import Camera
 from vlpcal.survey import calibrate_survey
-
-from test_calibrate import look_at, nudge, observe, survey_grid
 
 ROOM = [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]
 

@@ -780,8 +780,9 @@ def _print_calibration(result, folds: int) -> None:
                                             ("µm", 1e6)) if means and min(means) * f >= 0.1),
                        ("µm", 1e6))
     click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), {unit}; the "
-               f"reference is the measured position itself (±{format_length(prec['point_sigma_m'])} "
-               f"per axis ≈ {format_length(prec['point_sigma_m'] * 3 ** 0.5)} in 3D):")
+               "reference is the measured position itself "
+               f"(±{format_length(prec['point_sigma_m'])} per axis ≈ "
+               f"{format_length(prec['point_sigma_m'] * 3 ** 0.5)} in 3D):")
     click.echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p95':>7s} {'max':>7s} {'fixed':>6s}")
     for label, st in result.stats.items():
         if st["mean"] is None:

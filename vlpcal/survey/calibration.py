@@ -68,9 +68,9 @@ def _outlier_limit(cam: Camera, sigma: float) -> float:
 
 def _pnp_start(nominal: Camera, X, uv) -> Camera:
     """OpenCV's SQPnP on the nominal lens, unless it lands worse than the nominal pose."""
-    import cv2
-
     from dataclasses import replace
+
+    import cv2
 
     xy = nominal.normalise(uv)
     good = np.isfinite(xy).all(axis=1)
@@ -204,7 +204,7 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
                            "reason": f"needs {min_points(model)} points, sees {len(X)}"}
             break
         fit = fit_camera(nominal, X, uv, ids, model,
-                         start=fits[prev].camera if fits else None)
+                         start=fits[list(fits)[-1]].camera if fits else None)
         if not fit.support.ok:
             cand[model] = {"held_out_px": None, "supported": False,
                            "reason": fit.support.reason}
@@ -218,7 +218,6 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
                                      "points to fit it"}
             break
         fits[model], errs[model] = fit, err
-        prev = model
     if not errs:  # not even the pose could be checked on held-out points: keep the pose
         fit = fits.get("pose") or fit_camera(nominal, X, uv, ids, "pose")
         cand.setdefault("pose", {"held_out_px": None, "supported": True, "reason": ""})
@@ -277,7 +276,6 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
     ``obs``: list per camera of (point indices, uv K×2) — the observations kept by
     :func:`fit_camera`. Returns (cameras, adjusted positions N×3).
     """
-    from scipy.optimize import least_squares
 
     X = np.asarray(X, float)
     if models is None:

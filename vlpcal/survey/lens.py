@@ -171,8 +171,9 @@ def describe_lens(cam: Camera, nominal: Camera, model: str) -> str:
 def project_with_jacobian(cam: Camera, X, model: str):
     """Pixels of world points ``X`` (N×3) and their analytic derivatives: ``(uv N×2,
     J_params N×2×P in :func:`to_vector`'s order, J_points N×2×3)``. Rows where the point does
-    not project (behind the camera) are NaN in ``uv`` and zero in both Jacobians. Analytic so that a bundle adjustment over hundreds of points and cameras costs
-    one projection per step instead of one per parameter."""
+    not project (behind the camera) are NaN in ``uv`` and zero in both Jacobians. Analytic so
+    that a bundle adjustment over hundreds of points and cameras costs one projection per step
+    instead of one per parameter."""
     import cv2
 
     X = np.asarray(X, float)

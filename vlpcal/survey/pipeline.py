@@ -10,7 +10,6 @@ from .calibration import calibrate
 from .held_out import held_out
 from .regions import learn_region_map
 
-
 #: held-out label → the fusion the calibrated deployment would then use
 FUSION_OF = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest pair": "nearest",
              "calibrated, (c) region map": "region", "calibrated, all-camera LS": "robust"}
