@@ -896,6 +896,68 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
 
 
+@main.command("check")
+@click.option("--site", "site_path", required=True, type=click.Path(dir_okay=False),
+              help="Site file with the requirements (format vlpcal-site, docs/formats.md).")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False),
+              help="The layout to judge: any deployment (planned, installed, calibrated, "
+                   "edited by hand).")
+@click.option("--maps", type=click.Path(dir_okay=False), default=None,
+              help="Also write the maps per LED height (as vlpcal plan does) to this .png.")
+def check(site_path, deployment_path, maps):
+    """Judge a layout against a site's requirements with the reference model.
+
+    The same model that vlpcal plan uses: the sample points of the site's room (minus keep-out)
+    at the lowest, middle and highest LED height; a point counts when enough of the layout's
+    cameras see it, and the predicted error at the site's spot noise decides the p95. Prints
+    coverage, p95 and a verdict with the reason; exits 0 when the layout meets the site, 1 when
+    it does not.
+
+    Example: vlpcal check --site layouts/paper-linear.site.yaml -d layouts/paper-linear.deployment.yaml
+    """
+
+    from .planning import Candidate, SiteError, evaluate, load_site
+    from .reports import plan_maps
+
+    try:
+        site = load_site(site_path)
+    except SiteError as e:
+        raise UserError(str(e)) from None
+    dep = _load_deployment(deployment_path)
+    if maps is not None:
+        if not str(maps).lower().endswith(".png"):
+            raise UserError(f"{maps}: the maps are a PNG picture (.png)")
+        maps = _output_file(maps, inputs=(site_path, deployment_path))
+    ev = evaluate(site, list(dep.cameras))
+    r = site.requirements
+    hs = ", ".join(f"{h:g}" for h in sorted(set(r.heights)))
+    click.echo(f"{deployment_path}: {len(dep.cameras)} cameras judged against {site_path} "
+               f"({site.name}; LED at {hs} m, {r.min_cameras} cameras per point, spot noise "
+               f"{r.pixel_noise:g} px):")
+    p95 = f"{ev.p95 * 100:.2f} cm" if math.isfinite(ev.p95) else "–"
+    mean = f"{ev.mean * 100:.2f} cm" if math.isfinite(ev.mean) else "–"
+    click.echo(f"  coverage {ev.coverage:.1%} (required {r.coverage:.0%}): the share of the "
+               f"floor's sample points seen by {r.min_cameras} or more cameras")
+    click.echo(f"  predicted error over those points: p95 {p95} (required ≤ "
+               f"{r.max_error_p95 * 100:g} cm), mean {mean}")
+    why = []
+    if ev.coverage < r.coverage:
+        why.append(f"coverage {ev.coverage:.1%} < {r.coverage:.0%}")
+    if not ev.p95 <= r.max_error_p95:
+        why.append(f"p95 {p95} > {r.max_error_p95 * 100:g} cm")
+    if dep.room != site.room:
+        click.echo("  note: the deployment's room differs from the site's; the site's is used")
+    if maps is not None:
+        cand = Candidate(f"as in {deployment_path}", 0, 0, (), (), 0.0, list(dep.cameras), ev)
+        plan_maps(maps, site, cand)
+        click.echo(f"  maps: {maps}")
+    if why:
+        click.echo(f"verdict: does not meet the site ({'; '.join(why)})")
+        raise SystemExit(1)
+    click.echo("verdict: meets the site")
+
+
 @main.command("export")
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The deployment whose cameras to export.")

@@ -232,11 +232,19 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
     return Deployment(str(site["name"]), float(height), room, cameras, keep_out, extra)
 
 
+#: px: the largest image side a camera can send (a JPEG frame's limit)
+MAX_IMAGE_SIDE = 65535
+
+
 def check_intrinsics(c: dict, where: str) -> None:
     """Image size, focal lengths, principal point and distortion of a camera mapping (also
     the planner's camera model)."""
     for key in ("width", "height"):
         _number(c[key], f"{where}.{key}", positive=True, integer=True)
+        if c[key] > MAX_IMAGE_SIDE:
+            raise DeploymentError(f"{where}.{key}: expected an image side in pixels up to "
+                                  f"{MAX_IMAGE_SIDE} (the largest a JPEG frame can have), got "
+                                  f"{c[key]!r}")
     for key in ("fx", "fy"):
         _number(c[key], f"{where}.{key}", positive=True)
     for key in ("cx", "cy"):

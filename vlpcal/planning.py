@@ -37,6 +37,7 @@ FORMAT, VERSION = "vlpcal-site", 1
 FAMILIES = ("linear", "triangular", "square")
 REQUIREMENT_KEYS = ("heights", "min_cameras", "coverage", "max_error_p95", "pixel_noise")
 CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
+SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
 #: weight of the surrogate's penalty on covered points whose error exceeds the requirement
 PENALTY = 0.5
 #: sample grid spacing of the reference model, m (DESIGN.md: at most 10 cm)
@@ -89,6 +90,7 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
             if key not in doc:
                 raise SiteError(f"{key}: missing")
         site = _mapping(doc["site"], "site")
+        _only(site, SITE_KEYS, "site")
         for key in ("name", "ceiling_height", "room"):
             if key not in site:
                 raise SiteError(f"site.{key}: missing")
@@ -96,12 +98,15 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         room = _polygon(site["room"], "site.room")
         keep_out = [_polygon(p, f"site.keep_out[{i}]")
                     for i, p in enumerate(site.get("keep_out") or [])]
+        _check_floor(room, keep_out)
         cam = _mapping(doc["camera"], "camera")
+        _only(cam, CAMERA_KEYS, "camera")
         for key in CAMERA_KEYS:
             if key not in cam:
                 raise SiteError(f"camera.{key}: missing")
         check_intrinsics(cam, "camera")
         req = _mapping(doc["requirements"], "requirements")
+        _only(req, REQUIREMENT_KEYS, "requirements")
         for key in REQUIREMENT_KEYS:
             if key not in req:
                 raise SiteError(f"requirements.{key}: missing")
@@ -137,6 +142,27 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
                                               positive=True)))
     return Site(str(site["name"]), float(ceiling), room, camera, requirements, keep_out,
                 tuple(families))
+
+
+def _only(block: dict, keys, where: str) -> None:
+    """Refuse a key the format does not have (a misspelling would otherwise be dropped)."""
+    unknown = sorted(str(k) for k in set(block) - set(keys))
+    if unknown:
+        raise SiteError(f"{where}.{unknown[0]}: unknown key (expected {', '.join(keys)})")
+
+
+def _check_floor(room, keep_out) -> None:
+    """The room must be a simple polygon with floor left once the keep-out areas are cut."""
+    from shapely.geometry import Polygon
+
+    area = Polygon(room)
+    if not area.is_valid or area.area <= 0:
+        raise SiteError("site.room: expected a simple polygon (its edges must not cross)")
+    for poly in keep_out:
+        area = area.difference(Polygon(poly).buffer(0))
+    if area.is_empty or area.area <= 1e-9 * Polygon(room).area:
+        raise SiteError("site.keep_out: the keep-out areas cover the whole room: no floor is "
+                        "left to plan for")
 
 
 def load_site(path) -> Site:
