@@ -914,7 +914,7 @@ def check(site_path, deployment_path, maps):
     coverage, p95 and a verdict with the reason; exits 0 when the layout meets the site, 1 when
     it does not.
 
-    Example: vlpcal check --site layouts/paper-linear.site.yaml -d layouts/paper-linear.deployment.yaml
+    Example: vlpcal check --site site.yaml -d layouts/paper-linear.deployment.yaml
     """
 
     from .planning import Candidate, SiteError, evaluate, load_site
