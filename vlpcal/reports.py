@@ -131,32 +131,63 @@ def _lens_panel(ax, rows) -> None:
 
 
 def plan_maps(path, site, cand) -> None:
-    """Per LED height: cameras, how many see each point, and the predicted error."""
+    """Per LED height: how many cameras see each point (discrete colours, one scale for every
+    height) and the predicted RMS error (one scale, its cut shown), the points that fail the
+    requirement outlined in red, the cameras with their ids; axes in metres."""
+    from matplotlib.colors import BoundaryNorm
+
     plt = _pyplot()
     ev = cand.evaluation
+    r = site.requirements
     levels = sorted(set(ev.points[:, 2].round(6)))
-    fig, axes = plt.subplots(2, len(levels), figsize=(4.6 * len(levels), 7.2), squeeze=False,
+    fig, axes = plt.subplots(2, len(levels), figsize=(4.6 * len(levels), 7.6), squeeze=False,
                              constrained_layout=True)
     room = np.array(list(site.room) + [site.room[0]])
-    vmax = np.nanpercentile(ev.error, 99) * 100 if np.isfinite(ev.error).any() else 1
+    finite = np.isfinite(ev.error)
+    top = float(np.percentile(ev.error[finite], 99) * 100) if finite.any() else 1.0
+    cut = finite.any() and float(np.nanmax(ev.error) * 100) > top
+    most = int(max(ev.views.max(initial=0), r.min_cameras))
+    counts = plt.get_cmap("viridis", most + 1)
+    norm = BoundaryNorm(np.arange(-0.5, most + 1.5), most + 1)
+    fails = (ev.views < r.min_cameras) | ~(ev.error <= r.max_error_p95)
     for col, h in enumerate(levels):
         sel = np.isclose(ev.points[:, 2], h)
-        for row, (values, cmap, label) in enumerate((
-                (ev.views[sel], "viridis", "cameras seeing the point"),
-                (ev.error[sel] * 100, "magma_r", "predicted RMS error (cm)"))):
+        for row in (0, 1):
             ax = axes[row][col]
-            sc = ax.scatter(ev.points[sel, 0], ev.points[sel, 1], c=values, cmap=cmap, s=6,
-                            marker="s", vmin=0, vmax=None if row == 0 else vmax)
+            x, y = ev.points[sel, 0], ev.points[sel, 1]
+            if row == 0:
+                sc = ax.scatter(x, y, c=ev.views[sel], cmap=counts, norm=norm, s=6, marker="s")
+                title = f"h = {h:g} m: cameras that see the point (need {r.min_cameras})"
+                bar = fig.colorbar(sc, ax=ax, shrink=0.7, ticks=range(most + 1))
+            else:
+                sc = ax.scatter(x, y, c=ev.error[sel] * 100, cmap="magma_r", s=6, marker="s",
+                                vmin=0, vmax=top)
+                title = (f"h = {h:g} m: predicted RMS 3D error, cm (need p95 ≤ "
+                         f"{r.max_error_p95 * 100:g})")
+                bar = fig.colorbar(sc, ax=ax, shrink=0.7, extend="max" if cut else "neither")
+                if cut:
+                    bar.set_label(f"cut at {top:.2g} cm (99th percentile)", fontsize=7)
+            bad = fails[sel]
+            if row == 1 and bad.any():
+                ax.scatter(x[bad], y[bad], s=7, marker="s", facecolors="none",
+                           edgecolors="red", linewidths=0.4)
             ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
             for poly in site.keep_out:
                 ax.fill(*np.array(poly).T, color="0.85", ec="0.5")
             for c in cand.cameras:
                 ax.plot(*c.position[:2], "c^", ms=6, mec="k")
+                ax.annotate(c.id, c.position[:2], fontsize=6, xytext=(3, 3),
+                            textcoords="offset points")
             ax.set_aspect("equal")
-            ax.set_title(f"h = {h:g} m: {label}", fontsize=8)
-            fig.colorbar(sc, ax=ax, shrink=0.7)
+            ax.set_xlabel("x (m)")
+            ax.set_ylabel("y (m)")
+            ax.set_title(title, fontsize=8)
+    p95 = f"{ev.p95 * 100:.2f} cm" if np.isfinite(ev.p95) else "–"
     fig.suptitle(f"{site.name}: {cand.count} cameras, {cand.family} — coverage "
-                 f"{ev.coverage:.1%}, predicted p95 {ev.p95 * 100:.2f} cm", fontsize=10)
+                 f"{ev.coverage:.1%} (need {r.coverage:.0%}), predicted p95 {p95} over the "
+                 "covered points\nred outline: a point that fails the requirement (too few "
+                 "cameras, or too large an error)",
+                 fontsize=10)
     save_figure(fig, path, dpi=110)
 
 
