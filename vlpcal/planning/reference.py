@@ -1,0 +1,71 @@
+"""The reference model (DESIGN.md, the contract) that judges every layout: sample points of the
+room minus keep-out at the lowest, middle and highest LED height; a point is seen by a camera
+when it projects inside the image (2 px margin) in front of it; the predicted error of a point
+seen by ≥ 2 cameras is ``sqrt(trace(F⁻¹))``, ``F = Σ JᵢᵀJᵢ / σ²``; a layout meets the
+requirements when at least ``coverage`` of the points are seen by ``min_cameras`` cameras and
+the 95th percentile of their predicted error is within ``max_error_p95``."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import Camera
+from ..triangulation import predicted_rms_error
+from .site import Site
+
+#: sample grid spacing of the reference model, m (DESIGN.md: at most 10 cm)
+SAMPLE_STEP = 0.10
+#: px: a point is seen when it projects at least this far inside the image
+MARGIN_PX = 2.0
+
+
+def sample_points(site: Site, step: float = SAMPLE_STEP) -> np.ndarray:
+    """The reference model's sample points ``N×3``: the room minus keep-out areas on a square
+    grid (``step`` ≤ 10 cm, cell centres), at the lowest, middle (halfway between the lowest
+    and the highest) and highest LED height."""
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    area = Polygon(site.room)
+    for poly in site.keep_out:
+        area = area.difference(Polygon(poly))
+    x0, y0, x1, y1 = area.bounds
+    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = xy[contains_xy(area, xy[:, 0], xy[:, 1])]
+    hs = site.requirements.heights
+    levels = sorted({min(hs), (min(hs) + max(hs)) / 2, max(hs)})  # lowest, halfway, highest
+    return np.concatenate([np.c_[xy, np.full(len(xy), h)] for h in levels])
+
+
+@dataclass
+class Evaluation:
+    """A layout judged by the reference model."""
+
+    coverage: float  #: share of sample points seen by ≥ min_cameras cameras
+    p95: float  #: m, 95th percentile of the predicted error over those points
+    mean: float  #: m, mean predicted error over those points
+    meets: bool
+    points: np.ndarray  #: the sample points N×3
+    views: np.ndarray  #: N, cameras that see each point
+    error: np.ndarray  #: N, predicted RMS error (m; NaN where < 2 cameras)
+
+
+def evaluate(site: Site, cameras: list[Camera], step: float = SAMPLE_STEP) -> Evaluation:
+    """Judge a layout with the reference model (DESIGN.md), independently of any optimiser."""
+    pts = sample_points(site, step)
+    seen = np.stack([c.project(pts, margin=MARGIN_PX)[2] for c in cameras]) if cameras \
+        else np.zeros((0, len(pts)), bool)
+    views = seen.sum(axis=0)
+    err = predicted_rms_error(cameras, pts, seen, site.requirements.pixel_noise) if cameras \
+        else np.full(len(pts), np.nan)
+    ok = views >= site.requirements.min_cameras
+    coverage = float(ok.mean()) if len(pts) else 0.0
+    p95 = float(np.percentile(err[ok], 95)) if ok.any() else math.inf
+    mean = float(np.mean(err[ok])) if ok.any() else math.inf
+    r = site.requirements
+    return Evaluation(coverage, p95, mean, coverage >= r.coverage and p95 <= r.max_error_p95,
+                      pts, views, err)

@@ -1,0 +1,149 @@
+"""The site file (DESIGN.md ``format: vlpcal-site``, ``version: 1``): a room, a camera model and
+requirements, read as strictly as a deployment."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..deployment import DeploymentError, _mapping, _number, _polygon, check_intrinsics
+from ..geometry import NADIR, Camera
+
+FORMAT, VERSION = "vlpcal-site", 1
+FAMILIES = ("linear", "triangular", "square")
+REQUIREMENT_KEYS = ("heights", "min_cameras", "coverage", "max_error_p95", "pixel_noise")
+CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
+SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
+
+
+class SiteError(DeploymentError):
+    """A site file that does not follow the format (one line: file, key path, expectation)."""
+
+
+@dataclass
+class Requirements:
+    heights: tuple  #: LED heights served, m
+    min_cameras: int = 2
+    coverage: float = 0.99
+    max_error_p95: float = 0.02  #: m
+    pixel_noise: float = 0.3  #: px
+
+
+@dataclass
+class Site:
+    """A room to plan for, the camera model to hang, and what the plan must achieve."""
+
+    name: str
+    ceiling_height: float
+    room: list
+    camera: Camera  #: the model; id, position and rotation are placeholders
+    requirements: Requirements
+    keep_out: list = field(default_factory=list)
+    families: tuple = FAMILIES
+
+
+def site_from_dict(doc, source: str = "<site>") -> Site:
+    """Check a parsed site document (:class:`SiteError` names ``source`` and the key path)."""
+    try:
+        if not isinstance(doc, dict):
+            raise SiteError(f"expected a mapping with format: {FORMAT}")
+        if doc.get("format") != FORMAT:
+            raise SiteError(f"format: expected {FORMAT!r}, got {doc.get('format')!r}")
+        if type(doc.get("version")) is not int or doc.get("version") != VERSION:
+            raise SiteError(f"version: expected {VERSION}, got {doc.get('version')!r}")
+        unknown = sorted(set(doc) - {"format", "version", "site", "camera", "requirements",
+                                     "families"})
+        if unknown:
+            raise SiteError(f"{unknown[0]}: unknown key (expected format, version, site, "
+                            "camera, requirements, families)")
+        for key in ("site", "camera", "requirements"):
+            if key not in doc:
+                raise SiteError(f"{key}: missing")
+        site = _mapping(doc["site"], "site")
+        _only(site, SITE_KEYS, "site")
+        for key in ("name", "ceiling_height", "room"):
+            if key not in site:
+                raise SiteError(f"site.{key}: missing")
+        ceiling = _number(site["ceiling_height"], "site.ceiling_height", positive=True)
+        room = _polygon(site["room"], "site.room")
+        keep_out = [_polygon(p, f"site.keep_out[{i}]")
+                    for i, p in enumerate(site.get("keep_out") or [])]
+        _check_floor(room, keep_out)
+        cam = _mapping(doc["camera"], "camera")
+        _only(cam, CAMERA_KEYS, "camera")
+        for key in CAMERA_KEYS:
+            if key not in cam:
+                raise SiteError(f"camera.{key}: missing")
+        check_intrinsics(cam, "camera")
+        req = _mapping(doc["requirements"], "requirements")
+        _only(req, REQUIREMENT_KEYS, "requirements")
+        for key in REQUIREMENT_KEYS:
+            if key not in req:
+                raise SiteError(f"requirements.{key}: missing")
+        heights = req["heights"]
+        if not isinstance(heights, list) or not heights:
+            raise SiteError("requirements.heights: expected a list of LED heights, m")
+        heights = [_number(h, f"requirements.heights[{i}]") for i, h in enumerate(heights)]
+        if any(not 0 <= h < ceiling for h in heights):
+            raise SiteError(f"requirements.heights: expected heights from 0 to below the "
+                            f"ceiling ({ceiling:g} m), got {heights}")
+        min_cams = int(_number(req["min_cameras"], "requirements.min_cameras", positive=True,
+                               integer=True))
+        if min_cams < 2:
+            raise SiteError("requirements.min_cameras: expected 2 or more (one camera cannot "
+                            "give a 3D fix)")
+        coverage = _number(req["coverage"], "requirements.coverage", positive=True)
+        if coverage > 1:
+            raise SiteError(f"requirements.coverage: expected a share from 0 to 1, "
+                            f"got {coverage}")
+        families = doc.get("families", list(FAMILIES))
+        if not isinstance(families, list) or not families or \
+                any(f not in FAMILIES for f in families):
+            raise SiteError(f"families: expected a list of {', '.join(FAMILIES)}, "
+                            f"got {families!r}")
+    except DeploymentError as e:
+        raise SiteError(f"{source}: {e}") from None
+    camera = Camera("model", cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"],
+                    cam["cy"], cam["dist"], (0.0, 0.0, ceiling), NADIR)
+    requirements = Requirements(tuple(heights), min_cams, float(coverage),
+                                float(_number(req["max_error_p95"], "requirements.max_error_p95",
+                                              positive=True)),
+                                float(_number(req["pixel_noise"], "requirements.pixel_noise",
+                                              positive=True)))
+    return Site(str(site["name"]), float(ceiling), room, camera, requirements, keep_out,
+                tuple(families))
+
+
+def _only(block: dict, keys, where: str) -> None:
+    """Refuse a key the format does not have (a misspelling would otherwise be dropped)."""
+    unknown = sorted(str(k) for k in set(block) - set(keys))
+    if unknown:
+        raise SiteError(f"{where}.{unknown[0]}: unknown key (expected {', '.join(keys)})")
+
+
+def _check_floor(room, keep_out) -> None:
+    """The room must be a simple polygon with floor left once the keep-out areas are cut."""
+    from shapely.geometry import Polygon
+
+    area = Polygon(room)
+    if not area.is_valid or area.area <= 0:
+        raise SiteError("site.room: expected a simple polygon (its edges must not cross)")
+    for poly in keep_out:
+        area = area.difference(Polygon(poly).buffer(0))
+    if area.is_empty or area.area <= 1e-9 * Polygon(room).area:
+        raise SiteError("site.keep_out: the keep-out areas cover the whole room: no floor is "
+                        "left to plan for")
+
+
+def load_site(path) -> Site:
+    """Read and check a site file."""
+    import yaml
+
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise SiteError(f"{path}: cannot read ({e.strerror})") from None
+    except (UnicodeDecodeError, yaml.YAMLError):
+        raise SiteError(f"{path}: not a YAML text file") from None
+    return site_from_dict(doc, str(path))
