@@ -25,8 +25,9 @@ def test_the_papers_line_covers_under_half_of_its_room_with_one_command(tmp_path
                                     str(LAYOUTS / "paper-linear.deployment.yaml"),
                                     "--maps", str(maps)])
     assert res.exit_code == 1
-    assert "coverage 46.5% (required 95%)" in res.output and "p95 2.68 cm" in res.output
-    assert "does not meet the site (coverage 46.5% < 95%; p95 2.68 cm > 2 cm)" in res.output
+    assert "coverage 46.5% (required 95.0%)" in res.output and "p95 2.68 cm" in res.output
+    assert "does not meet the site (coverage 46.5% < 95.0%; p95 2.683 cm > 2.000 cm)" \
+        in res.output
     assert maps.is_file()
 
 
@@ -50,6 +51,11 @@ MALFORMED = {
                                    "families: [hexagonal]"),
     "wrong version": BASE.replace("version: 1", "version: 2"),
     "not a mapping": "- just\n- a list\n",
+    "p95 not a number": BASE.replace("max_error_p95: 0.02", "max_error_p95: .nan"),
+    "spot noise zero": BASE.replace("pixel_noise: 0.3", "pixel_noise: 0"),
+    "spot noise huge": BASE.replace("pixel_noise: 0.3", "pixel_noise: 1e300"),
+    "room of 5 cm": BASE.replace("[[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]",
+                                 "[[0, 0], [0.05, 0], [0.05, 0.05], [0, 0.05]]"),
 }
 
 
@@ -65,3 +71,13 @@ def test_a_malformed_site_is_one_line_exit_2_no_file(case, tmp_path):
         assert len(res.output.strip().splitlines()) == 1 and "Traceback" not in res.output
         assert str(site) in res.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site.yaml"]
+
+
+def test_plan_never_writes_over_its_site_or_its_maps(tmp_path):
+    site = tmp_path / "site.yaml"
+    site.write_text(BASE)
+    for out, why in ((site, "own input"), (tmp_path / "plan.png", "is a YAML file")):
+        res = CliRunner().invoke(main, ["plan", "--site", str(site), "--out", str(out), "-q"])
+        assert res.exit_code == 2 and why in res.output, res.output
+    assert site.read_text() == BASE and sorted(p.name for p in tmp_path.iterdir()) == \
+        ["site.yaml"]

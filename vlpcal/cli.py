@@ -861,7 +861,10 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         site = load_site(site_path)
     except SiteError as e:
         raise UserError(str(e)) from None
-    out = _output_file(out)
+    if not str(out).lower().endswith((".yaml", ".yml")):
+        raise UserError(f"{out}: the planned deployment is a YAML file (.yaml); its maps (.png) "
+                        "go beside it")
+    out = _output_file(out, inputs=(site_path,), beside=(".png",))
     say = (lambda m: None) if quiet else (lambda m: click.echo(m, err=True))
     result = plan_site(site, max_cameras, progress=lambda n: say(f"  tried {n} cameras"))
     r = site.requirements
@@ -917,6 +920,8 @@ def check(site_path, deployment_path, maps):
     Example: vlpcal check --site site.yaml -d layouts/paper-linear.deployment.yaml
     """
 
+    import numpy as np
+
     from .planning import Candidate, SiteError, evaluate, load_site
     from .reports import plan_maps
 
@@ -931,21 +936,39 @@ def check(site_path, deployment_path, maps):
         maps = _output_file(maps, inputs=(site_path, deployment_path))
     ev = evaluate(site, list(dep.cameras))
     r = site.requirements
-    hs = ", ".join(f"{h:g}" for h in sorted(set(r.heights)))
-    click.echo(f"{deployment_path}: {len(dep.cameras)} cameras judged against {site_path} "
-               f"({site.name}; LED at {hs} m, {r.min_cameras} cameras per point, spot noise "
-               f"{r.pixel_noise:g} px):")
+    levels = sorted(set(ev.points[:, 2].round(6)))
+    hs = ", ".join(f"{h:g}" for h in levels)
+    n = len(dep.cameras)
+    click.echo(f"{deployment_path}: {n} camera{'' if n == 1 else 's'} judged against "
+               f"{site_path} ({site.name}; LED at {hs} m, {r.min_cameras} cameras per point, "
+               f"spot noise {r.pixel_noise:g} px):")
+    model = site.camera
+    other = sorted({c.id for c in dep.cameras if (c.width, c.height) != (model.width,
+                                                                         model.height)})
+    if other:
+        click.echo(f"  note: {', '.join(other[:5])}{' …' if len(other) > 5 else ''} have another "
+                   "image size than the site's camera model; each camera is judged as it is")
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    xy = np.array([c.position[:2] for c in dep.cameras]).reshape(-1, 2)
+    outside = [c.id for c, inside in zip(dep.cameras, contains_xy(Polygon(site.room), xy[:, 0],
+                                                                   xy[:, 1])) if not inside]
+    high = [c.id for c in dep.cameras if not 0 < c.position[2] <= site.ceiling_height]
+    if outside or high:
+        click.echo(f"  note: camera(s) {', '.join((outside + high)[:5])} hang outside the "
+                   "room or above its ceiling; judged as they are")
     p95 = f"{ev.p95 * 100:.2f} cm" if math.isfinite(ev.p95) else "–"
     mean = f"{ev.mean * 100:.2f} cm" if math.isfinite(ev.mean) else "–"
-    click.echo(f"  coverage {ev.coverage:.1%} (required {r.coverage:.0%}): the share of the "
+    click.echo(f"  coverage {ev.coverage:.1%} (required {r.coverage:.1%}): the share of the "
                f"floor's sample points seen by {r.min_cameras} or more cameras")
     click.echo(f"  predicted error over those points: p95 {p95} (required ≤ "
-               f"{r.max_error_p95 * 100:g} cm), mean {mean}")
+               f"{r.max_error_p95 * 100:.3g} cm), mean {mean}")
     why = []
     if ev.coverage < r.coverage:
-        why.append(f"coverage {ev.coverage:.1%} < {r.coverage:.0%}")
+        why.append(f"coverage {ev.coverage:.1%} < {r.coverage:.1%}")
     if not ev.p95 <= r.max_error_p95:
-        why.append(f"p95 {p95} > {r.max_error_p95 * 100:g} cm")
+        why.append(f"p95 {ev.p95 * 100:.3f} cm > {r.max_error_p95 * 100:.3f} cm")
     if dep.room != site.room:
         click.echo("  note: the deployment's room differs from the site's; the site's is used")
     if maps is not None:

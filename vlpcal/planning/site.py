@@ -101,15 +101,18 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
                 any(f not in FAMILIES for f in families):
             raise SiteError(f"families: expected a list of {', '.join(FAMILIES)}, "
                             f"got {families!r}")
+        p95 = float(_number(req["max_error_p95"], "requirements.max_error_p95", positive=True))
+        noise = float(_number(req["pixel_noise"], "requirements.pixel_noise", positive=True))
+        if not 1e-6 <= noise <= min(cam["width"], cam["height"]):
+            raise SiteError(f"requirements.pixel_noise: expected a spot noise in px between "
+                            f"1e-6 and the image's size, got {noise:g}")
+        if not isinstance(site["name"], (str, int, float)):
+            raise SiteError(f"site.name: expected a name (text), got {site['name']!r}")
     except DeploymentError as e:
         raise SiteError(f"{source}: {e}") from None
     camera = Camera("model", cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"],
                     cam["cy"], cam["dist"], (0.0, 0.0, ceiling), NADIR)
-    requirements = Requirements(tuple(heights), min_cams, float(coverage),
-                                float(_number(req["max_error_p95"], "requirements.max_error_p95",
-                                              positive=True)),
-                                float(_number(req["pixel_noise"], "requirements.pixel_noise",
-                                              positive=True)))
+    requirements = Requirements(tuple(heights), min_cams, float(coverage), p95, noise)
     return Site(str(site["name"]), float(ceiling), room, camera, requirements, keep_out,
                 tuple(families))
 
@@ -133,6 +136,11 @@ def _check_floor(room, keep_out) -> None:
     if area.is_empty or area.area <= 1e-9 * Polygon(room).area:
         raise SiteError("site.keep_out: the keep-out areas cover the whole room: no floor is "
                         "left to plan for")
+    from .reference import SAMPLE_STEP
+
+    if area.area < SAMPLE_STEP ** 2:
+        raise SiteError(f"site.room: less floor than one cell of the reference model's "
+                        f"{SAMPLE_STEP * 100:g} cm grid (metres expected)")
 
 
 def load_site(path) -> Site:
