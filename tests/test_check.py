@@ -54,6 +54,8 @@ MALFORMED = {
     "p95 not a number": BASE.replace("max_error_p95: 0.02", "max_error_p95: .nan"),
     "spot noise zero": BASE.replace("pixel_noise: 0.3", "pixel_noise: 0"),
     "spot noise huge": BASE.replace("pixel_noise: 0.3", "pixel_noise: 1e300"),
+    "keep-out outside the room": BASE.replace(
+        "keep_out: []", "keep_out: [[[10, 10], [11, 10], [11, 11], [10, 11]]]"),
     "room of 5 cm": BASE.replace("[[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]",
                                  "[[0, 0], [0.05, 0], [0.05, 0.05], [0, 0.05]]"),
 }
