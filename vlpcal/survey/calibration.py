@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import Camera
+from .errors import SurveyError
 from .lens import (
     LENS_MODELS,
     MIN_POINTS_POSE,
@@ -25,11 +26,6 @@ from .lens import (
     project_with_jacobian,
     to_vector,
 )
-
-
-class SurveyError(ValueError):
-    """The survey cannot support what was asked (one line: which camera, what is missing)."""
-
 
 #: an observation further off than this many robust standard deviations is an outlier …
 OUTLIER_SIGMAS = 5.0
@@ -169,6 +165,16 @@ class LensChoice:
     scene_per_px: float = float("nan")  # m per px at the camera's points (distance / f)
 
 
+def _lens_choice(fit: CameraFit, camera_id: str, forced: bool, candidates: dict,
+                 X) -> LensChoice:
+    """The decision record of ``fit`` (on the points ``X`` it was given), with the scene's
+    metres per pixel at the camera's points for the report's words."""
+    cam = fit.camera
+    depth = cam.to_camera(np.asarray(X, float)[fit.keep])[:, 2]
+    return LensChoice(camera_id, fit.model, forced, candidates, fit.support.depth_rel_range,
+                      float(np.median(depth) / (0.5 * (cam.fx + cam.fy))))
+
+
 def _held_out_px(nominal, X, uv, model, fold, starts: dict):
     """Per point: reprojection error (px) when the point's fold was left out of the fit; and
     each fold's fitted camera. Each fold's fit starts from ``starts[fold]`` (the simpler
@@ -221,8 +227,7 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
     if not errs:  # not even the pose could be checked on held-out points: keep the pose
         fit = fits.get("pose") or fit_camera(nominal, X, uv, ids, "pose")
         cand.setdefault("pose", {"held_out_px": None, "supported": True, "reason": ""})
-        return fit, LensChoice(nominal.id, "pose", False, cand, fit.support.depth_rel_range,
-                               float("nan"))
+        return fit, _lens_choice(fit, nominal.id, False, cand, X)
     richest = fits[list(errs)[-1]]
     cap = _outlier_limit(richest.camera, richest.resid_px)
     loss = {m: np.fmin(e, cap) ** 2 for m, e in errs.items()}  # a failed prediction: the cap
@@ -239,10 +244,7 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
             cand[m]["excess_px2"], cand[m]["se_px2"] = float(d.mean()), se
         chosen = next(m for m in loss if cand[m]["excess_px2"] <= cand[m]["se_px2"])
     fit = fits[chosen]
-    depth = fit.camera.to_camera(X[fit.keep])[:, 2]
-    choice = LensChoice(nominal.id, chosen, False, cand, fit.support.depth_rel_range,
-                        float(np.median(depth) / (0.5 * (fit.camera.fx + fit.camera.fy))))
-    return fit, choice
+    return fit, _lens_choice(fit, nominal.id, False, cand, X)
 
 
 # -- every camera and position together -----------------------------------------------------
@@ -488,8 +490,11 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     uv = np.asarray(uv, float)
     if lens is None:
         lens = "full" if intrinsics else "pose"
+    estimated = isinstance(point_sigma, str)
+    if estimated and point_sigma != "auto":
+        raise ValueError(f"point_sigma: expected metres or 'auto', got {point_sigma!r}")
     extent = float(np.linalg.norm(np.ptp(X, axis=0))) if len(X) else 0.0
-    if not isinstance(point_sigma, str) and not (
+    if not estimated and not (
             1e-9 * extent < float(point_sigma) < extent):
         raise SurveyError(f"the stated precision of the survey positions, ±{point_sigma} m, is "
                           f"not between a billionth of the survey's extent ({extent:.3g} m) and "
@@ -519,10 +524,7 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
             if not fit.support.ok:
                 raise SurveyError(f"camera {cam.id}: cannot fit its lens ({model}): "
                                   f"{fit.support.reason} (or let --lens auto decide)")
-            depth = fit.camera.to_camera(X[seen][fit.keep])[:, 2]
-            choices.append(LensChoice(cam.id, model, True, {}, fit.support.depth_rel_range,
-                                      float(np.median(depth) / (0.5 * (fit.camera.fx
-                                                                       + fit.camera.fy)))))
+            choices.append(_lens_choice(fit, cam.id, True, {}, X[seen]))
         fits.append(fit)
         for p in fit.outliers:
             rejected[p] = rejected.get(p, 0) + 1
@@ -537,9 +539,6 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     models = [f.model for f in fits]
     pixel_sigma = float(np.sqrt(np.nanmean([f.resid_px ** 2 for f in fits])))
     pixel_sigma = float(np.fmax(pixel_sigma, 1e-6))
-    estimated = isinstance(point_sigma, str)
-    if estimated and point_sigma != "auto":
-        raise ValueError(f"point_sigma: expected metres or 'auto', got {point_sigma!r}")
     stated = None if estimated else float(point_sigma)
     point_sigma, pixel_sigma, cams, adjusted = estimate_precision(
         [f.camera for f in fits], X, obs, models, pixel_sigma, point_sigma=stated)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..geometry import Camera
+from .errors import SurveyError
 
 #: the nested lens models, simplest first
 LENS_MODELS = ("pose", "focal", "principal", "k1", "k2", "full")
@@ -143,9 +144,7 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv,
     return Support(ok, persp, rel, resid_px, rcond, reason)
 
 
-def _pose_error(cam: Camera):
-    from .calibration import SurveyError
-
+def _pose_error(cam: Camera) -> SurveyError:
     return SurveyError(f"camera {cam.id}: its survey points cannot fix its pose (they lie on "
                        "a line or at one place as it sees them): spread them over the floor "
                        "and at two or more heights")

@@ -95,12 +95,13 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
         point_sigma_estimated=cal.point_sigma_estimated,
         held_out_mean_m={k: v["mean"] for k, v in stats.items()})
     rows, words = [], []
-    for nom, fit, choice in zip(cams, cal.fits, cal.lens):
+    X, uv = np.asarray(X, float), np.asarray(uv, float)
+    for nom, fit, choice, uv_k in zip(cams, cal.fits, cal.lens, uv):
         c = fit.camera
         dR = rodrigues(c.rotation) @ rodrigues(nom.rotation).T
         angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
-        seen = np.isfinite(np.asarray(uv, float)[cams.index(nom)]).all(axis=1)
-        distance = float(np.median(np.linalg.norm(np.asarray(X, float)[seen] - c.center,
+        seen = np.isfinite(uv_k).all(axis=1)
+        distance = float(np.median(np.linalg.norm(X[seen] - c.center,
                                                   axis=1))) if seen.any() else float("nan")
         moved = float(np.linalg.norm(np.subtract(c.position, nom.position)))
         sentence = lens_sentence(choice, c, nom)

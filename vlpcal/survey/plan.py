@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .calibration import SurveyError
+from .errors import SurveyError
 from .lens import MIN_POINTS_POSE
 
 #: points a survey plan gives each camera by default: twice what its pose needs, so that a
