@@ -843,12 +843,14 @@ def _check_survey_positions(survey_path, dep, X, ids) -> None:
               help="Give up above this many cameras.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
 def plan(site_path, out, candidate, max_cameras, quiet):
-    """Plan a camera grid: the fewest cameras that meet the site's requirements.
+    """Plan a camera layout: the fewest cameras that meet the site's requirements.
 
-    Searches linear, triangular and square (two spacings) grids by camera count; for each
-    arrangement and yaw a CasADi/IPOPT optimiser sets spacing and offset on smooth
-    surrogates, and every result is judged by the reference model of docs/formats.md (coverage and
-    predicted 95th-percentile error). Prints the ranked candidates, writes the chosen one.
+    Every lattice of the site's grid families (square with two spacings, triangular, linear)
+    on the 10 cm mounting grid, both camera yaws, cameras clipped to the room; then, when the
+    site allows "free" layouts (the default), a local search from the best lattice removes
+    cameras and moves the others while the layout still meets the requirements. Every
+    candidate is judged by the reference model of docs/formats.md (coverage and predicted
+    95th-percentile error). Prints the ranked candidates, writes the chosen one.
 
     Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
     """
@@ -866,29 +868,38 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                         "go beside it")
     out = _output_file(out, inputs=(site_path,), beside=(".png",))
     say = (lambda m: None) if quiet else (lambda m: click.echo(m, err=True))
-    result = plan_site(site, max_cameras, progress=lambda n: say(f"  tried {n} cameras"))
+    result = plan_site(site, max_cameras, progress=say)
     r = site.requirements
     if not result.candidates:
         c = result.closest
-        best = (f"the best found: {c.count} cameras ({c.family}) cover "
+        best = (f"the densest lattice tried: {c.count} cameras cover "
                 f"{c.evaluation.coverage:.1%} with p95 {c.evaluation.p95 * 100:.2f} cm"
                 if c else "no layout could be evaluated")
         raise click.ClickException(
-            f"{site_path}: no grid of up to {max_cameras} cameras meets coverage "
+            f"{site_path}: no layout of up to {max_cameras} cameras meets coverage "
             f"{r.coverage:.0%} with p95 ≤ {r.max_error_p95 * 100:g} cm ({best}); relax the "
             "requirements, lower the LED heights or use a camera with more pixels")
     k = len(result.candidates)
-    click.echo(f"{site.name}: {k} layout{'s' if k > 1 else ''} of "
-               f"{result.candidates[0].count} cameras meet{'' if k > 1 else 's'} the "
-               "requirements "
-               f"({result.tried} arrangements optimised, {result.seconds:.1f} s)\n")
-    click.echo(f"{'#':>2s} {'family':10s} {'cams':>4s} {'grid':>6s} {'spacing m':>12s} "
+    click.echo(f"{site.name}: {result.candidates[0].count} cameras meet the requirements "
+               f"({k} candidate{'s' if k > 1 else ''}; {result.tried} layouts judged, "
+               f"{result.seconds:.1f} s)\n")
+    click.echo(f"{'#':>2s} {'layout':10s} {'cams':>4s} {'grid':>6s} {'spacing m':>12s} "
                f"{'yaw':>4s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
     for k, c in enumerate(result.candidates, start=1):
-        sp = "×".join(f"{v:.2f}" for v in c.spacing)
-        click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {c.nx:>3d}×{c.ny:<2d} {sp:>12s} "
-                   f"{round(math.degrees(c.yaw)):4d} {c.evaluation.coverage:8.1%} "
-                   f"{c.evaluation.mean * 100:8.2f} {c.evaluation.p95 * 100:7.2f}")
+        if c.family == "free":
+            grid, sp = "–", "–"
+            yaw = "/".join(sorted({str(round(math.degrees(math.atan2(cam.R[0][1],
+                                                                     cam.R[0][0])))) % 360
+                                   for cam in c.cameras}, key=int))
+        else:
+            grid = f"{c.nx}×{c.ny}"
+            sp = "×".join(f"{v:.2f}" for v in c.spacing)
+            yaw = str(round(math.degrees(c.yaw)))
+        click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>4s} "
+                   f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
+                   f"{c.evaluation.p95 * 100:7.2f}")
+    for family, why in result.missing.items():
+        click.echo(f"   {family:10s} {why}")
     if candidate > len(result.candidates):
         raise UserError(f"--candidate {candidate}: the plan has {k} candidate"
                         f"{'s' if k > 1 else ''}, numbered from 1")

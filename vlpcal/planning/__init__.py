@@ -2,25 +2,23 @@
 
 - :mod:`.site`: the site file (room, camera model, requirements), read strictly;
 - :mod:`.reference`: the reference model (DESIGN.md) that judges every layout;
-- :mod:`.families`: the grid families, their candidates and the closed-form bounds;
-- :mod:`.exhaustive`: the exhaustive search, the baseline;
-- :mod:`.optimiser`: the CasADi/IPOPT optimiser on smooth surrogates;
+- :mod:`.families`: the grid families as cameras, the footprint and the mounting grid;
+- :mod:`.nadir`: the reference model in closed form for level cameras, batched;
+- :mod:`.lattice`: the exhaustive search over a family's lattices clipped to the room;
+- :mod:`.free`: the local search beyond lattices (remove cameras, repair by moves);
 - :mod:`.plan`: the whole plan, as ``vlpcal plan`` runs it, and its deployment.
 """
 
-from .exhaustive import exhaustive_search
 from .families import (
+    MOUNT_STEP,
     Candidate,
-    arrangements,
+    ceiling_cameras,
     footprint,
     grid_cameras,
-    lower_bound,
-    mountable,
-    promising,
+    mount_step,
     rank_key,
-    shapes,
 )
-from .optimiser import PENALTY, optimise_layout
+from .lattice import Mounting, SearchResult, lattice_search
 from .plan import Plan, plan_site, planned_deployment
 from .reference import MARGIN_PX, SAMPLE_STEP, Evaluation, evaluate, sample_points
 from .site import (
@@ -38,9 +36,9 @@ from .site import (
 )
 
 __all__ = [
-    "CAMERA_KEYS", "FAMILIES", "FORMAT", "MARGIN_PX", "PENALTY", "REQUIREMENT_KEYS",
-    "SAMPLE_STEP", "SITE_KEYS", "VERSION", "Candidate", "Evaluation", "Plan", "Requirements",
-    "Site", "SiteError", "arrangements", "evaluate", "exhaustive_search", "footprint",
-    "grid_cameras", "load_site", "lower_bound", "mountable", "optimise_layout", "plan_site",
-    "planned_deployment", "promising", "rank_key", "sample_points", "shapes", "site_from_dict",
+    "CAMERA_KEYS", "FAMILIES", "FORMAT", "MARGIN_PX", "MOUNT_STEP", "REQUIREMENT_KEYS",
+    "SAMPLE_STEP", "SITE_KEYS", "VERSION", "Candidate", "Evaluation", "Mounting", "Plan",
+    "Requirements", "SearchResult", "Site", "SiteError", "ceiling_cameras", "evaluate",
+    "footprint", "grid_cameras", "lattice_search", "load_site", "mount_step", "plan_site",
+    "planned_deployment", "rank_key", "sample_points", "site_from_dict",
 ]

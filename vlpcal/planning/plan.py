@@ -1,65 +1,154 @@
-"""The whole plan, as ``vlpcal plan`` runs it: camera counts from the lower bound up, every
-family and arrangement optimised, the first count with a passing layout wins."""
+"""The whole plan, as ``vlpcal plan`` runs it: every lattice of the site's families on the
+mounting grid, then a local search beyond lattices from the best one; every exported layout
+judged by the reference model itself."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+import numpy as np
 
 from ..deployment import Deployment, provenance
-from .families import Candidate, arrangements, lower_bound, rank_key
-from .optimiser import optimise_layout
+from .families import Candidate, ceiling_cameras, mount_step, rank_key
+from .free import fewer_cameras, snap
+from .lattice import lattice_search
+from .nadir import YAWS, NadirModel
+from .reference import evaluate
 from .site import Site
+
+#: the searches' coarse models keep every n-th sample point along each axis (the exact model
+#: judges after): the lattice screen, the local search
+SCREEN_EVERY, SEARCH_EVERY = 2, 3
 
 
 @dataclass
 class Plan:
-    """The result of planning: ranked candidates at the fewest cameras that meet the site's
-    requirements (empty when none up to ``max_cameras`` does), and the best seen otherwise."""
+    """The result of planning: the layouts that meet the site's requirements, fewest cameras
+    first (empty when none does), and what the search did."""
 
-    candidates: list  # Candidate, best p95 first
-    tried: int  # arrangements optimised
+    candidates: list  # Candidate, by rank_key
+    tried: int  # layouts judged
     seconds: float
-    closest: Candidate | None = None  # when nothing meets: the best coverage seen
+    closest: Candidate | None = None  # when nothing meets: the densest lattice tried
+    missing: dict = field(default_factory=dict)  # family → why it has no candidate
 
 
-def plan_site(site: Site, max_cameras: int = 60, starts: int = 3, progress=None) -> Plan:
-    """The fewest cameras that meet the requirements: for each count from a lower bound up, every
-    family and arrangement (nx × ny) and both yaws, spacing and offset by
-    :func:`optimise_layout`, each result judged by :func:`evaluate`; the first count with a
-    passing layout ends the search and its candidates are ranked by predicted p95."""
+def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
+    """The fewest cameras that meet the requirements.
+
+    1. Each grid family of the site (square: a × b, a ≠ b; triangular; linear) by the
+       exhaustive lattice search on the mounting grid (:func:`.lattice.lattice_search`), both
+       yaws, cameras clipped to the room; a family after the first only looks for layouts
+       with no more cameras than the best so far.
+    2. ``free`` (when the site allows it): from the best lattice, :func:`.free.fewer_cameras`
+       removes cameras and repairs the layout by moves on the mounting grid.
+    3. Every candidate on the mounting grid (a triangular lattice's cameras snapped to it and
+       repaired if snapping broke it) and judged by :func:`evaluate`, the reference model.
+    """
     import time
 
-
     t0 = time.perf_counter()
-    tried, closest = 0, None
-    for n in range(lower_bound(site), max_cameras + 1):
-        found = []
-        for family, nx, ny, yaw in arrangements(site, n):
-            tried += 1
-            c = optimise_layout(site, family, nx, ny, yaw, starts)
-            if c is None:
-                continue
-            if c.evaluation.meets:
-                found.append(c)
-            elif closest is None or rank_key(c) < rank_key(closest):
-                closest = c
-        if progress and next(arrangements(site, n), None):
-            progress(n)
-        if found:
-            return Plan(sorted(found, key=rank_key), tried, time.perf_counter() - t0)
-    return Plan([], tried, time.perf_counter() - t0, closest)
+    say = progress or (lambda m: None)
+    step = mount_step(site)
+    model = NadirModel(site)
+    screen = NadirModel(site, every=SCREEN_EVERY)
+    grids = [f for f in ("square", "triangular", "linear") if f in site.families]
+    if "free" in site.families and "square" not in grids:
+        grids.insert(0, "square")  # the local search starts from a lattice
+    found, missing, tried, best_n = {}, {}, 0, max_cameras
+    for family in grids:
+        r = lattice_search(site, (family,), step, model, fewest=best_n, screen=screen)
+        tried += r.judged
+        if r.best is None:
+            missing[family] = f"no {family} lattice of ≤ {best_n} cameras meets the requirements"
+            say(f"  {family}: none of ≤ {best_n} cameras meets ({r.seconds:.1f} s)")
+            continue
+        cand = _on_grid(site, model, step, r.best)
+        if cand is None:
+            missing[family] = "its best lattice fails once snapped to the mounting grid"
+            continue
+        found[family] = cand
+        best_n = min(best_n, cand.count)
+        say(f"  {family}: {cand.count} cameras ({r.seconds:.1f} s)")
+    if "free" in site.families and found:
+        seed = min(found.values(), key=rank_key)
+        t1 = time.perf_counter()
+        search = NadirModel(site, every=SEARCH_EVERY)
+        cams = fewer_cameras(search, model, step, [c.position[:2] for c in seed.cameras],
+                             [_yaw(c) for c in seed.cameras])
+        ev = evaluate(site, cams)
+        if ev.meets and len(cams) < seed.count:
+            found["free"] = Candidate("free", 0, 0, (), tuple(cams[0].position[:2]), 0.0,
+                                      cams, ev)
+            say(f"  free: {len(cams)} cameras ({time.perf_counter() - t1:.1f} s)")
+        else:
+            missing["free"] = f"no layout beyond lattices with fewer than {seed.count} cameras"
+            say(f"  free: none below {seed.count} cameras ({time.perf_counter() - t1:.1f} s)")
+    candidates = sorted((c for f, c in found.items() if f in site.families), key=rank_key)
+    closest = None
+    if not candidates:
+        closest = _densest(site, step)
+    return Plan(candidates, tried, time.perf_counter() - t0, closest,
+                {f: m for f, m in missing.items() if f in site.families})
+
+
+def _yaw(camera) -> float:
+    """A level camera's yaw about the vertical, from its image x-axis: the nearest of the
+    yaws the searches use (0° or 90°; an image turned by 180° sees the same)."""
+    right = camera.R[0]  # image-right in the world
+    a = float(np.arctan2(right[1], right[0])) % np.pi
+    return min(YAWS, key=lambda y: min(abs(a - y), np.pi - abs(a - y)))
+
+
+def _on_grid(site: Site, model: NadirModel, step: float, cand: Candidate):
+    """A lattice's layout on the mounting grid, judged by :func:`evaluate`: as it is when its
+    cameras are on the grid already, else snapped (and repaired by the local search's moves
+    if snapping broke it); None if it cannot be made to meet."""
+    xy = np.array([c.position[:2] for c in cand.cameras])
+    yaws = [_yaw(c) for c in cand.cameras]
+    lay = snap(model, step, xy, yaws)
+    if lay is None:
+        return None
+    cams = lay.cameras()
+    if np.allclose([c.position[:2] for c in cams], xy, atol=1e-9):
+        return cand
+    ev = evaluate(site, cams)
+    return Candidate(cand.family, cand.nx, cand.ny, cand.spacing, tuple(cams[0].position[:2]),
+                     cand.yaw, cams, ev) if ev.meets else None
+
+
+def _densest(site: Site, step: float) -> Candidate:
+    """When nothing meets: the square lattice at the smallest spacings searched, judged (the
+    closest a lattice comes to the coverage)."""
+    from .families import footprint
+    from .lattice import SPACING_RANGE, Mounting
+
+    fw, fd = footprint(site)
+    a, b = max(step, SPACING_RANGE[0] * fw), max(step, SPACING_RANGE[0] * fd)
+    mount = Mounting(site, step)
+    xs = np.arange(mount.x0, mount.x1 + 1e-9, a)
+    ys = np.arange(mount.y0, mount.y1 + 1e-9, b)
+    X, Y = np.meshgrid(xs, ys)
+    keep = mount(X, Y)
+    xy = np.c_[X[keep], Y[keep]]
+    cams = ceiling_cameras(site, xy, [0.0] * len(xy))
+    return Candidate("square", len(xs), len(ys), (a, b), tuple(xy[0]), 0.0, cams,
+                     evaluate(site, cams))
 
 
 def planned_deployment(site: Site, cand: Candidate, rank: int = 1, source: str = "") -> Deployment:
     """The deployment file of a planned layout, with its predicted figures in the provenance
     (so that the survey can later report planned against achieved)."""
     ev, r = cand.evaluation, site.requirements
+    layout = {"family": cand.family, "cameras": cand.count, "rank": rank,
+              "mounting_grid_m": float(mount_step(site))}
+    if cand.family != "free":
+        layout.update({"grid": [cand.nx, cand.ny],
+                       "spacing_m": [float(v) for v in cand.spacing],
+                       "origin_m": [float(v) for v in cand.origin],
+                       "yaw_rad": float(cand.yaw)})
     prov = provenance(
-        "vlpcal plan", **{"from": {"site": str(source)}},
-        plan={"family": cand.family, "grid": [cand.nx, cand.ny],
-              "spacing_m": [float(v) for v in cand.spacing],
-              "origin_m": [float(v) for v in cand.origin],
-              "yaw_rad": float(cand.yaw), "rank": rank},
+        "vlpcal plan", **{"from": {"site": str(source)}}, plan=layout,
         predicted={"coverage": ev.coverage, "mean_error_m": ev.mean, "p95_error_m": ev.p95,
                    "model": "reference model (docs/formats.md)", "pixel_noise_px": r.pixel_noise})
     return Deployment(site.name, site.ceiling_height, site.room, cand.cameras, site.keep_out,

@@ -22,10 +22,10 @@ SAMPLE_STEP = 0.10
 MARGIN_PX = 2.0
 
 
-def sample_points(site: Site, step: float = SAMPLE_STEP) -> np.ndarray:
-    """The reference model's sample points ``N×3``: the room minus keep-out areas on a square
-    grid (``step`` ≤ 10 cm, cell centres), at the lowest, middle (halfway between the lowest
-    and the highest) and highest LED height."""
+def sample_grid(site: Site, step: float = SAMPLE_STEP):
+    """The reference model's floor grid: cell centres ``xs``, ``ys`` (``step`` ≤ 10 cm) over the
+    room's bounding box and the mask ``inside`` (len(ys) × len(xs)) of the cells in the room
+    minus keep-out areas."""
     from shapely import contains_xy
     from shapely.geometry import Polygon
 
@@ -33,12 +33,25 @@ def sample_points(site: Site, step: float = SAMPLE_STEP) -> np.ndarray:
     for poly in site.keep_out:
         area = area.difference(Polygon(poly))
     x0, y0, x1, y1 = area.bounds
-    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
-    xy = np.c_[gx.ravel(), gy.ravel()]
-    xy = xy[contains_xy(area, xy[:, 0], xy[:, 1])]
+    xs, ys = np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step)
+    gx, gy = np.meshgrid(xs, ys)
+    return xs, ys, contains_xy(area, gx, gy)
+
+
+def sample_levels(site: Site) -> list[float]:
+    """The LED heights the model samples: the lowest, halfway and highest."""
     hs = site.requirements.heights
-    levels = sorted({min(hs), (min(hs) + max(hs)) / 2, max(hs)})  # lowest, halfway, highest
-    return np.concatenate([np.c_[xy, np.full(len(xy), h)] for h in levels])
+    return sorted({min(hs), (min(hs) + max(hs)) / 2, max(hs)})
+
+
+def sample_points(site: Site, step: float = SAMPLE_STEP) -> np.ndarray:
+    """The reference model's sample points ``N×3``: the room minus keep-out areas on a square
+    grid (``step`` ≤ 10 cm, cell centres), at the lowest, middle (halfway between the lowest
+    and the highest) and highest LED height, level after level."""
+    xs, ys, inside = sample_grid(site, step)
+    gx, gy = np.meshgrid(xs, ys)
+    xy = np.c_[gx[inside], gy[inside]]
+    return np.concatenate([np.c_[xy, np.full(len(xy), h)] for h in sample_levels(site)])
 
 
 @dataclass

@@ -10,7 +10,7 @@ from ..deployment import DeploymentError, _mapping, _number, _polygon, check_int
 from ..geometry import NADIR, Camera
 
 FORMAT, VERSION = "vlpcal-site", 1
-FAMILIES = ("linear", "triangular", "square")
+FAMILIES = ("linear", "triangular", "square", "free")
 REQUIREMENT_KEYS = ("heights", "min_cameras", "coverage", "max_error_p95", "pixel_noise")
 CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
 SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
