@@ -144,8 +144,8 @@ def planned_deployment(site: Site, cand: Candidate, rank: int = 1, source: str =
               "mounting_grid_m": float(mount_step(site))}
     if cand.family != "free":
         layout.update({"grid": [cand.nx, cand.ny],
-                       "spacing_m": [float(v) for v in cand.spacing],
-                       "origin_m": [float(v) for v in cand.origin],
+                       "spacing_m": [round(float(v), 6) for v in cand.spacing],
+                       "origin_m": [round(float(v), 6) for v in cand.origin],
                        "yaw_rad": float(cand.yaw)})
     prov = provenance(
         "vlpcal plan", **{"from": {"site": str(source)}}, plan=layout,
