@@ -319,6 +319,14 @@ def triangulate_cv2(cam1: Camera, cam2: Camera, uv1, uv2) -> np.ndarray:
     return (H[:3] / H[3]).T
 
 
+def trace_adjugate_det(a00, a01, a02, a11, a12, a22):
+    """trace(adj F) and det F of symmetric 3×3 matrices given by their upper triangles (arrays
+    of any shape): trace(F⁻¹) = trace(adj F) / det F without forming the inverse."""
+    c00, c01 = a11 * a22 - a12 * a12, a01 * a22 - a02 * a12
+    det = a00 * c00 - a01 * c01 + a02 * (a01 * a12 - a02 * a11)
+    return c00 + (a00 * a22 - a02 * a02) + (a00 * a11 - a01 * a01), det
+
+
 def predicted_rms_error(cameras: list[Camera], X, used, pixel_noise: float) -> np.ndarray:
     """Predicted RMS 3D error (m) of points ``X`` (N×3) solved from the observations ``used``
     (C×N): ``sqrt(trace(F⁻¹))`` with ``F = Σᵢ JᵢᵀJᵢ / σ²`` over the cameras used, Jᵢ the 2×3
@@ -335,13 +343,8 @@ def predicted_rms_error(cameras: list[Camera], X, used, pixel_noise: float) -> n
         for k, (i, j) in enumerate(pairs):
             F[:, k] += np.where(w, (J[:, :, i] * J[:, :, j]).sum(axis=1), 0.0)
     F /= pixel_noise ** 2
-    A = _full(F)
-    a00, a01, a02 = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
-    a11, a12, a22 = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
-    det = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a02 * a12) \
-        + a02 * (a01 * a12 - a02 * a11)
-    trace_inv = ((a11 * a22 - a12 * a12) + (a00 * a22 - a02 * a02) + (a00 * a11 - a01 * a01))
+    adj_trace, det = trace_adjugate_det(*F.T)
     with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.sqrt(trace_inv / det)
+        out = np.sqrt(adj_trace / det)
     out[(np.asarray(used, bool).sum(axis=0) < 2) | ~np.isfinite(X).all(axis=1)] = np.nan
     return out

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from ..triangulation import trace_adjugate_det
 from .families import ceiling_cameras
 from .nadir import YAWS, NadirModel
 
@@ -91,13 +92,10 @@ class Layout:
     def deficits(self, totals) -> np.ndarray:
         """:meth:`deficit` of a batch of sums, B × 7 × (L·P) → B."""
         m = self.model
-        a00, a01, a02, a11, a12, a22, count = np.moveaxis(totals, 1, 0)
+        *F, count = np.moveaxis(totals, 1, 0)
         ok = count >= m.k - 0.5
         n = np.count_nonzero(ok, axis=-1)
-        c11, c12 = a11 * a22 - a12 * a12, a01 * a22 - a02 * a12
-        c22 = a01 * a12 - a02 * a11
-        det = a00 * c11 - a01 * c12 + a02 * c22
-        tr = c11 + (a00 * a22 - a02 * a02) + (a00 * a11 - a01 * a01)
+        tr, det = trace_adjugate_det(*F)
         bad = np.count_nonzero(ok & (tr > m.bound ** 2 * det), axis=-1)
         allowed = np.where(n > 0, n - 1 - np.ceil(0.95 * (n - 1) - 1e-9), 0)
         short = max(0, math.ceil(m.need * m.n_points - 1e-9)) - n

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..triangulation import trace_adjugate_det
 from .families import ceiling_cameras
 from .reference import MARGIN_PX, SAMPLE_STEP, sample_grid, sample_levels
 from .site import Site
@@ -167,10 +168,7 @@ class NadirModel:
 
     def judge(self, F, counts) -> Verdict:
         """Coverage, p95 and the verdict: F (L × 6 × B × Py × Px), counts (L × B × Py × Px)."""
-        a00, a01, a02, a11, a12, a22 = np.moveaxis(F, 1, 0)
-        det = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a02 * a12) \
-            + a02 * (a01 * a12 - a02 * a11)
-        tr = (a11 * a22 - a12 * a12) + (a00 * a22 - a02 * a02) + (a00 * a11 - a01 * a01)
+        tr, det = trace_adjugate_det(*np.moveaxis(F, 1, 0))
         ok = (counts >= self.k - 0.5) & self.inside
         with np.errstate(invalid="ignore", divide="ignore"):
             err = np.where(ok, np.sqrt(tr / det), np.inf)
