@@ -134,7 +134,9 @@ def test_closed_form_model_is_the_reference_model():
     for _ in range(4):
         xy = rng.uniform([0, 0], [5, 4], (12, 2))
         yaws = rng.choice(YAWS, 12)
-        ev = evaluate(L_SITE, _level_cameras(L_SITE, xy, yaws))
+        cams = _level_cameras(L_SITE, xy, yaws)
+        xy = np.array([c.position[:2] for c in cams])
+        ev = evaluate(L_SITE, cams)
         total = sum(m.camera_fisher(x, y, yaw) for (x, y), yaw in zip(xy, yaws))
         L = len(m.levels)
         F = total[:6].reshape(6, L, -1)
@@ -224,5 +226,39 @@ def test_plan_command_exports_a_deployment_that_meets_the_site(tmp_path):
     res = CliRunner().invoke(main, ["plan", "--site", str(tmp_path / "hard.yaml"), "--out",
                                     str(bad), "--max-cameras", "5", "-q"])
     assert res.exit_code == 1 and "no layout of up to 5 cameras meets" in res.output
-    assert "the densest lattice tried" in res.output and "p95" in res.output
+    assert "a dense lattice of" in res.output and "p95" in res.output
     assert not bad.exists()
+
+
+def test_plan_command_prints_and_exports_a_free_layout(tmp_path):
+    """The table of a plan whose best layout is beyond lattices (a room with a keep-out
+    corner): every candidate listed, the free one first and exported; its cameras half a
+    mounting step inside the walls; vlpcal check accepts the file."""
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main
+
+    doc = {"format": "vlpcal-site", "version": 1,
+           "site": {"name": "corner", "ceiling_height": 2.5,
+                    "room": [[0, 0], [4, 0], [4, 3], [0, 3]],
+                    "keep_out": [[[2.5, 0], [4, 0], [4, 1], [2.5, 1]]]},
+           "camera": SITE["camera"],
+           "requirements": {"heights": [0.0, 0.35], "min_cameras": 2, "coverage": 0.95,
+                            "max_error_p95": 0.02, "pixel_noise": 0.3}}
+    site_path = tmp_path / "site.yaml"
+    site_path.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "planned.yaml"
+    res = CliRunner().invoke(main, ["plan", "--site", str(site_path), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    rows = [line.split() for line in res.output.splitlines() if line[:2].strip().isdigit()]
+    assert rows[0][1] == "free" and {r[1] for r in rows} >= {"free", "square"}
+    assert int(rows[0][2]) < min(int(r[2]) for r in rows[1:])
+    from vlpcal import deployment
+
+    dep = deployment.load(out)
+    xy = np.array([c.position[:2] for c in dep.cameras])
+    assert len(xy) == int(rows[0][2])
+    assert (xy >= 0.05 - 1e-9).all() and (xy <= np.array([4, 3]) - 0.05 + 1e-9).all()
+    assert np.allclose(xy * 10, np.rint(xy * 10))  # on the 10 cm grid, no float noise
+    assert CliRunner().invoke(main, ["check", "--site", str(site_path), "-d",
+                                     str(out)]).exit_code == 0

@@ -85,6 +85,14 @@ def _output_file(path, inputs=(), beside=()):
     return out
 
 
+def _mount(site) -> str:
+    """The site's mounting grid, said in the unit a person would use."""
+    from .planning import mount_step
+
+    step = mount_step(site)
+    return f"{step * 100:.3g} cm" if step >= 0.01 else f"{step * 1000:.3g} mm"
+
+
 def _floats(text: str, option: str) -> list[float]:
     try:
         return [float(t) for t in text.split(",") if t.strip()]
@@ -872,7 +880,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     r = site.requirements
     if not result.candidates:
         c = result.closest
-        best = (f"the densest lattice tried: {c.count} cameras cover "
+        best = (f"for comparison, a dense lattice of {c.count} cameras covers "
                 f"{c.evaluation.coverage:.1%} with p95 {c.evaluation.p95 * 100:.2f} cm"
                 if c else "no layout could be evaluated")
         raise click.ClickException(
@@ -883,29 +891,31 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     click.echo(f"{site.name}: {result.candidates[0].count} cameras meet the requirements "
                f"({k} candidate{'s' if k > 1 else ''}; {result.tried} layouts judged, "
                f"{result.seconds:.1f} s)\n")
-    click.echo(f"{'#':>2s} {'layout':10s} {'cams':>4s} {'grid':>6s} {'spacing m':>12s} "
-               f"{'yaw':>4s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
+    click.echo(f"{'#':>2s} {'layout':10s} {'cams':>4s} {'x×y':>6s} {'spacing m':>12s} "
+               f"{'yaw':>5s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
     for k, c in enumerate(result.candidates, start=1):
-        if c.family == "free":
-            grid, sp = "–", "–"
-            yaw = "/".join(sorted({str(round(math.degrees(math.atan2(cam.R[0][1],
-                                                                     cam.R[0][0])))) % 360
-                                   for cam in c.cameras}, key=int))
-        else:
-            grid = f"{c.nx}×{c.ny}"
-            sp = "×".join(f"{v:.2f}" for v in c.spacing)
-            yaw = str(round(math.degrees(c.yaw)))
-        click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>4s} "
+        xs = {round(cam.position[0], 6) for cam in c.cameras}
+        ys = {round(cam.position[1], 6) for cam in c.cameras}
+        grid = f"{len(xs)}×{len(ys)}"
+        sp = "×".join(f"{v:.2f}" for v in c.spacing) if c.spacing else "–"
+        yaw = "/".join(str(a) for a in sorted({round(math.degrees(math.atan2(
+            cam.R[0][1], cam.R[0][0]))) % 180 for cam in c.cameras}))
+        click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>5s} "
                    f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
                    f"{c.evaluation.p95 * 100:7.2f}")
     for family, why in result.missing.items():
         click.echo(f"   {family:10s} {why}")
+    click.echo(f"x×y: distinct camera positions along x and y (cameras on a {_mount(site)} "
+               "grid from the room's lower-left corner, half a step from the walls); yaw: "
+               f"degrees from the room's x axis to each image's {site.camera.width} px side "
+               "(the maps draw it)")
     if candidate > len(result.candidates):
         raise UserError(f"--candidate {candidate}: the plan has {k} candidate"
                         f"{'s' if k > 1 else ''}, numbered from 1")
     chosen = result.candidates[candidate - 1]
     dep = planned_deployment(site, chosen, candidate, site_path)
     save(dep, out, header=f"Planned by vlpcal plan from {site_path}: candidate {candidate}.")
+    say("  drawing the maps…")
     plan_maps(out.with_suffix(".png"), site, chosen)
     click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
 

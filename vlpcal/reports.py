@@ -132,8 +132,10 @@ def _lens_panel(ax, rows) -> None:
 
 def plan_maps(path, site, cand) -> None:
     """Per LED height: how many cameras see each point (discrete colours, one scale for every
-    height) and the predicted RMS error (one scale, its cut shown), the points that fail the
-    requirement outlined in red, the cameras with their ids; axes in metres."""
+    height) and the predicted RMS error (one scale that includes the requirement, its cut
+    shown), the points that fail the requirement outlined in red, the cameras with their ids
+    and the direction of each image's long side; axes in metres."""
+    from matplotlib import patheffects
     from matplotlib.colors import BoundaryNorm
 
     plt = _pyplot()
@@ -144,41 +146,59 @@ def plan_maps(path, site, cand) -> None:
                              constrained_layout=True)
     room = np.array(list(site.room) + [site.room[0]])
     finite = np.isfinite(ev.error)
-    top = float(np.percentile(ev.error[finite], 99) * 100) if finite.any() else 1.0
+    need = r.max_error_p95 * 100
+    top = max(float(np.percentile(ev.error[finite], 99) * 100) if finite.any() else need,
+              1.25 * need)
     cut = finite.any() and float(np.nanmax(ev.error) * 100) > top
     most = int(max(ev.views.max(initial=0), r.min_cameras))
     counts = plt.get_cmap("viridis", most + 1)
     norm = BoundaryNorm(np.arange(-0.5, most + 1.5), most + 1)
-    fails = (ev.views < r.min_cameras) | ~(ev.error <= r.max_error_p95)
+    too_few = ev.views < r.min_cameras
+    fails = too_few | ~(ev.error <= r.max_error_p95)
+    size = np.ptp(room, axis=0).max()
+    halo = [patheffects.withStroke(linewidth=2, foreground="white")]
     for col, h in enumerate(levels):
         sel = np.isclose(ev.points[:, 2], h)
+        x, y = ev.points[sel, 0], ev.points[sel, 1]
+        xs, ys = np.unique(x.round(9)), np.unique(y.round(9))
+        ix, iy = np.searchsorted(xs, x.round(9)), np.searchsorted(ys, y.round(9))
+        step = float(np.min(np.diff(xs))) if len(xs) > 1 else 0.1
+        ex = np.r_[xs - step / 2, xs[-1] + step / 2]
+        ey = np.r_[ys - step / 2, ys[-1] + step / 2]
         for row in (0, 1):
             ax = axes[row][col]
-            x, y = ev.points[sel, 0], ev.points[sel, 1]
+            grid = np.full((len(ys), len(xs)), np.nan)
             if row == 0:
-                sc = ax.scatter(x, y, c=ev.views[sel], cmap=counts, norm=norm, s=6, marker="s")
+                grid[iy, ix] = ev.views[sel]
+                sc = ax.pcolormesh(ex, ey, grid, cmap=counts, norm=norm)
                 title = f"h = {h:g} m: cameras that see the point (need {r.min_cameras})"
-                bar = fig.colorbar(sc, ax=ax, shrink=0.7, ticks=range(most + 1))
+                fig.colorbar(sc, ax=ax, shrink=0.7, ticks=range(most + 1))
+                bad = too_few[sel]
             else:
-                sc = ax.scatter(x, y, c=ev.error[sel] * 100, cmap="magma_r", s=6, marker="s",
-                                vmin=0, vmax=top)
-                title = (f"h = {h:g} m: predicted RMS 3D error, cm (need p95 ≤ "
-                         f"{r.max_error_p95 * 100:g})")
+                grid[iy, ix] = ev.error[sel] * 100
+                sc = ax.pcolormesh(ex, ey, grid, cmap="magma_r", vmin=0, vmax=top)
+                title = (f"h = {h:g} m: predicted RMS 3D error, cm (need p95 ≤ {need:g})")
                 bar = fig.colorbar(sc, ax=ax, shrink=0.7, extend="max" if cut else "neither")
-                if cut:
-                    bar.set_label(f"cut at {top:.2g} cm (99th percentile)", fontsize=7)
-            bad = fails[sel]
-            if row == 1 and bad.any():
+                bar.ax.axhline(need, color="red", lw=1)
+                bar.set_label(f"red line: the {need:g} cm requirement"
+                              + (f"; cut at {top:.2g} cm" if cut else ""), fontsize=7)
+                bad = fails[sel]
+            if bad.any():
                 ax.scatter(x[bad], y[bad], s=7, marker="s", facecolors="none",
                            edgecolors="red", linewidths=0.4)
             ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
             for poly in site.keep_out:
                 ax.fill(*np.array(poly).T, color="0.85", ec="0.5")
             for c in cand.cameras:
-                ax.plot(*c.position[:2], "c^", ms=6, mec="k")
-                ax.annotate(c.id, c.position[:2], fontsize=6, xytext=(3, 3),
-                            textcoords="offset points")
+                px, py = c.position[:2]
+                d = np.asarray(c.R[0][:2], float)  # the image's x axis (its long side)
+                d = d / (np.hypot(*d) or 1.0) * 0.04 * size
+                ax.plot([px - d[0], px + d[0]], [py - d[1], py + d[1]], "k-", lw=1.2)
+                ax.plot(px, py, "c^", ms=6, mec="k")
+                ax.annotate(c.id, (px, py), fontsize=7, xytext=(3, 3),
+                            textcoords="offset points", path_effects=halo)
             ax.set_aspect("equal")
+            ax.margins(0.04)
             ax.set_xlabel("x (m)")
             ax.set_ylabel("y (m)")
             ax.set_title(title, fontsize=8)
@@ -186,7 +206,7 @@ def plan_maps(path, site, cand) -> None:
     fig.suptitle(f"{site.name}: {cand.count} cameras, {cand.family} — coverage "
                  f"{ev.coverage:.1%} (need {r.coverage:.0%}), predicted p95 {p95} over the "
                  "covered points\nred outline: a point that fails the requirement (too few "
-                 "cameras, or too large an error)",
+                 "cameras, or too large an error); black bar: each image's long side",
                  fontsize=10)
     save_figure(fig, path, dpi=110)
 

@@ -48,8 +48,9 @@ def ceiling_cameras(site: Site, xy, yaws, drop: float = 0.0) -> list[Camera]:
         # the nadir camera turned by yaw about the world's vertical:
         # x_cam = R_nadir · Rz(θ)ᵀ · (X − C), so image-right points along Rz(θ)·x
         rvec = rotation_vector(rodrigues(NADIR) @ rodrigues((0.0, 0.0, float(yaw))).T)
+        # to the micrometre: a position on the mounting grid reads 4.8, not 4.800000000000001
         out.append(Camera(f"C{k + 1}", m.width, m.height, m.fx, m.fy, m.cx, m.cy, m.dist,
-                          (float(x), float(y), z), rvec))
+                          (round(float(x), 6), round(float(y), 6), z), rvec))
     return out
 
 

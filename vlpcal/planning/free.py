@@ -40,8 +40,10 @@ class Layout:
                  dtype=np.float64):
         from shapely.geometry import Polygon
 
+        from .lattice import Mounting
+
         self.model, self.step = model, step
-        self.room = Polygon(model.site.room).buffer(1e-9)
+        self.mount = Mounting(model.site, step)
         self.x0, self.y0 = Polygon(model.site.room).bounds[:2]
         self.cells, self.yaws = [tuple(c) for c in cells], list(yaws)
         self.cache = {} if cache is None else cache
@@ -65,10 +67,9 @@ class Layout:
         return self.x0 + cell[0] * self.step, self.y0 + cell[1] * self.step
 
     def mountable(self, cell) -> bool:
-        from shapely import contains_xy
-
         if cell not in self.inside:
-            self.inside[cell] = bool(contains_xy(self.room, *self.position(cell)))
+            x, y = self.position(cell)
+            self.inside[cell] = bool(self.mount(np.array([x]), np.array([y]))[0])
         return self.inside[cell]
 
     def contribution(self, cell, yaw):

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .families import Candidate, ceiling_cameras, footprint
+from .families import Candidate, ceiling_cameras, footprint, mount_step
 from .nadir import YAWS, NadirModel
 from .reference import evaluate
 from .site import Site
@@ -89,19 +89,22 @@ def lattices(site: Site, family: str, step: float, yaws=YAWS):
 
 
 class Mounting:
-    """Whether floor positions can carry a camera (inside the room polygon, walls included):
-    a raster lookup for positions on the ``step`` grid from the room's lower-left corner,
-    the polygon itself for the others."""
+    """Whether floor positions can carry a camera: inside the room polygon and at least half a
+    mounting-grid step (:func:`.families.mount_step`) from its walls, where a camera body can
+    hang. A raster lookup for positions on the ``step`` grid from the room's lower-left
+    corner, the polygon itself for the others."""
 
     def __init__(self, site: Site, step: float):
         from shapely import contains_xy
         from shapely.geometry import Polygon
 
-        self.room = Polygon(site.room).buffer(1e-9)
-        self.x0, self.y0, self.x1, self.y1 = Polygon(site.room).bounds
+        margin = mount_step(site) / 2
+        room = Polygon(site.room)
+        self.room = room.buffer(-margin + 1e-9 * max(1.0, margin), join_style="mitre")
+        self.x0, self.y0, self.x1, self.y1 = room.bounds
         self.step = step
-        self.rectangle = len(site.room) == 4 and Polygon(site.room).envelope.equals(
-            Polygon(site.room))
+        self.rectangle = len(site.room) == 4 and room.envelope.equals(room)
+        self.inner = (self.x0 + margin, self.y0 + margin, self.x1 - margin, self.y1 - margin)
         gx, gy = np.meshgrid(np.arange(math.floor((self.x1 - self.x0) / step + 1e-9) + 1),
                              np.arange(math.floor((self.y1 - self.y0) / step + 1e-9) + 1),
                              indexing="ij")
@@ -111,8 +114,8 @@ class Mounting:
         from shapely import contains_xy
 
         eps = 1e-9 * max(1.0, self.x1 - self.x0, self.y1 - self.y0)
-        box = (X >= self.x0 - eps) & (X <= self.x1 + eps) & (Y >= self.y0 - eps) \
-            & (Y <= self.y1 + eps)
+        x0, y0, x1, y1 = self.inner
+        box = (X >= x0 - eps) & (X <= x1 + eps) & (Y >= y0 - eps) & (Y <= y1 + eps)
         if self.rectangle:
             return box
         out = np.zeros(X.shape, bool)
