@@ -1071,8 +1071,6 @@ def import_cameras(cameras_path, base_path, out, units):
     """
     from pathlib import Path
 
-    import yaml
-
     from .deployment import Deployment, DeploymentError, from_dict, provenance, save
     from .interchange import (
         InterchangeError,
@@ -1082,20 +1080,16 @@ def import_cameras(cameras_path, base_path, out, units):
         same_cameras,
     )
     from .planning import site_from_dict
+    from .reading import ReadError, load_yaml, read_text
 
     path = Path(cameras_path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise UserError(f"{path}: cannot read ({e.strerror})") from None
-    except UnicodeDecodeError:
-        raise UserError(f"{path}: not a text file (expected TOML or YAML)") from None
-    try:
-        base_doc = yaml.safe_load(Path(base_path).read_text(encoding="utf-8"))
-    except OSError as e:
-        raise UserError(f"{base_path}: cannot read ({e.strerror})") from None
-    except (UnicodeDecodeError, yaml.YAMLError):
-        base_doc = None
+        text = read_text(path, "a camera file (TOML or YAML)")
+        base_doc = load_yaml(base_path, "a vlpcal deployment or site file")
+    except ReadError as e:
+        if "not valid YAML" not in str(e):
+            raise UserError(str(e)) from None
+        base_doc = None  # said below, with what the base must be
     kind = base_doc.get("format") if isinstance(base_doc, dict) else None
     if kind not in ("vlpcal-site", "vlpcal-deployment"):
         raise UserError(f"{base_path}: not a vlpcal deployment or site file (expected YAML "

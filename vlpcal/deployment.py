@@ -18,6 +18,7 @@ from pathlib import Path
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
 from .geometry import Camera
+from .reading import shown
 
 FORMAT, VERSION = "vlpcal-deployment", 1
 CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
@@ -119,7 +120,7 @@ class Deployment:
 
 def _number(value, where: str, *, positive: bool = False, integer: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise DeploymentError(f"{where}: expected a number, got {value!r}")
+        raise DeploymentError(f"{where}: expected a number, got {shown(value)}")
     try:
         finite = math.isfinite(value)
     except OverflowError:
@@ -127,23 +128,23 @@ def _number(value, where: str, *, positive: bool = False, integer: bool = False)
     if not finite:
         raise DeploymentError(f"{where}: expected a finite number, got {str(value)[:20]}")
     if integer and int(value) != value:
-        raise DeploymentError(f"{where}: expected a whole number, got {value!r}")
+        raise DeploymentError(f"{where}: expected a whole number, got {shown(value)}")
     if positive and value <= 0:
-        raise DeploymentError(f"{where}: expected a positive number, got {value!r}")
+        raise DeploymentError(f"{where}: expected a positive number, got {shown(value)}")
     return value
 
 
 def _vector(value, n: int, where: str) -> list:
     if not isinstance(value, (list, tuple)) or len(value) != n \
             or any(isinstance(v, (list, tuple, dict)) for v in value):
-        raise DeploymentError(f"{where}: expected a list of {n} numbers, got {value!r}")
+        raise DeploymentError(f"{where}: expected a list of {n} numbers, got {shown(value)}")
     return [_number(v, f"{where}[{i}]") for i, v in enumerate(value)]
 
 
 def _polygon(value, where: str) -> list:
     if not isinstance(value, (list, tuple)) or len(value) < 3:
         raise DeploymentError(f"{where}: expected a polygon of at least 3 [x, y] points, "
-                              f"got {value!r}")
+                              f"got {shown(value)}")
     pts = [_vector(p, 2, f"{where}[{i}]") for i, p in enumerate(value)]
     from shapely.geometry import Polygon
 
@@ -166,9 +167,9 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             fail(f"not a vlpcal deployment (expected a YAML mapping with format: {FORMAT}; "
                  f"the file holds {kind.get(type(doc).__name__, type(doc).__name__)})")
         if doc.get("format") != FORMAT:
-            fail(f"format: expected {FORMAT!r}, got {doc.get('format')!r}")
+            fail(f"format: expected {shown(FORMAT)}, got {shown(doc.get('format'))}")
         if type(doc.get("version")) is not int or doc.get("version") != VERSION:
-            fail(f"version: expected {VERSION}, got {doc.get('version')!r} (this vlpcal reads "
+            fail(f"version: expected {VERSION}, got {shown(doc.get('version'))} (this vlpcal reads "
                  f"version {VERSION})")
         for key in ("site", "cameras"):
             if key not in doc:
@@ -180,7 +181,7 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             if key not in site:
                 fail(f"site.{key}: missing")
         if not isinstance(site["name"], str) or not site["name"].strip():
-            fail(f"site.name: expected a non-empty text, got {site['name']!r}")
+            fail(f"site.name: expected a non-empty text, got {shown(site['name'])}")
         height = _number(site["ceiling_height"], "site.ceiling_height", positive=True)
         room = _polygon(site["room"], "site.room")
         keep_out = site.get("keep_out")
@@ -207,10 +208,10 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
                     or str(cid) != str(cid).strip() or str(cid).startswith(".") \
                     or any(ch in str(cid) for ch in "/\\"):
                 fail(f"{where}.id: expected a camera name usable as a file name (no slashes, "
-                     f"no leading dot or spaces), got {cid!r}")
+                     f"no leading dot or spaces), got {shown(cid)}")
             cid = str(cid)
             if cid in seen:
-                fail(f"{where}.id: duplicate camera id {cid!r}")
+                fail(f"{where}.id: duplicate camera id {shown(cid)}")
             seen.add(cid)
             check_intrinsics(c, where)
             _vector(c["position"], 3, f"{where}.position")
@@ -244,7 +245,7 @@ def check_intrinsics(c: dict, where: str) -> None:
         if c[key] > MAX_IMAGE_SIDE:
             raise DeploymentError(f"{where}.{key}: expected an image side in pixels up to "
                                   f"{MAX_IMAGE_SIDE} (the largest a JPEG frame can have), got "
-                                  f"{c[key]!r}")
+                                  f"{shown(c[key])}")
     for key in ("fx", "fy"):
         _number(c[key], f"{where}.{key}", positive=True)
     for key in ("cx", "cy"):
@@ -254,13 +255,13 @@ def check_intrinsics(c: dict, where: str) -> None:
 
 def _mapping(value, where: str) -> dict:
     if not isinstance(value, dict):
-        raise DeploymentError(f"{where}: expected a mapping, got {value!r}")
+        raise DeploymentError(f"{where}: expected a mapping, got {shown(value)}")
     return value
 
 
 def _choice(value, options, where: str) -> str:
     if value not in options:
-        raise DeploymentError(f"{where}: expected one of {', '.join(options)}, got {value!r}")
+        raise DeploymentError(f"{where}: expected one of {', '.join(options)}, got {shown(value)}")
     return value
 
 
@@ -296,10 +297,10 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
                     ids = region.get("cameras")
                     if not isinstance(ids, list) or len(set(map(str, ids))) < 2:
                         raise DeploymentError(f"{where}.cameras: expected a list of at least 2 "
-                                              f"camera ids, got {ids!r}")
+                                              f"camera ids, got {shown(ids)}")
                     for cid in ids:
                         if str(cid) not in camera_ids:
-                            raise DeploymentError(f"{where}.cameras: unknown camera {cid!r}")
+                            raise DeploymentError(f"{where}.cameras: unknown camera {shown(cid)}")
             else:
                 raise DeploymentError(f"fusion.{key}: unknown key (expected method, "
                                       "pair_method, max_residual, region_map)")
@@ -307,7 +308,7 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
         for cid, corr in _mapping(extra["corrections"], "corrections").items():
             where = f"corrections.{cid}"
             if str(cid) not in camera_ids:
-                raise DeploymentError(f"{where}: unknown camera {cid!r}")
+                raise DeploymentError(f"{where}: unknown camera {shown(cid)}")
             for key, value in _mapping(corr, where).items():
                 if key != "pixel_offset":
                     raise DeploymentError(f"{where}.{key}: unknown key (expected pixel_offset)")
@@ -322,22 +323,16 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
 
 
 def load(path) -> Deployment:
-    """Read and check a deployment file; :class:`DeploymentError` names what is wrong."""
-    import yaml
+    """Read and check a deployment file; :class:`DeploymentError` names what is wrong (a file
+    too large, not UTF-8 YAML, with a key twice, nested too deep or full of aliases included:
+    :mod:`.reading`)."""
+    from .reading import ReadError, load_yaml
 
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise DeploymentError(f"{path}: cannot read ({e.strerror})") from None
-    except UnicodeDecodeError:
-        raise DeploymentError(f"{path}: not UTF-8 text (expected a YAML file)") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        at = f" at line {mark.line + 1}" if mark else ""
-        raise DeploymentError(f"{path}: not valid YAML{at}") from None
+        doc = load_yaml(path, "a deployment YAML file")
+    except ReadError as e:
+        raise DeploymentError(str(e)) from None
     return from_dict(doc, str(path))
 
 

@@ -21,6 +21,7 @@ import sys
 import numpy as np
 
 from .geometry import Camera, rodrigues
+from .reading import shown
 
 #: metres per unit
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -88,19 +89,22 @@ def from_anipose_toml(text: str, source: str = "<toml>", units: str | None = Non
         doc = _toml_loads(text)
     except ValueError as e:
         raise InterchangeError(f"{source}: not a TOML file ({e})") from None
+    except RecursionError:
+        raise InterchangeError(f"{source}: nested too deeply (expected an aniposelib "
+                               "calibration TOML)") from None
     meta = doc.get("metadata", {})
     if not isinstance(meta, dict):
         raise InterchangeError(f"{source}: metadata: expected a [metadata] table")
     stated = meta.get("units")
     if units and stated and units != stated:
-        raise InterchangeError(f"{source}: its [metadata] says units = {stated!r}; the unit "
-                               f"given ({units!r}) disagrees: leave it out")
+        raise InterchangeError(f"{source}: its [metadata] says units = {shown(stated)}; the unit "
+                               f"given ({shown(units)}) disagrees: leave it out")
     units = units or stated
     if not isinstance(units, (str, type(None))) or units not in UNITS:
         raise InterchangeError(
             f"{source}: the length unit is not stated in [metadata] (aniposelib does not "
             f"record it): state it with --units m, cm or mm" if units is None else
-            f"{source}: unknown length unit {units!r} (expected m, cm or mm)")
+            f"{source}: unknown length unit {shown(units)} (expected m, cm or mm)")
     sections = []
     for key, value in doc.items():
         m = re.fullmatch(r"cam_(\d+)", key)
@@ -115,7 +119,7 @@ def from_anipose_toml(text: str, source: str = "<toml>", units: str | None = Non
     for _, key, sec in sorted(sections):
         cams.append(_camera_of_section(sec, f"{source}: [{key}]", UNITS[units]))
         if cams[-1].id in seen:
-            raise InterchangeError(f"{source}: [{key}].name: camera {cams[-1].id!r} twice")
+            raise InterchangeError(f"{source}: [{key}].name: camera {shown(cams[-1].id)} twice")
         seen.add(cams[-1].id)
     return cams
 
@@ -129,12 +133,12 @@ def _camera_of_section(sec: dict, where: str, metres: float) -> Camera:
         try:
             a = np.asarray(sec[key], float)
         except KeyError:
-            raise InterchangeError(f"{where}: missing key {key!r}") from None
+            raise InterchangeError(f"{where}: missing key {shown(key)}") from None
         except (TypeError, ValueError):
             raise InterchangeError(f"{where}.{key}: expected numbers") from None
         if a.shape != shape or not np.isfinite(a).all():
             raise InterchangeError(f"{where}.{key}: expected {shape} finite numbers, got "
-                                   f"{sec[key]!r}")
+                                   f"{shown(sec[key])}")
         return a
 
     size, K = array("size", (2,)), array("matrix", (3, 3))
@@ -189,15 +193,21 @@ def to_opencv_yaml(cameras: list[Camera]) -> str:
     back = [c.id for c in from_opencv_yaml(text)]
     for c, b in zip(cameras, back):
         if c.id != b:  # FileStorage writes strings unquoted: true, null, 1e3 come back changed
-            raise InterchangeError(f"camera id {c.id!r} does not survive OpenCV's YAML (it "
-                                   f"reads back as {b!r}): rename the camera")
+            raise InterchangeError(f"camera id {shown(c.id)} does not survive OpenCV's YAML (it "
+                                   f"reads back as {shown(b)}): rename the camera")
     return text
 
 
 def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
-    """Cameras from a FileStorage YAML as :func:`to_opencv_yaml` writes it."""
+    """Cameras from a FileStorage YAML as :func:`to_opencv_yaml` writes it (its nesting
+    checked first: OpenCV's parser recurses without a limit)."""
     import cv2
 
+    from .reading import MAX_DEPTH, nesting_depth
+
+    if nesting_depth(text) > MAX_DEPTH:
+        raise InterchangeError(f"{source}: nested deeper than {MAX_DEPTH} levels (expected "
+                               "what vlpcal export --to opencv writes)")
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
         node = fs.getNode("cameras")
@@ -213,7 +223,7 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
                                "what vlpcal export --to opencv writes)")
     unit = fs.getNode("units").string() or "m"
     if unit not in UNITS:
-        raise InterchangeError(f"{source}: units: expected m, cm or mm, got {unit!r}")
+        raise InterchangeError(f"{source}: units: expected m, cm or mm, got {shown(unit)}")
     cams = []
     for i in range(node.size()):
         n, where = node.at(i), f"{source}: cameras[{i}]"

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..deployment import DeploymentError, _mapping, _number, _polygon, check_intrinsics
 from ..geometry import NADIR, Camera
+from ..reading import shown
 
 FORMAT, VERSION = "vlpcal-site", 1
 FAMILIES = ("linear", "triangular", "square", "free")
@@ -48,9 +49,9 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         if not isinstance(doc, dict):
             raise SiteError(f"expected a mapping with format: {FORMAT}")
         if doc.get("format") != FORMAT:
-            raise SiteError(f"format: expected {FORMAT!r}, got {doc.get('format')!r}")
+            raise SiteError(f"format: expected {shown(FORMAT)}, got {shown(doc.get('format'))}")
         if type(doc.get("version")) is not int or doc.get("version") != VERSION:
-            raise SiteError(f"version: expected {VERSION}, got {doc.get('version')!r}")
+            raise SiteError(f"version: expected {VERSION}, got {shown(doc.get('version'))}")
         unknown = sorted(set(doc) - {"format", "version", "site", "camera", "requirements",
                                      "families"})
         if unknown:
@@ -100,14 +101,14 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         if not isinstance(families, list) or not families or \
                 any(f not in FAMILIES for f in families):
             raise SiteError(f"families: expected a list of {', '.join(FAMILIES)}, "
-                            f"got {families!r}")
+                            f"got {shown(families)}")
         p95 = float(_number(req["max_error_p95"], "requirements.max_error_p95", positive=True))
         noise = float(_number(req["pixel_noise"], "requirements.pixel_noise", positive=True))
         if not 1e-6 <= noise <= min(cam["width"], cam["height"]):
             raise SiteError(f"requirements.pixel_noise: expected a spot noise in px between "
                             f"1e-6 and the image's size, got {noise:g}")
         if not isinstance(site["name"], (str, int, float)):
-            raise SiteError(f"site.name: expected a name (text), got {site['name']!r}")
+            raise SiteError(f"site.name: expected a name (text), got {shown(site['name'])}")
     except DeploymentError as e:
         raise SiteError(f"{source}: {e}") from None
     camera = Camera("model", cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"],
@@ -148,14 +149,12 @@ def _check_floor(room, keep_out) -> None:
 
 
 def load_site(path) -> Site:
-    """Read and check a site file."""
-    import yaml
+    """Read and check a site file (read within :mod:`vlpcal.reading`'s bounds)."""
+    from ..reading import ReadError, load_yaml
 
     path = Path(path)
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise SiteError(f"{path}: cannot read ({e.strerror})") from None
-    except (UnicodeDecodeError, yaml.YAMLError):
-        raise SiteError(f"{path}: not a YAML text file") from None
+        doc = load_yaml(path, "a site YAML file")
+    except ReadError as e:
+        raise SiteError(str(e)) from None
     return site_from_dict(doc, str(path))

@@ -1,0 +1,132 @@
+"""Hostile and careless files against every reader of YAML and TOML (issue 14): one line that
+names the file and what was expected, exit 2, no traceback, bounded time and memory."""
+
+import os
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SITE = ROOT / "layouts" / "paper-linear.site.yaml"
+DEPLOYMENT = ROOT / "layouts" / "paper-linear.deployment.yaml"
+
+
+def _bomb(levels=9, width=9) -> str:
+    """The 'billion laughs': each level an anchored list of aliases to the one before."""
+    lines = ['l0: &l0 ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for i in range(1, levels):
+        lines.append(f"l{i}: &l{i} [" + ", ".join([f"*l{i - 1}"] * width) + "]")
+    return "\n".join(lines) + f"\nformat: *l{levels - 1}\n"
+
+
+HOSTILE = {
+    "duplicate key": (DEPLOYMENT.read_text() + "\ncameras: []\n", "duplicate key 'cameras'"),
+    "alias bomb": (_bomb(), "aliases"),
+    "deep flow nesting": ("[" * 50_000 + "]" * 50_000, "nested deeper than"),
+    "deep block nesting": ("".join(" " * i + "-\n" for i in range(500)), "nested deeper than"),
+    "not UTF-8": (b"format: vlpcal-deployment\nname: \xff\xfe\n", "not UTF-8"),
+    "not YAML": ("format: [unclosed\n", "not valid YAML"),
+}
+
+
+def _vlpcal(*args, cwd=None, timeout=60):
+    """Run the command in a child process; its output, exit code and peak memory (MB)."""
+    code = ("import resource, sys; from vlpcal.cli import main\n"
+            "try:\n    main(sys.argv[1:], prog_name='vlpcal')\n"
+            "finally:\n"
+            "    print(f'@maxrss {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}',"
+            " file=sys.stderr)\n")
+    r = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True,
+                       text=True, timeout=timeout, cwd=cwd)
+    err = [line for line in r.stderr.splitlines() if not line.startswith("@maxrss")]
+    rss = [int(line.split()[1]) for line in r.stderr.splitlines() if line.startswith("@maxrss")]
+    return r.returncode, r.stdout, err, rss[0] / 1024 if rss else None
+
+
+def _write(path: Path, content):
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE))
+@pytest.mark.parametrize("role", ["deployment", "site", "import base"])
+def test_hostile_yaml_is_one_line(tmp_path, case, role):
+    content, fragment = HOSTILE[case]
+    bad = tmp_path / "bad.yaml"
+    _write(bad, content)
+    before = bad.read_bytes()
+    if role == "deployment":
+        args = ["check", "--site", SITE, "-d", bad]
+    elif role == "site":
+        args = ["plan", "--site", bad, "--out", tmp_path / "out.yaml"]
+    else:
+        cams = tmp_path / "cams.toml"
+        cams.write_text("[cam_0]\nname = 'C1'\n")
+        args = ["import", "--cameras", cams, "-b", bad, "-o", tmp_path / "out.yaml"]
+    code, out, err, rss = _vlpcal(*args)
+    lines = [line for line in (out.splitlines() + err) if line.strip()]
+    assert code == 2, (out, err)
+    assert len(lines) == 1 and "Traceback" not in lines[0], lines
+    assert str(bad) in lines[0]
+    if role != "import base" or fragment != "not valid YAML":
+        assert fragment in lines[0], lines
+    assert rss is not None and rss < 500, f"{rss:.0f} MB"
+    assert bad.read_bytes() == before and not (tmp_path / "out.yaml").exists()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "folder", "too big"])
+def test_special_files_are_refused_by_type_and_size(tmp_path, kind):
+    bad = tmp_path / "bad.yaml"
+    if kind == "fifo":
+        os.mkfifo(bad)  # opening it for reading would wait for a writer forever
+    elif kind == "folder":
+        bad.mkdir()
+    else:
+        with open(bad, "wb") as f:
+            f.truncate(64 * 2 ** 20)  # sparse: 64 MB of zeros without the disk
+    code, out, err, _ = _vlpcal("check", "--site", SITE, "-d", bad, timeout=30)
+    lines = [line for line in (out.splitlines() + err) if line.strip()]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in lines[0], lines
+    assert str(bad) in lines[0] or "bad.yaml" in lines[0]
+
+
+def test_deeply_nested_opencv_and_toml_camera_files(tmp_path):
+    """OpenCV's FileStorage parser recurses without a limit (a segfault) and TOML's raises
+    RecursionError: both are one line."""
+    cv = tmp_path / "cams.yaml"
+    cv.write_text("%YAML:1.0\ncameras:\n" + "[" * 200_000 + "]" * 200_000 + "\n")
+    toml = tmp_path / "cams.toml"
+    toml.write_text("a = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    for cams in (cv, toml):
+        code, out, err, _ = _vlpcal("import", "--cameras", cams, "-b", SITE, "-o",
+                                    tmp_path / "out.yaml")
+        lines = [line for line in (out.splitlines() + err) if line.strip()]
+        assert code == 2 and len(lines) == 1 and "Traceback" not in lines[0], lines
+        assert str(cams) in lines[0]
+        assert not (tmp_path / "out.yaml").exists()
+
+
+def test_an_error_quotes_a_huge_value_briefly(tmp_path):
+    """A value that is wrong is quoted in the error cut short, however large it is."""
+    doc = DEPLOYMENT.read_text().replace("name:", "name: [" + ", ".join(["1"] * 100_000)
+                                         + "]\nold_name:", 1)
+    bad = tmp_path / "big-value.yaml"
+    bad.write_text(doc)
+    code, out, err, _ = _vlpcal("check", "--site", SITE, "-d", bad)
+    lines = [line for line in (out.splitlines() + err) if line.strip()]
+    assert code == 2 and len(lines) == 1 and len(lines[0]) < 400, lines
+
+
+def test_reader_limits_are_what_the_module_says():
+    from vlpcal.reading import MAX_ALIASES, MAX_DEPTH, nesting_depth, shown
+
+    assert 5 <= nesting_depth("a:\n  b:\n    - [1, [2, 3]]\n") <= 6  # an upper estimate
+    assert nesting_depth("s: '[[[['\n") == 1  # brackets inside quotes do not count
+    assert MAX_DEPTH >= 8 and MAX_ALIASES >= 1
+    assert len(shown(list(range(10 ** 6)))) < 100
+    assert resource is not None

@@ -1,0 +1,169 @@
+"""Bounded reading of the text files a user hands to vlpcal (deployments, sites, camera
+files): a regular file of bounded size, UTF-8, and YAML whose every key appears once, whose
+nesting and aliases stay within small budgets — checked while the document is composed,
+before anything recurses into it or prints it. Errors are :class:`ReadError`, one line
+naming the file, the line and what was expected.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+#: bytes: a deployment of a thousand cameras is well under 1 MB
+MAX_BYTES = 16 * 2 ** 20
+#: nesting levels of a YAML document (a deployment needs 5)
+MAX_DEPTH = 32
+#: YAML aliases (``*name``) in a document: deployments need none
+MAX_ALIASES = 16
+#: YAML nodes in a document
+MAX_NODES = 2_000_000
+
+
+class ReadError(ValueError):
+    """A file that cannot be read as what it should be (one line)."""
+
+
+def read_text(path, what: str = "a text file", max_bytes: int = MAX_BYTES) -> str:
+    """The UTF-8 text of a regular file of at most ``max_bytes`` (a FIFO, a device or a
+    folder is refused by its type, before it is opened for reading)."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise ReadError(f"{path}: cannot read ({e.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise ReadError(f"{path}: {kind} (expected {what})")
+    if st.st_size > max_bytes:
+        raise ReadError(f"{path}: {st.st_size} bytes, more than the {max_bytes} expected of "
+                        f"{what}")
+    try:
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)
+    except OSError as e:
+        raise ReadError(f"{path}: cannot read ({e.strerror})") from None
+    if len(data) > max_bytes:
+        raise ReadError(f"{path}: more than the {max_bytes} bytes expected of {what}")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ReadError(f"{path}: not UTF-8 text (expected {what})") from None
+
+
+def _loader():
+    import yaml
+
+    class BoundedLoader(yaml.SafeLoader):
+        """SafeLoader that refuses duplicate keys and counts depth, aliases and nodes while
+        composing (the composer is where PyYAML recurses)."""
+
+        def __init__(self, stream):
+            super().__init__(stream)
+            self._depth = self._aliases = self._nodes = 0
+
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                self._aliases += 1
+                if self._aliases > MAX_ALIASES:
+                    raise _Refused(self.peek_event().start_mark,
+                                   f"more than {MAX_ALIASES} aliases (*name)")
+            self._nodes += 1
+            if self._nodes > MAX_NODES:
+                raise _Refused(self.peek_event().start_mark, f"more than {MAX_NODES} values")
+            self._depth += 1
+            if self._depth > MAX_DEPTH:
+                raise _Refused(self.peek_event().start_mark,
+                               f"nested deeper than {MAX_DEPTH} levels")
+            try:
+                return super().compose_node(parent, index)
+            finally:
+                self._depth -= 1
+
+        def construct_mapping(self, node, deep=False):
+            seen = {}
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    hash(key)
+                except TypeError:
+                    raise _Refused(key_node.start_mark, "a key that is not a plain value") \
+                        from None
+                if key in seen:
+                    raise _Refused(key_node.start_mark,
+                                   f"duplicate key {str(key)[:40]!r} (first at line "
+                                   f"{seen[key] + 1}; each key once)")
+                seen[key] = key_node.start_mark.line
+            return super().construct_mapping(node, deep)
+
+    return BoundedLoader
+
+
+class _Refused(Exception):
+    def __init__(self, mark, message):
+        super().__init__(message)
+        self.mark, self.message = mark, message
+
+
+def load_yaml(path, what: str = "a YAML file", text: str | None = None):
+    """The YAML document in ``path`` (or ``text``, named by ``path``), read within the budgets
+    above; :class:`ReadError` names the file, the line and the problem."""
+    import yaml
+
+    if text is None:
+        text = read_text(path, what)
+    try:
+        return yaml.load(text, Loader=_loader())  # noqa: S506 (a SafeLoader)
+    except _Refused as e:
+        raise ReadError(f"{path}: line {e.mark.line + 1}: {e.message} (expected {what})") \
+            from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        at = f" at line {mark.line + 1}" if mark else ""
+        raise ReadError(f"{path}: not valid YAML{at} (expected {what})") from None
+    except RecursionError:
+        raise ReadError(f"{path}: nested too deeply (expected {what})") from None
+
+
+def nesting_depth(text: str) -> int:
+    """An upper estimate of a YAML-like text's nesting, in one linear pass and without a
+    parser (for parsers that recurse without a limit, like OpenCV's FileStorage): block
+    indentation levels plus the ``- `` items opened on one line, plus the flow brackets open."""
+    deepest, stack, flow = 0, [], 0
+    for line in text.splitlines():
+        body = line.lstrip(" ")
+        if not body or body.startswith("#"):
+            continue
+        indent = len(line) - len(body)
+        while stack and stack[-1] >= indent:
+            stack.pop()
+        stack.append(indent)
+        dashes = 0
+        while body.startswith("- ") or body == "-":
+            dashes += 1
+            body = body[2:].lstrip(" ")
+        quote = None
+        for ch in body:
+            if quote:
+                quote = None if ch == quote else quote
+            elif ch in "\"'":
+                quote = ch
+            elif ch in "[{":
+                flow += 1
+            elif ch in "]}":
+                flow = max(0, flow - 1)
+            deepest = max(deepest, len(stack) + dashes + flow)
+        deepest = max(deepest, len(stack) + dashes + flow)
+    return deepest
+
+
+def shown(value) -> str:
+    """A value as an error message quotes it: Python's repr, cut to a few items per level, a
+    few levels and a short string (a document full of aliases must not make a huge message)."""
+    import reprlib
+
+    r = reprlib.Repr()
+    r.maxlevel, r.maxlist, r.maxtuple, r.maxdict, r.maxset = 3, 6, 6, 4, 6
+    r.maxstring, r.maxother, r.maxlong = 60, 60, 40
+    return r.repr(value)
