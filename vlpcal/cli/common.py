@@ -1,0 +1,116 @@
+"""What every command shares: the ``vlpcal`` group, the one-line user error, reading a
+deployment and checking an output file before any work."""
+
+from __future__ import annotations
+
+import click
+
+from .. import __version__
+
+
+class UserError(click.ClickException):
+    """A user's mistake (a wrong path, a malformed file): one line, exit code 2."""
+
+    exit_code = 2
+
+
+class OneLineErrors(click.Group):
+    """A wrong option value (a folder given for a file, a missing file) is a user's mistake
+    like any other: one line naming the option and where to look, not a usage block."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except click.UsageError as e:
+            if type(e).__name__ == "NoArgsIsHelpError":  # a bare group: its help, as asked
+                raise
+            where = e.ctx.command_path if e.ctx else "vlpcal"
+            raise UserError(f"{e.format_message()} (see {where} --help)") from None
+
+
+@click.group(cls=OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="vlpcal")
+def main():
+    """vlpcal: centimetre-level 3D positioning of an LED from a few cheap ceiling cameras.
+
+    Units are metres and radians; the world frame has z up and the floor at z = 0. Start
+    with the demo, then plan (installer), survey (surveyor) and locate (integrator).
+
+    Example: vlpcal demo
+    """
+
+
+def _load_deployment(path):
+    from ..deployment import DeploymentError, load
+
+    try:
+        return load(path)
+    except DeploymentError as e:
+        raise UserError(str(e)) from None
+
+
+def _output_file(path, inputs=(), beside=()):
+    """``path`` as a file to write, checked before any work: not a folder, in a folder that
+    exists and takes a new file, none of the command's ``inputs`` (files or folders: the output
+    may not be one of them or lie inside one), and neither are the files it writes ``beside``
+    it (suffixes, e.g. ``.png``) folders or inputs."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    out = Path(path)
+    if out.is_dir() or not out.parent.is_dir():
+        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+    targets = [out] + [out.with_suffix(s) for s in beside]
+    for t in targets:
+        r = t.resolve()
+        for src in inputs:
+            src = Path(src).resolve()
+            if r == src or src in r.parents:
+                raise UserError(f"{out}: is (or would write {t.name} over) the command's own "
+                                f"input {src}; choose another output file")
+        if t != out and t.is_dir():
+            raise UserError(f"{out}: would write {t} beside it, which is a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".probe", dir=out.parent)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise UserError(f"{out}: cannot write in {out.parent} ({e.strerror})") from None
+    return out
+
+
+def _mount(site) -> str:
+    """The site's mounting grid, said in the unit a person would use."""
+    from ..planning import mount_step
+
+    step = mount_step(site)
+    return f"{step * 100:.3g} cm" if step >= 0.01 else f"{step * 1000:.3g} mm"
+
+
+def _floats(text: str, option: str) -> list[float]:
+    try:
+        return [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise click.BadParameter(f"expected numbers separated by commas, got {text!r}",
+                                 param_hint=option) from None
+
+
+def _camera_sources(cameras, dep) -> dict:
+    """``--camera ID=SOURCE`` values → camera id → frame source, checked against ``dep``."""
+    from ..live import open_source
+
+    ids = [c.id for c in dep.cameras]
+    sources = {}
+    for spec in cameras:
+        cid, sep, src = spec.partition("=")
+        if not sep or not cid or not src:
+            raise UserError(f"--camera {spec!r}: expected ID=SOURCE, e.g. "
+                            "C1=http://10.0.0.21:81/stream")
+        if cid not in ids:
+            raise UserError(f"--camera {spec!r}: {dep.name} has no camera {cid!r} "
+                            f"(it has {', '.join(ids)})")
+        if cid in sources:
+            raise UserError(f"--camera {spec!r}: camera {cid} given twice")
+        sources[cid] = open_source(src)
+    return sources

@@ -1,0 +1,195 @@
+"""The integrator's command: frames, spots or live cameras to 3D fixes (``vlpcal locate``)."""
+
+from __future__ import annotations
+
+import click
+
+from .common import UserError, _camera_sources, _load_deployment, main
+
+
+@main.command()
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="Deployment YAML (docs/formats.md).")
+@click.option("--frames", "frames_dir", type=click.Path(file_okay=False),
+              help="Folder of <frame_id>/<camera_id>.jpg.")
+@click.option("--observations", type=click.Path(dir_okay=False),
+              help="CSV frame_id,camera_id,u,v of spots the cameras found themselves.")
+@click.option("--camera", "cameras", multiple=True, metavar="ID=SOURCE",
+              help="Live source per camera: an MJPEG URL (ESP32-CAM: http://IP:81/stream) or "
+                   "a video device (/dev/video0). Repeat for each camera.")
+@click.option("--out", "-o", default="-", show_default=True,
+              help="Fixes file (.csv or .jsonl), or - for stdout.")
+@click.option("--format", "fmt", type=click.Choice(["csv", "jsonl"]), default=None,
+              help="Output format (default: from --out's extension; csv for stdout).")
+@click.option("--batch", default=512, show_default=True, type=click.IntRange(1),
+              help="Frame sets located together (folders).")
+@click.option("--tolerance", default=0.05, show_default=True, type=click.FloatRange(0.001),
+              help="Live: frames arriving within this many seconds form one set.")
+@click.option("--duration", type=click.FloatRange(0), default=None,
+              help="Live: stop after this many seconds.")
+@click.option("--max-sets", type=click.IntRange(1), default=None,
+              help="Live: stop after this many frame sets.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
+def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, tolerance,
+           duration, max_sets, quiet):
+    """Turn camera frames into 3D fixes (metres, world frame, z up).
+
+    One row per frame set: frame_id,x,y,z,status first (the contract), then the cameras used,
+    the predicted RMS error sigma_m, the worst reprojection residual and each camera's status.
+    A frame set without a fix keeps its row with empty x, y, z and a status saying why.
+
+    Example: vlpcal locate -d deployment.yaml --frames frames/ --out fixes.csv
+    """
+    import sys
+    import time
+    from collections import Counter
+
+    from ..locator import FixWriter, Locator
+
+    sources = [name for name, given in (("--frames", frames_dir),
+                                         ("--observations", observations),
+                                         ("--camera", cameras)) if given]
+    if len(sources) != 1:
+        raise click.UsageError("give exactly one input: --frames DIR, --observations CSV or "
+                               "--camera ID=SOURCE …")
+    loc = Locator(_load_deployment(deployment_path))
+    say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
+    live = bool(cameras)
+    try:
+        writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else ())
+    except OSError as e:
+        raise UserError(f"{out}: cannot write the fixes there ({e.strerror})") from None
+    t0 = time.perf_counter()
+    statuses: Counter = Counter()
+    notes = []
+    try:
+        if frames_dir:
+            n = _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet)
+        elif observations:
+            n = _locate_observations(loc, observations, writer, statuses, notes)
+        else:
+            n = _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses,
+                             notes, say)
+    except KeyboardInterrupt:
+        notes.append("interrupted: the fixes so far are kept")
+        n = sum(statuses.values())
+    except click.ClickException:
+        writer.abort()
+        raise
+    except BrokenPipeError:  # the reader of stdout has what it wanted (| head): stop quietly
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return
+    writer.close()
+    secs = time.perf_counter() - t0
+    if n and not quiet:
+        ok = statuses.get("ok", 0)
+        parts = ", ".join(f"{k} {v}" for k, v in statuses.most_common())
+        say(f"{n} frame sets: {ok / n:.1%} fixed ({parts}); {n / secs:,.0f} sets/s"
+            + (f" → {out}" if out != "-" else ""))
+    for note in notes:
+        say(note)
+    if not n:
+        say("no frame sets located")
+    sys.stdout.flush()
+
+
+def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> int:
+    from ..datasets import DatasetError, read_frames_folder
+
+    try:
+        folder = read_frames_folder(frames_dir)
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    absent = [c for c in loc.camera_ids if c not in folder.camera_ids]
+    if absent:
+        notes.append(f"{frames_dir}: no frames at all from camera(s) {', '.join(absent)} of "
+                     f"{loc.deployment.name}: is this the right deployment for these frames?")
+    unknown = sorted(set(folder.camera_ids) - set(loc.camera_ids))
+    if unknown:
+        files = sum(1 for (_, c) in folder.files if c in unknown)
+        notes.append(f"ignored {files} frames of camera(s) {', '.join(unknown)} that "
+                     f"{loc.deployment.name} does not have")
+    ids = folder.frame_ids
+    with click.progressbar(length=len(ids), label="locating", file=None if not quiet else
+                           open("/dev/null", "w"), show_pos=True) as bar:
+        for s in range(0, len(ids), batch):
+            chunk = ids[s:s + batch]
+            sets = []
+            for fid in chunk:
+                fs = {}
+                for cid in loc.camera_ids:
+                    path = folder.files.get((fid, cid))
+                    if path is not None:
+                        try:
+                            fs[cid] = path.read_bytes()
+                        except OSError:
+                            fs[cid] = b""  # unreadable: reported as a corrupt frame
+                sets.append(fs)
+            fixes = loc.locate_batch(sets, chunk)
+            statuses.update(fixes.counts())
+            writer.write(fixes)
+            bar.update(len(chunk))
+    return len(ids)
+
+
+def _locate_observations(loc, path, writer, statuses, notes) -> int:
+    import numpy as np
+
+    from ..datasets import DatasetError, read_observations
+
+    try:
+        obs, ids = read_observations(path, "frame_id")
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    index = {c: k for k, c in enumerate(loc.camera_ids)}
+    frame_index = {f: n for n, f in enumerate(ids)}
+    uv = np.full((len(index), len(ids), 2), np.nan)
+    unknown = set()
+    for (fid, cid), p in obs.items():
+        if cid in index:
+            uv[index[cid], frame_index[fid]] = p
+        else:
+            unknown.add(cid)
+    if unknown:
+        notes.append(f"ignored spots of camera(s) {', '.join(sorted(unknown))} that "
+                     f"{loc.deployment.name} does not have")
+    fixes = loc.locate_pixels(uv, frame_ids=ids)
+    statuses.update(fixes.counts())
+    writer.write(fixes)
+    return len(ids)
+
+
+def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, notes,
+                 say) -> int:
+    import time
+
+    from ..live import LiveGrouper
+
+    sources = _camera_sources(cameras, loc.deployment)
+    t_end = time.monotonic() + duration if duration else None
+    grouper = LiveGrouper(sources, tolerance, on_event=say, deadline=t_end)
+    n = 0
+    try:
+        for fs in grouper:
+            fixes = loc.locate_batch([fs.frames], [f"{fs.index:06d}"])
+            statuses.update(fixes.counts())
+            writer.write(fixes, {"t_s": round(fs.t, 3)})
+            n += 1
+            if (max_sets and n >= max_sets) or (t_end and time.monotonic() > t_end):
+                break
+    finally:
+        grouper.stop()
+    st = grouper.stats
+    if not n:
+        why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)
+        raise click.ClickException(f"no frames from any camera, nothing located ({why})")
+    for cid in loc.camera_ids:
+        if cid in sources:
+            notes.append(f"camera {cid}: {st.frames[cid]} frames, absent from "
+                         f"{st.missing[cid]} of {st.sets} sets"
+                         + (f"; {st.dropped[cid]} dropped (the locator fell behind)"
+                            if st.dropped[cid] else "")
+                         + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
+    return n

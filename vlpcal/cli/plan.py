@@ -1,0 +1,172 @@
+"""The installer's commands: plan a layout for a site, judge any layout against it
+(``vlpcal plan``, ``vlpcal check``)."""
+
+from __future__ import annotations
+
+import math
+
+import click
+
+from .common import UserError, _load_deployment, _mount, _output_file, main
+
+
+@main.command()
+@click.option("--site", "site_path", required=True, type=click.Path(dir_okay=False),
+              help="Site file (format vlpcal-site, docs/formats.md).")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="Deployment to write; maps per LED height (.png) go beside it.")
+@click.option("--candidate", default=1, show_default=True, type=click.IntRange(1),
+              help="Which ranked candidate to export.")
+@click.option("--max-cameras", default=120, show_default=True, type=click.IntRange(2),
+              help="Give up above this many cameras.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
+def plan(site_path, out, candidate, max_cameras, quiet):
+    """Plan a camera layout: the fewest cameras that meet the site's requirements.
+
+    Every lattice of the site's grid families (square with two spacings, triangular, linear)
+    on the 10 cm mounting grid, both camera yaws, cameras clipped to the room; then, when the
+    site allows "free" layouts (the default), a local search from the best lattice removes
+    cameras and moves the others while the layout still meets the requirements. Every
+    candidate is judged by the reference model of docs/formats.md (coverage and predicted
+    95th-percentile error). Prints the ranked candidates, writes the chosen one.
+
+    Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
+    """
+
+    from ..deployment import save
+    from ..planning import SiteError, load_site, plan_site, planned_deployment
+    from ..reports import plan_maps
+
+    try:
+        site = load_site(site_path)
+    except SiteError as e:
+        raise UserError(str(e)) from None
+    if not str(out).lower().endswith((".yaml", ".yml")):
+        raise UserError(f"{out}: the planned deployment is a YAML file (.yaml); its maps (.png) "
+                        "go beside it")
+    out = _output_file(out, inputs=(site_path,), beside=(".png",))
+    say = (lambda m: None) if quiet else (lambda m: click.echo(m, err=True))
+    result = plan_site(site, max_cameras, progress=say)
+    r = site.requirements
+    if not result.candidates:
+        c = result.closest
+        best = (f"for comparison, a dense lattice of {c.count} cameras covers "
+                f"{c.evaluation.coverage:.1%} with p95 {c.evaluation.p95 * 100:.2f} cm"
+                if c else "no layout could be evaluated")
+        raise click.ClickException(
+            f"{site_path}: no layout of up to {max_cameras} cameras meets coverage "
+            f"{r.coverage:.0%} with p95 ≤ {r.max_error_p95 * 100:g} cm ({best}); relax the "
+            "requirements, lower the LED heights or use a camera with more pixels")
+    k = len(result.candidates)
+    click.echo(f"{site.name}: {result.candidates[0].count} cameras meet the requirements "
+               f"({k} candidate{'s' if k > 1 else ''}; {result.tried} layouts judged, "
+               f"{result.seconds:.1f} s)\n")
+    click.echo(f"{'#':>2s} {'layout':10s} {'cams':>4s} {'x×y':>6s} {'spacing m':>12s} "
+               f"{'yaw':>5s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
+    for k, c in enumerate(result.candidates, start=1):
+        xs = {round(cam.position[0], 6) for cam in c.cameras}
+        ys = {round(cam.position[1], 6) for cam in c.cameras}
+        grid = f"{len(xs)}×{len(ys)}"
+        sp = "×".join(f"{v:.2f}" for v in c.spacing) if c.spacing else "–"
+        yaw = "/".join(str(a) for a in sorted({round(math.degrees(math.atan2(
+            cam.R[0][1], cam.R[0][0]))) % 180 for cam in c.cameras}))
+        click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>5s} "
+                   f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
+                   f"{c.evaluation.p95 * 100:7.2f}")
+    for family, why in result.missing.items():
+        click.echo(f"   {family:10s} {why}")
+    click.echo(f"x×y: distinct camera positions along x and y (cameras on a {_mount(site)} "
+               "grid from the room's lower-left corner, half a step from the walls); yaw: "
+               f"degrees from the room's x axis to each image's {site.camera.width} px side "
+               "(the maps draw it)")
+    if candidate > len(result.candidates):
+        raise UserError(f"--candidate {candidate}: the plan has {k} candidate"
+                        f"{'s' if k > 1 else ''}, numbered from 1")
+    chosen = result.candidates[candidate - 1]
+    dep = planned_deployment(site, chosen, candidate, site_path)
+    save(dep, out, header=f"Planned by vlpcal plan from {site_path}: candidate {candidate}.")
+    say("  drawing the maps…")
+    plan_maps(out.with_suffix(".png"), site, chosen)
+    click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
+
+
+@main.command("check")
+@click.option("--site", "site_path", required=True, type=click.Path(dir_okay=False),
+              help="Site file with the requirements (format vlpcal-site, docs/formats.md).")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False),
+              help="The layout to judge: any deployment (planned, installed, calibrated, "
+                   "edited by hand).")
+@click.option("--maps", type=click.Path(dir_okay=False), default=None,
+              help="Also write the maps per LED height (as vlpcal plan does) to this .png.")
+def check(site_path, deployment_path, maps):
+    """Judge a layout against a site's requirements with the reference model.
+
+    The same model that vlpcal plan uses: the sample points of the site's room (minus keep-out)
+    at the lowest, middle and highest LED height; a point counts when enough of the layout's
+    cameras see it, and the predicted error at the site's spot noise decides the p95. Prints
+    coverage, p95 and a verdict with the reason; exits 0 when the layout meets the site, 1 when
+    it does not.
+
+    Example: vlpcal check --site site.yaml -d layouts/paper-linear.deployment.yaml
+    """
+
+    import numpy as np
+
+    from ..planning import Candidate, SiteError, evaluate, load_site
+    from ..reports import plan_maps
+
+    try:
+        site = load_site(site_path)
+    except SiteError as e:
+        raise UserError(str(e)) from None
+    dep = _load_deployment(deployment_path)
+    if maps is not None:
+        if not str(maps).lower().endswith(".png"):
+            raise UserError(f"{maps}: the maps are a PNG picture (.png)")
+        maps = _output_file(maps, inputs=(site_path, deployment_path))
+    ev = evaluate(site, list(dep.cameras))
+    r = site.requirements
+    levels = sorted(set(ev.points[:, 2].round(6)))
+    hs = ", ".join(f"{h:g}" for h in levels)
+    n = len(dep.cameras)
+    click.echo(f"{deployment_path}: {n} camera{'' if n == 1 else 's'} judged against "
+               f"{site_path} ({site.name}; LED at {hs} m, {r.min_cameras} cameras per point, "
+               f"spot noise {r.pixel_noise:g} px):")
+    model = site.camera
+    other = sorted({c.id for c in dep.cameras if (c.width, c.height) != (model.width,
+                                                                         model.height)})
+    if other:
+        click.echo(f"  note: {', '.join(other[:5])}{' …' if len(other) > 5 else ''} have another "
+                   "image size than the site's camera model; each camera is judged as it is")
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    xy = np.array([c.position[:2] for c in dep.cameras]).reshape(-1, 2)
+    outside = [c.id for c, inside in zip(dep.cameras, contains_xy(Polygon(site.room), xy[:, 0],
+                                                                   xy[:, 1])) if not inside]
+    high = [c.id for c in dep.cameras if not 0 < c.position[2] <= site.ceiling_height]
+    if outside or high:
+        click.echo(f"  note: camera(s) {', '.join((outside + high)[:5])} hang outside the "
+                   "room or above its ceiling; judged as they are")
+    p95 = f"{ev.p95 * 100:.2f} cm" if math.isfinite(ev.p95) else "–"
+    mean = f"{ev.mean * 100:.2f} cm" if math.isfinite(ev.mean) else "–"
+    click.echo(f"  coverage {ev.coverage:.1%} (required {r.coverage:.1%}): the share of the "
+               f"floor's sample points seen by {r.min_cameras} or more cameras")
+    click.echo(f"  predicted error over those points: p95 {p95} (required ≤ "
+               f"{r.max_error_p95 * 100:.3g} cm), mean {mean}")
+    why = []
+    if ev.coverage < r.coverage:
+        why.append(f"coverage {ev.coverage:.1%} < {r.coverage:.1%}")
+    if not ev.p95 <= r.max_error_p95:
+        why.append(f"p95 {ev.p95 * 100:.3f} cm > {r.max_error_p95 * 100:.3f} cm")
+    if dep.room != site.room:
+        click.echo("  note: the deployment's room differs from the site's; the site's is used")
+    if maps is not None:
+        cand = Candidate(f"as in {deployment_path}", 0, 0, (), (), 0.0, list(dep.cameras), ev)
+        plan_maps(maps, site, cand)
+        click.echo(f"  maps: {maps}")
+    if why:
+        click.echo(f"verdict: does not meet the site ({'; '.join(why)})")
+        raise SystemExit(1)
+    click.echo("verdict: meets the site")

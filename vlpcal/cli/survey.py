@@ -1,0 +1,407 @@
+"""The surveyor's commands: plan a survey, capture it, calibrate the cameras from it
+(``vlpcal survey plan | capture | calibrate``)."""
+
+from __future__ import annotations
+
+import math
+
+import click
+
+from .common import UserError, _camera_sources, _floats, _load_deployment, _output_file, main
+
+
+@main.group()
+def survey():
+    """Survey calibration: cameras (and region maps) from LED measurements at known points.
+
+    Example: vlpcal survey plan -d planned.yaml --out survey-plan.csv
+    """
+
+
+@survey.command("plan")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="The deployment (room, cameras).")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="points.csv to write; a printable map (.png) goes beside it.")
+@click.option("--step", default=0.3, show_default=True, type=click.FloatRange(0.05, 2.0),
+              help="Grid spacing, m (made finer where a camera or pair needs more points).")
+@click.option("--heights", default="0,0.35,0.7", show_default=True,
+              help="LED heights to survey, m, comma-separated (two or more).")
+@click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6),
+              help="Points each camera must see (more let the calibration fit more of its lens).")
+def survey_plan(deployment_path, out, step, heights, min_per_camera):
+    """Plan the survey: where to put the LED, with ids, and a map to print.
+
+    Example: vlpcal survey plan -d planned.yaml --out survey-plan.csv
+    """
+    from pathlib import Path
+
+    from ..datasets import POINTS_COLUMNS, write_truth_csv
+    from ..reports import survey_plan_figure
+    from ..survey import SurveyError, plan_survey
+
+    dep = _load_deployment(deployment_path)
+    hs = _floats(heights, "--heights")
+    if len(hs) < 2 or any(not 0 <= h < dep.ceiling_height - 0.3 for h in hs):
+        raise click.BadParameter(f"expected two or more heights from 0 to "
+                                 f"{dep.ceiling_height - 0.3:g} m, got {heights!r}",
+                                 param_hint="--heights")
+    try:
+        plan = plan_survey(dep, step, hs, min_per_camera)
+    except SurveyError as e:
+        raise UserError(f"{deployment_path}: {e}") from None
+    out = Path(out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"{out}: cannot make its folder ({e.strerror})") from None
+    if out.is_dir():
+        raise UserError(f"{out}: is a folder (expected a points.csv file to write)")
+    write_truth_csv(out, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
+    survey_plan_figure(out.with_suffix(".png"), dep, plan)
+    click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
+               f"→ {out}, map {out.with_suffix('.png')}")
+    ids = plan.camera_ids
+    for k, cid in enumerate(ids):
+        shared = [(ids[j], int((plan.seen[k] & plan.seen[j]).sum())) for j in range(len(ids))
+                  if j != k]
+        pairs = ", ".join(f"{cj} {n}" for cj, n in shared if n)
+        click.echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
+
+
+@survey.command("capture")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="The deployment (cameras as installed).")
+@click.option("--points", "points_path", required=True, type=click.Path(dir_okay=False),
+              help="Points to walk, in order: point_id,x,y,z (vlpcal survey plan's output).")
+@click.option("--survey", "survey_path", required=True, type=click.Path(file_okay=False),
+              help="Survey bundle to write (created; resumed if it exists).")
+@click.option("--camera", "cameras", multiple=True, required=True, metavar="ID=SOURCE",
+              help="A live camera: ID=http://…/stream (MJPEG) or ID=/dev/videoN. Repeat.")
+@click.option("--yes", is_flag=True,
+              help="Non-interactive: capture and accept every point (for scripted rigs).")
+@click.option("--delay", type=click.FloatRange(0), default=None,
+              help="Seconds to wait at each point before grabbing  [default: 1 with --yes, "
+                   "else 0]")
+@click.option("--on-point", "on_point", default=None, metavar="COMMAND",
+              help="Shell command run before each point, e.g. to move a rig: {id}, {x}, {y}, "
+                   "{z} are replaced (quoted), and VLPCAL_POINT_ID, _X, _Y, _Z are set.")
+@click.option("--burst", default=5, show_default=True, type=click.IntRange(1, 100),
+              help="Frame sets grabbed per point.")
+@click.option("--check-every", default=5, show_default=True, type=click.IntRange(0),
+              help="Show the per-camera calibration check every N points (0: at the end).")
+def survey_capture(deployment_path, points_path, survey_path, cameras, yes, delay, on_point,
+                   burst, check_every):
+    """Capture a survey live: walk through the points while the cameras stream.
+
+    At each point: place the LED, press Enter; a short burst is grabbed from every camera and
+    what each saw is shown (pixel, peak, saturation, not seen, two blobs, no frames). Then
+    accept, redo, skip or go back; an extra point can be added with its measured position.
+    Each accepted point is on disk (frames, then its line in points.csv) before the next
+    prompt: an interrupted session resumes where it stopped when run again. Every few points
+    a quick fit per camera says whether the survey is good enough yet.
+
+    \b
+    Example:
+      vlpcal survey capture -d planned.yaml --points points.csv --survey survey \\
+        --camera C1=http://10.0.0.21:81/stream --camera C2=http://10.0.0.22:81/stream
+    """
+    import os
+    import subprocess
+    import sys
+
+    from ..capture import Burst, CaptureSession, Step
+    from ..datasets import DatasetError, SurveyAppender, read_points
+    from ..live import LiveGrouper
+
+    dep = _load_deployment(deployment_path)
+    try:
+        ids, xyz = read_points(points_path)
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    sources = _camera_sources(cameras, dep)
+    missing = [c.id for c in dep.cameras if c.id not in sources]
+    if missing:
+        click.echo(f"note: no --camera for {', '.join(missing)}: their frames stay missing",
+                   err=True)
+    from pathlib import Path
+
+    bundle = Path(survey_path)
+    created = not bundle.exists()
+    try:
+        appender = SurveyAppender(survey_path)
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    except OSError as e:
+        raise UserError(f"{survey_path}: cannot write the survey there ({e.strerror})") from None
+    delay = (1.0 if yes else 0.0) if delay is None else delay
+
+    def say(line: str) -> None:
+        click.echo(line)
+        sys.stdout.flush()
+
+    # per prompt: the keys shown, and what each means (Enter is "")
+    keys = {"place": ("Enter: capture · s skip · b back · e extra point · q quit",
+                      {"": "go", "e": "extra"}),
+            "accept": ("Enter: accept · r redo · s skip · b back · q quit",
+                       {"": "accept", "r": "redo"}),
+            "retry": ("Enter: try again · s skip · b back · q quit", {"": "redo"})}
+
+    def ask(kind: str, prompt: str) -> Step:
+        if yes:
+            if kind == "place":
+                say(prompt)
+            return Step("go" if kind == "place" else "accept")
+        shown, own = keys[kind]
+        choices = {**own, "s": "skip", "b": "back", "q": "quit"}
+        while True:
+            click.echo(f"{prompt}  [{shown}] > ", nl=False)
+            sys.stdout.flush()
+            line = sys.stdin.readline()
+            if not line:  # end of input: stop, resumable
+                return Step("quit")
+            key = line.strip().lower()[:1]
+            if key not in choices:
+                keys_ok = ", ".join(k for k in choices if k)
+                say(f"  ? {line.strip()!r}: press Enter or one of {keys_ok}")
+                continue
+            if choices[key] != "extra":
+                return Step(choices[key])
+            click.echo("  measured position of the extra point, x y z in metres > ", nl=False)
+            sys.stdout.flush()
+            try:
+                vals = [float(t) for t in sys.stdin.readline().replace(",", " ").split()]
+            except ValueError:
+                vals = []
+            if len(vals) == 3 and all(map(math.isfinite, vals)):
+                return Step("extra", tuple(vals))
+            say("  expected three numbers, e.g. 1.20 0.45 0.35")
+
+    def move(pid, p) -> None:
+        import re
+        import shlex
+
+        values = {"id": pid, "x": f"{p[0]:.6g}", "y": f"{p[1]:.6g}", "z": f"{p[2]:.6g}"}
+        cmd = re.sub(r"\{(id|x|y|z)\}", lambda m: shlex.quote(values[m.group(1)]), on_point)
+        env = {**os.environ, **{f"VLPCAL_POINT_{k.upper()}": v for k, v in values.items()}}
+        res = subprocess.run(cmd, shell=True, env=env)
+        if res.returncode:
+            raise UserError(f"--on-point {cmd!r} failed (exit {res.returncode}) at {pid}; "
+                            "the survey so far is kept: fix the rig and run again to resume")
+
+    grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: say(f"! {m}"))
+    session = CaptureSession(dep, ids, xyz, appender, Burst(grouper, burst), ask, say,
+                             on_point=move if on_point else None, delay=delay,
+                             check_every=check_every, unattended=yes)
+    try:
+        n = session.run()
+    except KeyboardInterrupt:
+        n = None
+    finally:
+        grouper.stop()
+        done_ids, skipped = appender.accepted()[0], appender.skipped()
+        if created and not done_ids and not skipped:
+            import shutil
+
+            shutil.rmtree(bundle, ignore_errors=True)  # nothing captured: leave nothing
+    done = len(done_ids)
+    if n is None:
+        click.echo(f"\ninterrupted: {done} points are safe in {survey_path}; run the same "
+                   "command to resume", err=True)
+        sys.exit(130)
+    if session.stalled:
+        raise click.ClickException(
+            f"no camera sent frames at {session.stalled}: stopped with {done} points safe in "
+            f"{survey_path}; check the cameras and run the same command to resume")
+    left = [p for p in ids if p not in set(done_ids) | skipped]
+    say(f"\n{n} points captured now, {done} in {survey_path}"
+        + (f"; {len(left)} still to do (run again to resume)" if left else ""))
+    if not left:
+        say(f"next: vlpcal survey calibrate -d {deployment_path} --survey {survey_path} "
+            "--out calibrated.yaml")
+
+
+class PointSigma(click.ParamType):
+    """``auto`` or a positive length in metres."""
+
+    name = "auto|metres"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, float):
+            return value
+        if str(value).strip().lower() == "auto":
+            return "auto"
+        try:
+            v = float(value)
+        except ValueError:
+            v = float("nan")
+        if not (v > 0 and v < float("inf")):
+            self.fail(f"expected 'auto' or a positive length in metres, got {value!r}", param,
+                      ctx)
+        return v
+
+
+@survey.command("calibrate")
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="The nominal deployment (as installed).")
+@click.option("--survey", "survey_path", required=True, type=click.Path(file_okay=False),
+              help="Survey bundle: points.csv and frames/ (or observations.csv).")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="Calibrated deployment to write; a report (.report.json, .png) goes beside.")
+@click.option("--lens", default="auto", show_default=True,
+              type=click.Choice(("auto", "pose", "focal", "principal", "k1", "k2", "full")),
+              help="Lens model per camera: auto chooses by held-out error among the nested "
+                   "models pose (lens as in the deployment), focal (+ fx, fy), principal "
+                   "(+ cx, cy), k1 (+ radial k1), k2 (+ radial k2, tangential p1, p2), full "
+                   "(+ radial k3); the others force one for every camera.")
+@click.option("--intrinsics", is_flag=True, help="The same as --lens full.")
+@click.option("--folds", default=5, show_default=True, type=click.IntRange(2, 20),
+              help="Held-out accuracy: k-fold by survey point.")
+@click.option("--point-sigma", default="auto", show_default=True, type=PointSigma(),
+              help="Measurement uncertainty of a surveyed position, m per axis (e.g. 0.003 "
+                   "for a tape measure, 0.0001 for a machined target); auto estimates it from "
+                   "the fit.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds, point_sigma,
+                     quiet):
+    """Calibrate the cameras from a survey and report held-out accuracy.
+
+    Each camera's pose and as much of its lens as the survey supports and needs (--lens auto:
+    the nested models compared on held-out error, the simpler kept unless the richer is
+    clearly better) are fitted to the survey points it saw, robustly (wrong spots and
+    mis-measured points are reported by id); then all cameras and all surveyed positions are
+    refined together, each position within its measurement precision (--point-sigma auto:
+    estimated from the fit). The accuracy printed is measured on survey points left out of
+    the fit (k-fold), never on the fitted ones.
+
+    Example: vlpcal survey calibrate -d nominal.yaml --survey survey/ --out calibrated.yaml
+    """
+
+    from ..datasets import DatasetError, read_survey_bundle
+    from ..reports import write_calibration
+    from ..survey import FUSION_OF, SurveyError, calibrate_survey, survey_spots
+
+    if intrinsics:
+        if lens not in ("auto", "full"):
+            raise UserError(f"--intrinsics is --lens full; it contradicts --lens {lens}")
+        lens = "full"
+    dep = _load_deployment(deployment_path)
+    try:
+        bundle = read_survey_bundle(survey_path)
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    from pathlib import Path
+
+    if Path(out).suffix.lower() not in (".yaml", ".yml"):
+        raise UserError(f"{out}: the calibrated deployment is a YAML file (.yaml); its report "
+                        "(.report.json) and figure (.png) go beside it")
+    out = _output_file(out, inputs=(deployment_path, survey_path),
+                       beside=(".report.json", ".png"))
+    uv, notes = survey_spots(dep, bundle)
+    for note in notes:
+        click.echo(note, err=True)
+    X, ids = bundle.xyz, bundle.point_ids
+    _check_survey_positions(survey_path, dep, X, ids)
+    try:
+        with click.progressbar(length=folds + 1, label="calibrating (lens choice and all, "
+                               "then k-fold)", hidden=quiet) as bar:
+            result = calibrate_survey(
+                dep, X, uv, ids, lens, folds, point_sigma,
+                progress=lambda i, n: bar.update(1),
+                sources={"deployment": str(deployment_path), "survey": str(survey_path)})
+    except SurveyError as e:
+        raise UserError(f"{survey_path}: {e}") from None
+    _print_calibration(result, folds)
+    paths = write_calibration(out, result, notes,
+                              header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
+    label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
+    click.echo(f"\nwrote {paths[0]} (fusion: {result.fusion}, the row '{label}'), "
+               f"{paths[1]}, {paths[2]}")
+
+
+def _print_calibration(result, folds: int) -> None:
+    """The lens decisions, the held-out table, the per-camera verdicts and the mis-measured
+    points."""
+    import numpy as np
+
+    from ..survey.calibration import format_length
+
+    n = len(result.points)
+    prec = result.precision
+    click.echo("\nlens, per camera (chosen by held-out reprojection error unless --lens forces "
+               "one):")
+    for sentence in result.lens:
+        click.echo(f"  {sentence}")
+    rows = [r for r in result.cameras if r.get("lens_candidates")]
+    if rows:
+        from ..survey import LENS_MODELS
+
+        click.echo(f"held-out reprojection error per lens model, px (* chosen; – not "
+                   f"supported or not tried):\n  {'camera':8s}"
+                   + "".join(f"{m:>11s}" for m in LENS_MODELS))
+        for r in rows:
+            cells = []
+            for m in LENS_MODELS:
+                px = r["lens_candidates"].get(m, {}).get("held_out_px")
+                cell = "–" if px is None else f"{px:.3g}" + ("*" if m == r["lens_model"] else "")
+                cells.append(f"{cell:>11s}")
+            click.echo(f"  {r['camera']:8s}" + "".join(cells))
+    how = "estimated from the fit" if prec["estimated"] else "as stated"
+    click.echo(f"survey positions: ±{format_length(prec['point_sigma_m'])} per axis ({how}); spots "
+               f"±{prec['pixel_sigma_px']:.2g} px")
+    # one unit for the table, chosen so that the best row reads with three figures
+    means = [st["mean"] for st in result.stats.values() if st["mean"] is not None]
+    unit, scale = next(((u, f) for u, f in (("m", 1.0), ("cm", 100.0), ("mm", 1000.0),
+                                            ("µm", 1e6)) if means and min(means) * f >= 0.1),
+                       ("µm", 1e6))
+    click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), {unit}; the "
+               "reference is the measured position itself "
+               f"(±{format_length(prec['point_sigma_m'])} per axis ≈ "
+               f"{format_length(prec['point_sigma_m'] * 3 ** 0.5)} in 3D):")
+    click.echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p95':>7s} {'max':>7s} {'fixed':>6s}")
+    for label, st in result.stats.items():
+        if st["mean"] is None:
+            click.echo(f"{label:32s} {'–':>7s} {'':23s} {st['fixed']:6.0%}")
+            continue
+        cells = " ".join(f"{st[k] * scale:7.3f}" if st[k] * scale < 10 else
+                         f"{st[k] * scale:7.1f}" for k in ("mean", "median", "p95", "max"))
+        click.echo(f"{label:32s} {cells} {st['fixed']:6.0%}")
+    click.echo("(fixed: share of the held-out points with a fix; a point one camera saw "
+               "has none)")
+    click.echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'lens':>9s} {'moved':>9s} "
+               f"{'turned °':>9s}  rejected spots")
+    for r in result.cameras:
+        click.echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['lens_model']:>9s} "
+                   f"{format_length(r['moved_m']):>9s} {r['turned_deg']:9.2f}  "
+                   f"{', '.join(r['outliers']) or '–'}")
+    for r in result.cameras:
+        if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
+            click.echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
+                       f"({r['moved_share']:.0%} of its distance to the survey) and turned "
+                       f"{r['turned_deg']:.0f}° from the deployment: is this survey from this "
+                       "site, and are the camera ids the same?", err=True)
+    if result.mismeasured:
+        click.echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
+                   "from its record the calibrated cameras put the LED):")
+        for pid, off in result.mismeasured:
+            click.echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
+
+
+def _check_survey_positions(survey_path, dep, X, ids) -> None:
+    """Refuse positions that cannot be in this room (millimetres read as metres, a typo): a
+    margin of a fifth of the room's size around it, and under its ceiling."""
+    import numpy as np
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    size = max(float(np.ptp(np.asarray(dep.room, float), axis=0).max()), dep.ceiling_height)
+    margin = 0.2 * size
+    room = Polygon(dep.room).buffer(margin)
+    inside = contains_xy(room, X[:, 0], X[:, 1]) & (X[:, 2] > -margin) \
+        & (X[:, 2] < dep.ceiling_height)
+    if not inside.all():
+        i = int(np.flatnonzero(~inside)[0])
+        raise UserError(f"{survey_path}: point {ids[i]} at ({X[i, 0]:g}, {X[i, 1]:g}, "
+                        f"{X[i, 2]:g}) m is not in the room of {dep.name} (a margin of a fifth "
+                        f"of its size) or under its {dep.ceiling_height:g} m ceiling: metres "
+                        "expected")
