@@ -33,3 +33,23 @@ def test_runtime_path_does_not_import_casadi_or_matplotlib():
             "print(sorted({'casadi', 'matplotlib', 'scipy'} & set(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_show_prints_what_a_deployment_holds():
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    planned = CliRunner().invoke(main, ["show", str(root / "layouts/paper-linear.planned.yaml")])
+    assert planned.exit_code == 0, planned.output
+    assert "9 cameras" in planned.output and "predicted: coverage" in planned.output
+    assert planned.output.count("160×120") == 9
+    cal = CliRunner().invoke(main, ["show", str(root / "surveys/paper-2024/calibrated.yaml")])
+    assert cal.exit_code == 0, cal.output
+    assert "region map of" in cal.output and "lens models: C1" in cal.output
+    assert "held-out mean 3D error" in cal.output
+    missing = CliRunner().invoke(main, ["show", "no-such.yaml"])
+    assert missing.exit_code == 2 and len(missing.output.strip().splitlines()) == 1

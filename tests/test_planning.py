@@ -262,3 +262,24 @@ def test_plan_command_prints_and_exports_a_free_layout(tmp_path):
     assert np.allclose(xy * 10, np.rint(xy * 10))  # on the 10 cm grid, no float noise
     assert CliRunner().invoke(main, ["check", "--site", str(site_path), "-d",
                                      str(out)]).exit_code == 0
+
+
+def test_a_hall_beyond_the_camera_limit_is_refused_at_once(tmp_path):
+    """A 200 × 150 m hall needs thousands of cameras: the plan says so from the footprint
+    bound, before it samples 9 million points."""
+    import time
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main
+    from vlpcal.planning.plan import fewest_possible
+
+    doc = {**SITE, "site": {**SITE["site"], "room": [[0, 0], [200, 0], [200, 150], [0, 150]]}}
+    (tmp_path / "hall.yaml").write_text(yaml.safe_dump(doc))
+    assert fewest_possible(site_from_dict(doc)) > 1000
+    t0 = time.perf_counter()
+    res = CliRunner().invoke(main, ["plan", "--site", str(tmp_path / "hall.yaml"), "--out",
+                                    str(tmp_path / "p.yaml")])
+    assert time.perf_counter() - t0 < 20  # not a timing claim: minutes or hours without it
+    assert res.exit_code == 1 and "cameras are needed" in res.output
+    assert not (tmp_path / "p.yaml").exists()

@@ -6,13 +6,14 @@ calls the layers below.
 - :mod:`.survey`: the surveyor (``survey plan | capture | calibrate``);
 - :mod:`.locate`: the integrator (``locate``);
 - :mod:`.interchange`: other tools' camera files (``export``, ``import``);
-- :mod:`.demo`: the demo and the simulator (``demo``, ``simulate``).
+- :mod:`.demo`: the demo and the simulator (``demo``, ``simulate``);
+- :mod:`.show`: what a deployment holds (``show``).
 
 Heavy modules (cv2, scipy, matplotlib) are imported inside commands, so ``vlpcal --help``
 starts fast.
 """
 
-from . import demo, interchange, locate, plan, survey  # noqa: F401  (registers the commands)
+from . import demo, interchange, locate, plan, show, survey  # noqa: F401  (registers them)
 from .common import UserError, main
 
 __all__ = ["UserError", "main"]

@@ -48,6 +48,11 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     say = (lambda m: None) if quiet else (lambda m: click.echo(m, err=True))
     result = plan_site(site, max_cameras, progress=say)
     r = site.requirements
+    if not result.candidates and "all" in result.missing:
+        raise click.ClickException(f"{site_path}: no layout of up to {max_cameras} cameras "
+                                   f"can meet the requirements: {result.missing['all']}; "
+                                   "raise --max-cameras, relax the requirements or use a "
+                                   "camera with a wider view")
     if not result.candidates:
         c = result.closest
         best = (f"for comparison, a dense lattice of {c.count} cameras covers "

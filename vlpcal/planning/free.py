@@ -160,8 +160,9 @@ def _repair(lay: Layout, focus, reach: float, iterations: int, tenure: int = 3) 
         if not moves:
             break
         best_move, best_total, nd = None, None, None
-        for start in range(0, len(moves), MOVE_BATCH):
-            batch = moves[start:start + MOVE_BATCH]
+        size = max(1, min(MOVE_BATCH, 2 ** 24 // lay.total.size))
+        for start in range(0, len(moves), size):
+            batch = moves[start:start + size]
             totals = np.empty((len(batch),) + lay.total.shape, lay.dtype)
             for b, (idx, cells, yaws) in enumerate(batch):
                 t = totals[b]

@@ -26,8 +26,11 @@ from .site import Site
 SPACING_RANGE = (0.25, 1.1)
 #: share of the coverage a screened layout may miss on the coarse grid and still be judged
 SCREEN_SLACK = 0.02
-#: lattices judged at once (memory: 6 × levels × batch × sample points floats)
+#: lattices judged at once, at most (memory: 6 × levels × batch × sample points floats)
 BATCH = 96
+#: sample-point values per batch (about 100 MB of floats per array): a large room judges fewer
+#: lattices at once
+BATCH_VALUES = 2 ** 24
 
 
 @dataclass
@@ -214,8 +217,9 @@ def lattice_search(site: Site, families=("square",), step: float = 0.05,
         if low > limit:
             continue
         idx = np.flatnonzero(counts <= limit)
-        for start in range(0, len(idx), BATCH):
-            chunk = idx[start:start + BATCH]
+        batch = max(1, min(BATCH, BATCH_VALUES // model.inside.size))
+        for start in range(0, len(idx), batch):
+            chunk = idx[start:start + batch]
             subs = [(c[chunk], r[chunk], m[chunk].astype(float)) for c, r, m in every]
             judged += len(chunk)
             if screen is not None:

@@ -4,6 +4,7 @@ judged by the reference model itself."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,6 +50,11 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
 
     t0 = time.perf_counter()
     say = progress or (lambda m: None)
+    fewest = fewest_possible(site)
+    if fewest > max_cameras:  # before any sample point is made: a hall of 10⁴ m² stays quick
+        return Plan([], 0, time.perf_counter() - t0, None,
+                    {"all": f"at least {fewest} cameras are needed (the served share of the "
+                            "floor, times the cameras per point, over a camera's footprint)"})
     step = mount_step(site)
     model = NadirModel(site)
     screen = NadirModel(site, every=SCREEN_EVERY)
@@ -90,6 +96,23 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
         closest = _densest(site, step)
     return Plan(candidates, tried, time.perf_counter() - t0, closest,
                 {f: m for f, m in missing.items() if f in site.families})
+
+
+def fewest_possible(site: Site) -> int:
+    """A lower bound on the cameras any layout needs: the highest LED height must be seen by
+    ``min_cameras`` cameras over at least ``3·coverage − 2`` of its floor (the other two
+    heights can at most make up the rest), and each camera sees at most its footprint there."""
+    from shapely.geometry import Polygon
+
+    from .families import footprint
+
+    r = site.requirements
+    area = Polygon(site.room)
+    for poly in site.keep_out:
+        area = area.difference(Polygon(poly))
+    fw, fd = footprint(site)
+    share = max(0.0, 3 * r.coverage - 2)
+    return max(r.min_cameras, math.ceil(r.min_cameras * share * area.area / (fw * fd) - 1e-9))
 
 
 def _yaw(camera) -> float:

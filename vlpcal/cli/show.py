@@ -1,0 +1,87 @@
+"""What a deployment holds, for a person (``vlpcal show``)."""
+
+from __future__ import annotations
+
+import math
+
+import click
+
+from .common import _load_deployment, main
+
+
+@main.command("show")
+@click.argument("deployment_path", metavar="DEPLOYMENT", type=click.Path(dir_okay=False))
+def show(deployment_path):
+    """Print what a deployment holds: the room, every camera (image, lens, where it hangs and
+    how it points), the detector and fusion the locator will use (region map, residual limit),
+    pixel corrections, the spot noise behind predicted errors, and where the file came from
+    (planned, calibrated: the predicted or held-out accuracy).
+
+    Example: vlpcal show layouts/paper-linear.planned.yaml
+    """
+    import numpy as np
+
+    dep = _load_deployment(deployment_path)
+    room = np.asarray(dep.room, float)
+    span = np.ptp(room, axis=0)
+    area = 0.5 * abs(np.dot(room[:, 0], np.roll(room[:, 1], 1))
+                     - np.dot(room[:, 1], np.roll(room[:, 0], 1)))
+    click.echo(f"{dep.name}: {len(dep.cameras)} camera{'s' if len(dep.cameras) != 1 else ''};"
+               f" room {span[0]:g} × {span[1]:g} m ({area:.2f} m², {len(room)} corners), "
+               f"ceiling {dep.ceiling_height:g} m"
+               + (f", {len(dep.keep_out)} keep-out area(s)" if dep.keep_out else ""))
+    click.echo(f"\n{'camera':8s} {'image':>9s} {'fx':>7s} {'fy':>7s} {'cx':>6s} {'cy':>6s} "
+               f"{'lens k1':>8s} {'x m':>7s} {'y m':>7s} {'z m':>6s} {'tilt°':>6s} {'yaw°':>5s}")
+    for c in dep.cameras:
+        axis = c.R[2]  # the optical axis in the world
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, -axis[2]))))
+        yaw = math.degrees(math.atan2(c.R[0][1], c.R[0][0])) % 360
+        x, y, z = c.position
+        click.echo(f"{c.id[:8]:8s} {f'{c.width}×{c.height}':>9s} {c.fx:7.1f} {c.fy:7.1f} "
+                   f"{c.cx:6.1f} {c.cy:6.1f} {c.dist[0]:8.3f} {x:7.3f} {y:7.3f} {z:6.3f} "
+                   f"{tilt:6.1f} {yaw:5.0f}")
+    click.echo("(tilt: the optical axis from straight down; yaw: the image's x axis from the "
+               "room's x axis)")
+    fusion = dep.extra.get("fusion", {})
+    line = f"\nlocator: detector {dep.detector}, fusion {dep.fusion}"
+    if "max_residual" in fusion:
+        line += f", residual limit {float(fusion['max_residual']):.2f} px"
+    if fusion.get("region_map"):
+        line += f", region map of {len(fusion['region_map'])} regions"
+    click.echo(line)
+    corrections = dep.extra.get("corrections", {})
+    if corrections:
+        click.echo(f"pixel corrections for {len(corrections)} camera(s): "
+                   + ", ".join(f"{cid} ({', '.join(f'{v:+.2f}' for v in c['pixel_offset'])} px)"
+                               for cid, c in list(corrections.items())[:6] if 'pixel_offset' in c))
+    noise = dep.extra.get("uncertainty", {}).get("pixel_noise")
+    if noise is not None:
+        click.echo(f"predicted errors assume {float(noise):g} px of spot noise")
+    prov = dep.extra.get("provenance") or {}
+    if prov:
+        click.echo(f"\nmade by {prov.get('command', 'an unknown tool')}"
+                   + (f" (vlpcal {prov['vlpcal']})" if prov.get("vlpcal") else "")
+                   + (f" on {prov['written']}" if prov.get("written") else ""))
+        for key, value in (prov.get("from") or {}).items():
+            click.echo(f"  from {key}: {value}")
+        plan = prov.get("plan") or {}
+        if plan:
+            click.echo(f"  plan: a {plan.get('family', '?')} layout of "
+                       f"{plan.get('cameras', len(dep.cameras))} cameras")
+        predicted = prov.get("predicted") or {}
+        if predicted.get("p95_error_m") is not None:
+            click.echo(f"  predicted: coverage {float(predicted.get('coverage', 0)):.1%}, p95 "
+                       f"{float(predicted['p95_error_m']) * 100:.2f} cm at "
+                       f"{predicted.get('pixel_noise_px', '?')} px")
+        if isinstance(prov.get("lens"), dict):
+            click.echo("  lens models: " + ", ".join(f"{k} {v}" for k, v in prov["lens"].items()))
+        if prov.get("point_sigma_m") is not None:
+            how = "estimated" if prov.get("point_sigma_estimated") else "as stated"
+            click.echo(f"  survey points' position error: {float(prov['point_sigma_m']) * 1000:.1f}"
+                       f" mm ({how})")
+        held = prov.get("held_out_mean_m")
+        if isinstance(held, dict) and held:
+            best = min(held, key=lambda k: held[k] if held[k] is not None else math.inf)
+            if held[best] is not None:
+                click.echo(f"  held-out mean 3D error: {float(held[best]) * 100:.2f} cm "
+                           f"({best}; the report has every pipeline)")
