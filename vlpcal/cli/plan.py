@@ -55,8 +55,10 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                                    "camera with a wider view")
     if not result.candidates:
         c = result.closest
-        best = (f"for comparison, a dense lattice of {c.count} cameras covers "
-                f"{c.evaluation.coverage:.1%} with p95 {c.evaluation.p95 * 100:.2f} cm"
+        best = (f"for comparison, a dense lattice of {c.count} camera"
+                f"{'s' if c.count != 1 else ''} covers {c.evaluation.coverage:.1%}"
+                + (f" with p95 {c.evaluation.p95 * 100:.2f} cm"
+                   if math.isfinite(c.evaluation.p95) else "")
                 if c else "no layout could be evaluated")
         raise click.ClickException(
             f"{site_path}: no layout of up to {max_cameras} cameras meets coverage "
@@ -81,7 +83,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     for family, why in result.missing.items():
         click.echo(f"   {family:10s} {why}")
     click.echo(f"x×y: distinct camera positions along x and y (cameras on a {_mount(site)} "
-               "grid from the room's lower-left corner, half a step from the walls); yaw: "
+               "grid from the room's lower-left corner); yaw: "
                f"degrees from the room's x axis to each image's {site.camera.width} px side "
                "(the maps draw it)")
     if candidate > len(result.candidates):
@@ -144,12 +146,11 @@ def check(site_path, deployment_path, maps):
     if other:
         click.echo(f"  note: {', '.join(other[:5])}{' …' if len(other) > 5 else ''} have another "
                    "image size than the site's camera model; each camera is judged as it is")
-    from shapely import contains_xy
-    from shapely.geometry import Polygon
+    from ..planning import Mounting, mount_step
 
     xy = np.array([c.position[:2] for c in dep.cameras]).reshape(-1, 2)
-    outside = [c.id for c, inside in zip(dep.cameras, contains_xy(Polygon(site.room), xy[:, 0],
-                                                                   xy[:, 1])) if not inside]
+    inside = Mounting(site, mount_step(site))(xy[:, 0], xy[:, 1])  # walls count as inside
+    outside = [c.id for c, ok in zip(dep.cameras, inside) if not ok]
     high = [c.id for c in dep.cameras if not 0 < c.position[2] <= site.ceiling_height]
     if outside or high:
         click.echo(f"  note: camera(s) {', '.join((outside + high)[:5])} hang outside the "

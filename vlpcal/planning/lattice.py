@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .families import Candidate, ceiling_cameras, footprint, mount_step
+from .families import Candidate, ceiling_cameras, footprint
 from .nadir import YAWS, NadirModel
 from .reference import evaluate
 from .site import Site
@@ -70,7 +70,9 @@ def lattices(site: Site, family: str, step: float, yaws=YAWS):
     lo, hi = SPACING_RANGE
     for yaw in yaws:
         fw, fd = (fw0, fd0) if not yaw else (fd0, fw0)
-        A, B = _grid(lo * fw, hi * fw, step), _grid(lo * fd, hi * fd, step)
+        # a spacing longer than the room holds one column (or row): no need to try more
+        A = _grid(min(lo * fw, x1 - x0), min(hi * fw, x1 - x0 + step), step)
+        B = _grid(min(lo * fd, y1 - y0), min(hi * fd, y1 - y0 + step), step)
         if family == "square":
             specs = [((a, b), (a, b), ((0.0, 0.0),)) for a in A for b in B]
         elif family == "triangular":
@@ -92,22 +94,21 @@ def lattices(site: Site, family: str, step: float, yaws=YAWS):
 
 
 class Mounting:
-    """Whether floor positions can carry a camera: inside the room polygon and at least half a
-    mounting-grid step (:func:`.families.mount_step`) from its walls, where a camera body can
-    hang. A raster lookup for positions on the ``step`` grid from the room's lower-left
-    corner, the polygon itself for the others."""
+    """Whether floor positions can carry a camera: inside the room polygon, its walls
+    included (a camera body a few centimetres across hangs against the wall; the model's
+    sample grid does not resolve the difference). A raster lookup for positions on the
+    ``step`` grid from the room's lower-left corner, the polygon itself for the others."""
 
     def __init__(self, site: Site, step: float):
         from shapely import contains_xy
         from shapely.geometry import Polygon
 
-        margin = mount_step(site) / 2
         room = Polygon(site.room)
-        self.room = room.buffer(-margin + 1e-9 * max(1.0, margin), join_style="mitre")
         self.x0, self.y0, self.x1, self.y1 = room.bounds
+        self.room = room.buffer(1e-9 * max(1.0, self.x1 - self.x0, self.y1 - self.y0))
         self.step = step
         self.rectangle = len(site.room) == 4 and room.envelope.equals(room)
-        self.inner = (self.x0 + margin, self.y0 + margin, self.x1 - margin, self.y1 - margin)
+        self.inner = room.bounds
         gx, gy = np.meshgrid(np.arange(math.floor((self.x1 - self.x0) / step + 1e-9) + 1),
                              np.arange(math.floor((self.y1 - self.y0) / step + 1e-9) + 1),
                              indexing="ij")

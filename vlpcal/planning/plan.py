@@ -140,7 +140,7 @@ def _on_grid(site: Site, model: NadirModel, step: float, cand: Candidate):
                      cand.yaw, cams, ev) if ev.meets else None
 
 
-def _densest(site: Site, step: float) -> Candidate:
+def _densest(site: Site, step: float) -> Candidate | None:
     """When nothing meets: the square lattice at the smallest spacings searched, judged (the
     closest a lattice comes to the coverage)."""
     from .families import footprint
@@ -154,6 +154,8 @@ def _densest(site: Site, step: float) -> Candidate:
     X, Y = np.meshgrid(xs, ys)
     keep = mount(X, Y)
     xy = np.c_[X[keep], Y[keep]]
+    if not len(xy):
+        return None
     cams = ceiling_cameras(site, xy, [0.0] * len(xy))
     return Candidate("square", len(xs), len(ys), (a, b), tuple(xy[0]), 0.0, cams,
                      evaluate(site, cams))
