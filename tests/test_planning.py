@@ -283,3 +283,43 @@ def test_a_hall_beyond_the_camera_limit_is_refused_at_once(tmp_path):
     assert time.perf_counter() - t0 < 20  # not a timing claim: minutes or hours without it
     assert res.exit_code == 1 and "cameras are needed" in res.output
     assert not (tmp_path / "p.yaml").exists()
+
+
+@pytest.mark.parametrize("case", ["distorted lens", "tiny scene", "free only", "small room",
+                                  "no sample point"])
+def test_what_plan_exports_meets_its_site_or_it_says_why(tmp_path, case):
+    """The probe's wrong results: a plan never claims a layout the reference model rejects
+    (a distorted lens), a tiny scene is sampled finely enough to mean it, 'free' alone and a
+    room smaller than a footprint still get layouts, a strip with no sample point is said."""
+    import copy
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main
+
+    doc = copy.deepcopy(SITE)
+    if case == "distorted lens":
+        doc["camera"]["dist"] = [0.3, 0, 0, 0, 0]
+    elif case == "tiny scene":
+        doc["site"].update(room=[[0, 0], [0.3, 0], [0.3, 0.2], [0, 0.2]], ceiling_height=0.3)
+        doc["requirements"].update(heights=[0, 0.05], max_error_p95=0.0026)
+    elif case == "free only":
+        doc["families"] = ["free"]
+    elif case == "small room":
+        doc["site"]["room"] = [[0, 0], [0.5, 0], [0.5, 0.4], [0, 0.4]]
+    else:
+        doc["site"]["room"] = [[0, 0], [10, 0], [10, 0.05], [0, 0.05]]
+    site_path, out = tmp_path / "site.yaml", tmp_path / "plan.yaml"
+    site_path.write_text(yaml.safe_dump(doc))
+    res = CliRunner().invoke(main, ["plan", "-q", "--site", str(site_path), "--out", str(out)])
+    if res.exit_code == 0:
+        site = load_site(site_path)
+        from vlpcal import deployment
+
+        assert evaluate(site, deployment.load(out).cameras).meets
+        if case == "tiny scene":  # judged on a grid that resolves the scene
+            assert len(sample_points(site)) >= 100
+    else:
+        assert case in ("distorted lens", "no sample point"), res.output
+        assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1
+        assert not out.exists()

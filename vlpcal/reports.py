@@ -150,7 +150,9 @@ def plan_maps(path, site, cand) -> None:
     top = max(float(np.percentile(ev.error[finite], 99) * 100) if finite.any() else need,
               1.25 * need)
     cut = finite.any() and float(np.nanmax(ev.error) * 100) > top
-    most = int(max(ev.views.max(initial=0), r.min_cameras))
+    # counts past k + 6 share the last colour ("or more"): thousands of cameras make no
+    # thousand-tick colour bar
+    most = int(min(max(ev.views.max(initial=0), r.min_cameras), r.min_cameras + 6))
     counts = plt.get_cmap("viridis", most + 1)
     norm = BoundaryNorm(np.arange(-0.5, most + 1.5), most + 1)
     too_few = ev.views < r.min_cameras
@@ -169,7 +171,7 @@ def plan_maps(path, site, cand) -> None:
             ax = axes[row][col]
             grid = np.full((len(ys), len(xs)), np.nan)
             if row == 0:
-                grid[iy, ix] = ev.views[sel]
+                grid[iy, ix] = np.minimum(ev.views[sel], most)
                 sc = ax.pcolormesh(ex, ey, grid, cmap=counts, norm=norm)
                 title = f"h = {h:g} m: cameras that see the point (need {r.min_cameras})"
                 fig.colorbar(sc, ax=ax, shrink=0.7, ticks=range(most + 1))

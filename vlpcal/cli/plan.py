@@ -133,6 +133,9 @@ def check(site_path, deployment_path, maps):
             raise UserError(f"{maps}: the maps are a PNG picture (.png)")
         maps = _output_file(maps, inputs=(site_path, deployment_path))
     ev = evaluate(site, list(dep.cameras))
+    if not len(ev.points):
+        raise UserError(f"{site_path}: no point of the reference model's sample grid falls on "
+                        "the floor (a room narrower than one grid cell?)")
     r = site.requirements
     levels = sorted(set(ev.points[:, 2].round(6)))
     hs = ", ".join(f"{h:g}" for h in levels)

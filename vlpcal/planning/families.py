@@ -90,6 +90,8 @@ MOUNT_STEP = 0.10
 
 
 def mount_step(site: Site) -> float:
-    """The mounting grid: :data:`MOUNT_STEP`, or 1/10 of the footprint's short side when that
-    is finer (a small scene keeps the same relative resolution)."""
-    return min(MOUNT_STEP, min(footprint(site)) / 10)
+    """The mounting grid: :data:`MOUNT_STEP`, kept between 1/40 and 1/10 of the footprint's
+    short side, so the search's resolution relative to a camera's view is the same for a
+    scene at 0.3 m or at 100 m (and its work bounded)."""
+    short = min(footprint(site))
+    return min(max(MOUNT_STEP, short / 40), short / 10)

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..triangulation import trace_adjugate_det
 from .families import ceiling_cameras
-from .reference import MARGIN_PX, SAMPLE_STEP, sample_grid, sample_levels
+from .reference import MARGIN_PX, sample_grid, sample_levels
 from .site import Site
 
 #: the camera yaws the model knows, rad
@@ -44,11 +44,14 @@ class Verdict:
 class NadirModel:
     """The site's sample points and camera model, ready to judge batches of level layouts."""
 
-    def __init__(self, site: Site, step: float = SAMPLE_STEP, every: int = 1):
+    def __init__(self, site: Site, step: float | None = None, every: int = 1):
         """``every``: keep every n-th sample point along each axis (a coarse model for a
         search whose points are a subset of the exact model's)."""
         self.site = site
         r = site.requirements
+        from .reference import sample_step
+
+        self.step = (sample_step(site) if step is None else step) * every
         xs, ys, inside = sample_grid(site, step)
         self.xs, self.ys, self.inside = xs[::every], ys[::every], inside[::every, ::every]
         self.levels = sample_levels(site)

@@ -20,6 +20,9 @@ from .site import Site
 #: the searches' coarse models keep every n-th sample point along each axis (the exact model
 #: judges after): the lattice screen, the local search
 SCREEN_EVERY, SEARCH_EVERY = 2, 3
+#: sample-grid cells per LED height a plan takes on (a 200 × 100 m hall at 10 cm has 2·10⁶:
+#: gigabytes and hours)
+MAX_SAMPLE_CELLS = 500_000
 
 
 @dataclass
@@ -57,6 +60,15 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
                             "floor, times the cameras per point, over a camera's footprint)"})
     step = mount_step(site)
     model = NadirModel(site)
+    if model.n_points == 0:
+        return Plan([], 0, time.perf_counter() - t0, None,
+                    {"all": "no point of the reference model's sample grid falls on the floor "
+                            "(a room narrower than one grid cell?)"})
+    if model.inside.size > MAX_SAMPLE_CELLS:
+        return Plan([], 0, time.perf_counter() - t0, None,
+                    {"all": f"the reference model's {model.step * 100:g} cm grid has "
+                            f"{model.inside.size:,} cells per height, more than the "
+                            f"{MAX_SAMPLE_CELLS:,} a plan handles here: plan the room in parts"})
     screen = NadirModel(site, every=SCREEN_EVERY)
     grids = [f for f in ("square", "triangular", "linear") if f in site.families]
     if "free" in site.families and "square" not in grids:
@@ -70,8 +82,12 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
             say(f"  {family}: none of ≤ {best_n} cameras meets ({r.seconds:.1f} s)")
             continue
         cand = _on_grid(site, model, step, r.best)
-        if cand is None:
-            missing[family] = "its best lattice fails once snapped to the mounting grid"
+        if cand is None or not cand.evaluation.meets:
+            # the search's closed form ignores lens distortion: the reference model decides
+            missing[family] = ("its best lattice fails the reference model once snapped to "
+                               "the mounting grid" if cand is None else
+                               "its best lattice fails the reference model (the lens "
+                               "distortion the search leaves out)")
             continue
         found[family] = cand
         best_n = min(best_n, cand.count)
@@ -83,7 +99,7 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
         cams = fewer_cameras(search, model, step, [c.position[:2] for c in seed.cameras],
                              [_yaw(c) for c in seed.cameras])
         ev = evaluate(site, cams)
-        if ev.meets and len(cams) < seed.count:
+        if ev.meets and (len(cams) < seed.count or seed.family not in site.families):
             found["free"] = Candidate("free", 0, 0, (), tuple(cams[0].position[:2]), 0.0,
                                       cams, ev)
             say(f"  free: {len(cams)} cameras ({time.perf_counter() - t1:.1f} s)")
@@ -102,14 +118,11 @@ def fewest_possible(site: Site) -> int:
     """A lower bound on the cameras any layout needs: the highest LED height must be seen by
     ``min_cameras`` cameras over at least ``3·coverage − 2`` of its floor (the other two
     heights can at most make up the rest), and each camera sees at most its footprint there."""
-    from shapely.geometry import Polygon
-
     from .families import footprint
+    from .reference import floor
 
     r = site.requirements
-    area = Polygon(site.room)
-    for poly in site.keep_out:
-        area = area.difference(Polygon(poly))
+    area = floor(site.room, site.keep_out)
     fw, fd = footprint(site)
     share = max(0.0, 3 * r.coverage - 2)
     return max(r.min_cameras, math.ceil(r.min_cameras * share * area.area / (fw * fd) - 1e-9))

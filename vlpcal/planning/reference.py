@@ -22,16 +22,35 @@ SAMPLE_STEP = 0.10
 MARGIN_PX = 2.0
 
 
-def sample_grid(site: Site, step: float = SAMPLE_STEP):
-    """The reference model's floor grid: cell centres ``xs``, ``ys`` (``step`` ≤ 10 cm) over the
-    room's bounding box and the mask ``inside`` (len(ys) × len(xs)) of the cells in the room
-    minus keep-out areas."""
-    from shapely import contains_xy
+def floor(room, keep_out):
+    """The floor to serve: the room polygon minus the union of the keep-out areas (one union,
+    so thousands of small keep-outs stay fast)."""
+    from shapely import union_all
     from shapely.geometry import Polygon
 
-    area = Polygon(site.room)
-    for poly in site.keep_out:
-        area = area.difference(Polygon(poly))
+    area = Polygon(room)
+    if keep_out:
+        area = area.difference(union_all([Polygon(p).buffer(0) for p in keep_out]))
+    return area
+
+
+def sample_step(site: Site) -> float:
+    """The sample grid's step: :data:`SAMPLE_STEP` (the contract's "at most 10 cm"), finer for
+    a scene whose camera footprint is under 1.2 m, so that a footprint spans at least 12
+    cells at any scale."""
+    from .families import footprint
+
+    return min(SAMPLE_STEP, min(footprint(site)) / 12)
+
+
+def sample_grid(site: Site, step: float | None = None):
+    """The reference model's floor grid: cell centres ``xs``, ``ys`` (``step`` ≤ 10 cm; by
+    default :func:`sample_step`) over the floor's bounding box and the mask ``inside``
+    (len(ys) × len(xs)) of the cells in the room minus keep-out areas."""
+    from shapely import contains_xy
+
+    step = sample_step(site) if step is None else step
+    area = floor(site.room, site.keep_out)
     x0, y0, x1, y1 = area.bounds
     xs, ys = np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step)
     gx, gy = np.meshgrid(xs, ys)
@@ -44,7 +63,7 @@ def sample_levels(site: Site) -> list[float]:
     return sorted({min(hs), (min(hs) + max(hs)) / 2, max(hs)})
 
 
-def sample_points(site: Site, step: float = SAMPLE_STEP) -> np.ndarray:
+def sample_points(site: Site, step: float | None = None) -> np.ndarray:
     """The reference model's sample points ``N×3``: the room minus keep-out areas on a square
     grid (``step`` ≤ 10 cm, cell centres), at the lowest, middle (halfway between the lowest
     and the highest) and highest LED height, level after level."""
@@ -67,7 +86,7 @@ class Evaluation:
     error: np.ndarray  #: N, predicted RMS error (m; NaN where < 2 cameras)
 
 
-def evaluate(site: Site, cameras: list[Camera], step: float = SAMPLE_STEP) -> Evaluation:
+def evaluate(site: Site, cameras: list[Camera], step: float | None = None) -> Evaluation:
     """Judge a layout with the reference model (DESIGN.md), independently of any optimiser."""
     pts = sample_points(site, step)
     seen = np.stack([c.project(pts, margin=MARGIN_PX)[2] for c in cameras]) if cameras \

@@ -132,13 +132,14 @@ def _check_floor(room, keep_out) -> None:
     area = Polygon(room)
     if not area.is_valid or area.area <= 0:
         raise SiteError("site.room: expected a simple polygon (its edges must not cross)")
+    from .reference import floor
+
     for i, poly in enumerate(keep_out):
-        block = Polygon(poly).buffer(0)
-        if not block.intersects(area) and not block.intersects(Polygon(room)):
+        if not Polygon(poly).buffer(0).intersects(area):
             raise SiteError(f"site.keep_out[{i}]: lies wholly outside the room (a typo, or "
                             "another unit?)")
-        area = area.difference(block)
-    if area.is_empty or area.area <= 1e-9 * Polygon(room).area:
+    area = floor(room, keep_out)
+    if area.is_empty or not area.area > 1e-9 * Polygon(room).area:
         raise SiteError("site.keep_out: the keep-out areas cover the whole room: no floor is "
                         "left to plan for")
     from .reference import SAMPLE_STEP
