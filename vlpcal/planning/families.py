@@ -90,8 +90,11 @@ MOUNT_STEP = 0.10
 
 
 def mount_step(site: Site) -> float:
-    """The mounting grid: :data:`MOUNT_STEP`, kept between 1/40 and 1/10 of the footprint's
-    short side, so the search's resolution relative to a camera's view is the same for a
-    scene at 0.3 m or at 100 m (and its work bounded)."""
+    """The mounting grid: :data:`MOUNT_STEP` for rooms of ordinary height; 1/10 of the
+    footprint's short side when that is finer (a small scene); a multiple of it near 1/20 of
+    the footprint when the footprint is over 3 m (a high ceiling), so that the search's
+    resolution relative to a camera's view, and its work, stay bounded at any scale."""
     short = min(footprint(site))
-    return min(max(MOUNT_STEP, short / 40), short / 10)
+    if short / 10 < MOUNT_STEP:
+        return short / 10
+    return MOUNT_STEP * max(1, round(short / (20 * MOUNT_STEP)))
