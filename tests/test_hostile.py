@@ -130,3 +130,42 @@ def test_reader_limits_are_what_the_module_says():
     assert nesting_depth("s: '[[[['\n") == 1  # brackets inside quotes do not count
     assert MAX_DEPTH >= 8 and MAX_ALIASES >= 1
     assert len(shown(list(range(10 ** 6)))) < 100
+
+
+@pytest.mark.parametrize("command", ["locate", "export", "import", "survey plan",
+                                     "survey plan png", "plan", "calibrate"])
+def test_no_command_writes_over_its_own_input(tmp_path, command):
+    """--out naming the command's own input (or a name whose companion would land on it) is
+    one line, exit 2, before any work; the input is unchanged."""
+    import shutil
+
+    dep = tmp_path / "deployment.yaml"
+    shutil.copy(DEPLOYMENT, dep)
+    site = tmp_path / "site.yaml"
+    shutil.copy(SITE, site)
+    frames = tmp_path / "frames"
+    (frames / "f1").mkdir(parents=True)
+    args, victim = {
+        "locate": (["locate", "-d", dep, "--observations", tmp_path / "obs.csv", "--out",
+                    tmp_path / "obs.csv"], tmp_path / "obs.csv"),
+        "export": (["export", "-d", dep, "--to", "opencv", "-o", dep], dep),
+        "import": (["import", "--cameras", dep, "-b", site, "-o", site], site),
+        "survey plan": (["survey", "plan", "-d", dep, "--out", dep.with_suffix(".csv")], None),
+        "survey plan png": (["survey", "plan", "-d", dep, "--out", tmp_path / "map.png"], None),
+        "plan": (["plan", "--site", site, "--out", site], site),
+        "calibrate": (["survey", "calibrate", "-d", dep, "--survey", tmp_path, "--out",
+                       tmp_path / "deployment.yaml"], dep),
+    }[command]
+    if command == "survey plan":  # its map would land on a file given as the deployment
+        dep.with_suffix(".png").write_bytes(b"not a picture")
+        args = ["survey", "plan", "-d", dep.with_suffix(".png"), "--out",
+                dep.with_suffix(".csv")]
+        shutil.copy(DEPLOYMENT, dep.with_suffix(".png"))
+        victim = dep.with_suffix(".png")
+    (tmp_path / "obs.csv").write_text("frame_id,camera_id,u,v\nf1,C1,80,60\nf1,C2,70,60\n")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    code, out, err, _ = _vlpcal(*args)
+    lines = [line for line in (out.splitlines() + err) if line.strip()]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in lines[0], lines
+    after = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    assert after == before, f"{victim} or another file changed"

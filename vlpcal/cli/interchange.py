@@ -33,7 +33,7 @@ def export_cameras(deployment_path, fmt, out, units):
     from ..interchange import to_anipose_toml, to_opencv_yaml
 
     dep = _load_deployment(deployment_path)
-    out = _output_file(out)
+    out = _output_file(out, inputs=(deployment_path,))
     kind = {".toml": "anipose", ".yaml": "opencv", ".yml": "opencv"}.get(out.suffix.lower())
     if fmt is None and kind is None:
         raise UserError(f"{out}: give --to anipose or --to opencv (or name the file .toml or "
@@ -138,7 +138,7 @@ def import_cameras(cameras_path, base_path, out, units):
                        "cameras (run survey calibrate to learn them again)", err=True)
     extra["provenance"] = provenance("vlpcal import", **{"from": {"cameras": str(path),
                                                                   "base": str(base_path)}})
-    out = _output_file(out)
+    out = _output_file(out, inputs=(cameras_path, base_path))
     dep = Deployment(base.name, base.ceiling_height, base.room, cams, base.keep_out, extra)
     try:
         save(dep, out, header=f"Cameras imported by vlpcal import from {path}.")

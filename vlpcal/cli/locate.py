@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .common import UserError, _camera_sources, _load_deployment, main
+from .common import UserError, _camera_sources, _load_deployment, _output_file, main
 
 
 @main.command()
@@ -25,8 +25,8 @@ from .common import UserError, _camera_sources, _load_deployment, main
               help="Frame sets located together (folders).")
 @click.option("--tolerance", default=0.05, show_default=True, type=click.FloatRange(0.001),
               help="Live: frames arriving within this many seconds form one set.")
-@click.option("--duration", type=click.FloatRange(0), default=None,
-              help="Live: stop after this many seconds.")
+@click.option("--duration", type=click.FloatRange(0, min_open=True), default=None,
+              help="Live: stop after this many seconds (more than 0; none: until stopped).")
 @click.option("--max-sets", type=click.IntRange(1), default=None,
               help="Live: stop after this many frame sets.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
@@ -53,6 +53,9 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
         raise click.UsageError("give exactly one input: --frames DIR, --observations CSV or "
                                "--camera ID=SOURCE …")
     loc = Locator(_load_deployment(deployment_path))
+    if out != "-":  # never over the deployment or the frames it reads
+        out = str(_output_file(out, inputs=[p for p in (deployment_path, frames_dir,
+                                                         observations) if p]))
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
     live = bool(cameras)
     try:

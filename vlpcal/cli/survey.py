@@ -51,12 +51,16 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
     except SurveyError as e:
         raise UserError(f"{deployment_path}: {e}") from None
     out = Path(out)
+    if out.suffix.lower() != ".csv":  # its map is written beside it as .png
+        raise UserError(f"{out}: the survey plan is a CSV file (.csv); its map (.png) goes "
+                        "beside it")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise UserError(f"{out}: cannot make its folder ({e.strerror})") from None
     if out.is_dir():
         raise UserError(f"{out}: is a folder (expected a points.csv file to write)")
+    out = _output_file(out, inputs=(deployment_path,), beside=(".png",))
     write_truth_csv(out, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
     survey_plan_figure(out.with_suffix(".png"), dep, plan)
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
