@@ -169,3 +169,12 @@ def test_no_command_writes_over_its_own_input(tmp_path, command):
     assert code == 2 and len(lines) == 1 and "Traceback" not in lines[0], lines
     after = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
     assert after == before, f"{victim} or another file changed"
+
+
+def test_a_bad_observations_file_leaves_stdout_clean(tmp_path):
+    """The fixes go to stdout for a pipe: an input refused before any fix prints its one-line
+    error and nothing on stdout (not a CSV header a reader would take for an empty result)."""
+    bad = tmp_path / "obs.csv"
+    bad.write_text("frame,cam,x\n1,2,3\n")
+    code, out, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--observations", bad)
+    assert code == 2 and out == "" and len([e for e in err if e.strip()]) == 1, (out, err)

@@ -225,15 +225,22 @@ class FixWriter:
             fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", dir=folder)
             os.chmod(self._tmp, 0o644)
             self._f = os.fdopen(fd, "w", newline="")
+        self._header = self.fmt != "csv"  # written with the first rows (or at close): an
+        # input that fails before any fix leaves stdout clean
         if self.fmt == "csv":
             import csv
 
             self._csv = csv.DictWriter(self._f, fieldnames=self.columns, extrasaction="ignore")
+
+    def _start(self) -> None:
+        if not self._header:
             self._csv.writeheader()
+            self._header = True
 
     def write(self, fixes, extra: dict | None = None) -> None:
         import json
 
+        self._start()
         for fix in fixes:
             row = {**fix.row(), **(extra or {})}
             if self.fmt == "csv":
@@ -248,6 +255,7 @@ class FixWriter:
         located so far is kept)."""
         import os
 
+        self._start()
         if self._tmp is None:
             self._f.flush()
             return

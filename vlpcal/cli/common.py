@@ -49,7 +49,7 @@ def _load_deployment(path):
         raise UserError(str(e)) from None
 
 
-def _output_file(path, inputs=(), beside=()):
+def _output_file(path, inputs=(), beside=(), what: str = ""):
     """``path`` as a file to write, checked before any work: not a folder, in a folder that
     exists and takes a new file, none of the command's ``inputs`` (files or folders: the output
     may not be one of them or lie inside one), and neither are the files it writes ``beside``
@@ -60,7 +60,8 @@ def _output_file(path, inputs=(), beside=()):
 
     out = Path(path)
     if out.is_dir() or not out.parent.is_dir():
-        raise UserError(f"{out}: cannot write there (expected a file in an existing folder)")
+        raise UserError(f"{out}: cannot write {what + ' ' if what else ''}there (expected a "
+                        "file in an existing folder)")
     targets = [out] + [out.with_suffix(s) for s in beside]
     for t in targets:
         r = t.resolve()

@@ -55,7 +55,7 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
     loc = Locator(_load_deployment(deployment_path))
     if out != "-":  # never over the deployment or the frames it reads
         out = str(_output_file(out, inputs=[p for p in (deployment_path, frames_dir,
-                                                         observations) if p]))
+                                                         observations) if p], what="the fixes"))
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
     live = bool(cameras)
     try:
