@@ -178,3 +178,28 @@ def test_a_bad_observations_file_leaves_stdout_clean(tmp_path):
     bad.write_text("frame,cam,x\n1,2,3\n")
     code, out, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--observations", bad)
     assert code == 2 and out == "" and len([e for e in err if e.strip()]) == 1, (out, err)
+
+
+def test_a_small_jpeg_declaring_a_huge_image_is_not_decoded(tmp_path):
+    """A 2 kB JPEG whose header says 32000 × 32000 (a gigabyte to decode): refused from its
+    header, the frame set keeps its row, memory stays small."""
+    import cv2
+    import numpy as np
+
+    img = np.zeros((120, 160), np.uint8)
+    img[55:65, 75:85] = 255
+    frame = cv2.imencode(".jpg", img)[1].tobytes()
+    bomb = bytearray(frame)
+    at = bomb.find(b"\xff\xc0")
+    bomb[at + 5:at + 9] = (32000).to_bytes(2, "big") * 2
+    (tmp_path / "frames" / "f1").mkdir(parents=True)
+    (tmp_path / "frames" / "f1" / "C1.jpg").write_bytes(bytes(bomb))
+    for cid in ("C2", "C3"):
+        (tmp_path / "frames" / "f1" / f"{cid}.jpg").write_bytes(frame)
+    out = tmp_path / "fixes.csv"
+    code, _, err, rss = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", tmp_path / "frames",
+                                "--out", out)
+    assert code == 0, err
+    rows = out.read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("f1,")
+    assert rss is not None and rss < 500, f"{rss:.0f} MB"

@@ -145,8 +145,41 @@ _cv2 = _LazyCv2()
 
 # -- decoding ----------------------------------------------------------------------------------
 
-def decode_gray(data) -> np.ndarray | None:
-    """JPEG bytes → 8-bit grayscale (luma) image, or None when the bytes are not a whole JPEG.
+#: pixels a JPEG may declare when no frame size is expected (a 1 kB file can declare
+#: 32000 × 32000 and cost a gigabyte to decode)
+MAX_PIXELS = 2 ** 26
+_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def jpeg_size(buf: bytes) -> tuple[int, int] | None:
+    """(height, width) that a JPEG's frame header declares, read from its markers without
+    decoding (None if there is no frame header before the data)."""
+    i, n = 2, len(buf)
+    while i + 4 <= n:
+        if buf[i] != 0xFF:
+            return None
+        marker = buf[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        length = (buf[i + 2] << 8) | buf[i + 3]
+        if marker in _SOF:
+            if i + 9 > n:
+                return None
+            return (buf[i + 5] << 8) | buf[i + 6], (buf[i + 7] << 8) | buf[i + 8]
+        if marker == 0xDA or length < 2:  # the scan data before any frame header
+            return None
+        i += 2 + length
+    return None
+
+
+def decode_gray(data, shape=None) -> np.ndarray | None:
+    """JPEG bytes → 8-bit grayscale (luma) image, or None when the bytes are not a whole JPEG
+    or declare another size than ``shape`` (H, W) — more than :data:`MAX_PIXELS` without it —
+    read from the header before anything is decoded.
 
     A truncated JPEG decodes to a grey-filled image with only a warning, so the end-of-image
     marker is checked first (trailing zero padding, as some cameras send, is allowed).
@@ -156,6 +189,10 @@ def decode_gray(data) -> np.ndarray | None:
     buf = bytes(data) if not isinstance(data, bytes) else data
     if len(buf) < 4 or not buf.startswith(b"\xff\xd8") or not (
             buf.endswith(b"\xff\xd9") or buf.rstrip(b"\x00").endswith(b"\xff\xd9")):
+        return None
+    size = jpeg_size(buf)
+    if size is None or (tuple(shape) != size if shape is not None
+                        else size[0] * size[1] > MAX_PIXELS):
         return None
     try:
         img = _cv2.imdecode(np.frombuffer(buf, np.uint8), _cv2.IMREAD_GRAYSCALE)
@@ -621,7 +658,14 @@ def _to_stack(frames, shape=None):
             codes[i] = _REASON_CODE[MISSING]
             continue
         if type(f) is bytes and f[:2] == b"\xff\xd8" and f[-2:] == b"\xff\xd9":
-            try:  # a whole JPEG: decode it here (decode_gray's checks, inlined for speed)
+            # a whole JPEG: decode it here (decode_gray's checks, inlined for speed), after
+            # its header's size is checked (a small file may declare a huge image)
+            size = jpeg_size(f)
+            if size is None or (size != want if want is not None
+                                else size[0] * size[1] > MAX_PIXELS):
+                codes[i] = _REASON_CODE[WRONG_SIZE if size is not None else CORRUPT]
+                continue
+            try:
                 im = _cv2.imdecode(np.frombuffer(f, np.uint8), _cv2.IMREAD_GRAYSCALE)
             except _cv2.error:
                 im = None
