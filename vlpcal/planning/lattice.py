@@ -108,7 +108,6 @@ class Mounting:
         self.room = room.buffer(1e-9 * max(1.0, self.x1 - self.x0, self.y1 - self.y0))
         self.step = step
         self.rectangle = len(site.room) == 4 and room.envelope.equals(room)
-        self.inner = room.bounds
         gx, gy = np.meshgrid(np.arange(math.floor((self.x1 - self.x0) / step + 1e-9) + 1),
                              np.arange(math.floor((self.y1 - self.y0) / step + 1e-9) + 1),
                              indexing="ij")
@@ -118,8 +117,8 @@ class Mounting:
         from shapely import contains_xy
 
         eps = 1e-9 * max(1.0, self.x1 - self.x0, self.y1 - self.y0)
-        x0, y0, x1, y1 = self.inner
-        box = (X >= x0 - eps) & (X <= x1 + eps) & (Y >= y0 - eps) & (Y <= y1 + eps)
+        box = (X >= self.x0 - eps) & (X <= self.x1 + eps) & (Y >= self.y0 - eps) \
+            & (Y <= self.y1 + eps)
         if self.rectangle:
             return box
         out = np.zeros(X.shape, bool)

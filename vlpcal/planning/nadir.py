@@ -115,12 +115,6 @@ class NadirModel:
         XM = {p: np.matmul(X[p], mounted) for p in {p for p, _ in monomials}}  # B×Px×J
         return [np.matmul(Y[q], np.swapaxes(XM[p], -1, -2)) for p, q in monomials]
 
-    def camera_sums(self, xy, yaw, level):
-        """Monomial sums of single cameras at one level: xy (C × 2) → 6 × C × Py × Px."""
-        X = self._axis(self.xs[None, :] - xy[:, :1], yaw, level, 0)  # 3 of C×Px
-        Y = self._axis(self.ys[None, :] - xy[:, 1:], yaw, level, 1)  # 3 of C×Py
-        return np.stack([Y[q][:, :, None] * X[p][:, None, :] for p, q in MONOMIALS])
-
     def _factors(self, axis: int, at: float, yaw: float, level: int):
         """Visibility × powers of δ along one floor axis for a camera at ``at`` (m), at every
         sample point in the room (cached: cameras on a grid share their columns and rows)."""
