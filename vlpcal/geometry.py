@@ -216,6 +216,12 @@ class Camera:
         return -self.R @ self.center
 
     @property
+    def yaw(self) -> float:
+        """rad: the image's x axis (its width) from the world's x axis, about the vertical — how
+        a ceiling camera is turned (for a tilted camera, of the axis' floor projection)."""
+        return math.atan2(self.R[0][1], self.R[0][0])
+
+    @property
     def axis(self) -> np.ndarray:
         """Unit optical axis in the world frame."""
         return self.R[2].copy()

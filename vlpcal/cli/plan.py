@@ -75,8 +75,8 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         ys = {round(cam.position[1], 6) for cam in c.cameras}
         grid = f"{len(xs)}×{len(ys)}"
         sp = "×".join(f"{v:.2f}" for v in c.spacing) if c.spacing else "–"
-        yaw = "/".join(str(a) for a in sorted({round(math.degrees(math.atan2(
-            cam.R[0][1], cam.R[0][0]))) % 180 for cam in c.cameras}))
+        yaw = "/".join(str(a) for a in sorted({round(math.degrees(cam.yaw)) % 180
+                                               for cam in c.cameras}))
         click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>5s} "
                    f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
                    f"{c.evaluation.p95 * 100:7.2f}")

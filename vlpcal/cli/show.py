@@ -35,7 +35,7 @@ def show(deployment_path):
     for c in dep.cameras:
         axis = c.R[2]  # the optical axis in the world
         tilt = math.degrees(math.acos(max(-1.0, min(1.0, -axis[2]))))
-        yaw = math.degrees(math.atan2(c.R[0][1], c.R[0][0])) % 360
+        yaw = math.degrees(c.yaw) % 360
         x, y, z = c.position
         click.echo(f"{c.id[:8]:8s} {f'{c.width}×{c.height}':>9s} {c.fx:7.1f} {c.fy:7.1f} "
                    f"{c.cx:6.1f} {c.cy:6.1f} {c.dist[0]:8.3f} {x:7.3f} {y:7.3f} {z:6.3f} "

@@ -131,8 +131,7 @@ def fewest_possible(site: Site) -> int:
 def _yaw(camera) -> float:
     """A level camera's yaw about the vertical, from its image x-axis: the nearest of the
     yaws the searches use (0° or 90°; an image turned by 180° sees the same)."""
-    right = camera.R[0]  # image-right in the world
-    a = float(np.arctan2(right[1], right[0])) % np.pi
+    a = camera.yaw % np.pi
     return min(YAWS, key=lambda y: min(abs(a - y), np.pi - abs(a - y)))
 
 
