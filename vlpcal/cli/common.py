@@ -81,14 +81,6 @@ def _output_file(path, inputs=(), beside=(), what: str = ""):
     return out
 
 
-def _mount(site) -> str:
-    """The site's mounting grid, said in the unit a person would use."""
-    from ..planning import mount_step
-
-    step = mount_step(site)
-    return f"{step * 100:.3g} cm" if step >= 0.01 else f"{step * 1000:.3g} mm"
-
-
 def _floats(text: str, option: str) -> list[float]:
     try:
         return [float(t) for t in text.split(",") if t.strip()]

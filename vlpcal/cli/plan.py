@@ -7,7 +7,7 @@ import math
 
 import click
 
-from .common import UserError, _load_deployment, _mount, _output_file, main
+from .common import UserError, _load_deployment, _output_file, main
 
 
 @main.command()
@@ -179,3 +179,11 @@ def check(site_path, deployment_path, maps):
         click.echo(f"verdict: does not meet the site ({'; '.join(why)})")
         raise SystemExit(1)
     click.echo("verdict: meets the site")
+
+
+def _mount(site) -> str:
+    """The site's mounting grid, said in the unit a person would use."""
+    from ..planning import mount_step
+
+    step = mount_step(site)
+    return f"{step * 100:.3g} cm" if step >= 0.01 else f"{step * 1000:.3g} mm"
