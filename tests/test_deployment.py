@@ -1,4 +1,5 @@
 import copy
+import errno
 import json
 import math
 
@@ -140,10 +141,12 @@ def test_a_failed_save_leaves_the_old_file(tmp_path, monkeypatch):
     before = path.read_text()
 
     def boom(*a, **k):
-        raise RuntimeError("disk full")
+        raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(deployment.os, "fsync", boom)
-    with pytest.raises(RuntimeError):
+    import vlpcal.writing
+
+    monkeypatch.setattr(vlpcal.writing.os, "fsync", boom)
+    with pytest.raises(vlpcal.writing.OutputError, match="No space left.*nothing was replaced"):
         deployment.save(Deployment("other", 3.0, GOOD["site"]["room"], paper_rig()), path)
     assert path.read_text() == before
     assert [p.name for p in tmp_path.iterdir()] == ["d.yaml"]

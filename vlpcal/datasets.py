@@ -20,7 +20,6 @@ import math
 import os
 import re
 import shutil
-import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,41 +83,27 @@ def _read_csv(path: Path, columns: tuple) -> list[dict]:
 
 
 def _write_csv(path: Path, columns, rows) -> None:
-    with open(path, "w", newline="") as f:
+    with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(columns)
         w.writerows(rows)
 
 
-def _publish(tmp: Path, root: Path, overwrite: bool) -> None:
-    """Move the finished temporary folder into place (replacing ``root`` if allowed)."""
-    if root.exists():
-        if not overwrite:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise DatasetError(f"{root}: already exists (choose another folder or overwrite)")
-        old = root.with_name(f".{root.name}.old-{os.getpid()}")
-        os.replace(root, old)
-        try:
-            os.replace(tmp, root)
-        except BaseException:
-            os.replace(old, root)  # put the previous folder back
-            raise
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(tmp, root)
-
-
 @contextmanager
 def _staged(root: Path, overwrite: bool):
-    """A temporary folder beside ``root`` to fill; moved into place when the block succeeds,
-    removed when it fails (no half-written folder is ever visible)."""
-    tmp = _staging(root)
+    """A staging folder beside ``root`` to fill; put in place (replacing ``root`` if
+    ``overwrite``) when the block succeeds, removed when it fails: :mod:`vlpcal.writing`."""
+    from .writing import OutputSet
+
+    if root.exists() and not overwrite:
+        raise DatasetError(f"{root}: already exists (choose another folder or overwrite)")
     try:
+        root.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise DatasetError(f"{root}: cannot make its folder ({e.strerror})") from None
+    with OutputSet(root, folders=True) as (tmp,):
+        tmp.chmod(0o755)
         yield tmp
-        _publish(tmp, root, overwrite)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def _write_jpegs(frames: dict, ids: list, folder_of) -> None:
@@ -130,13 +115,6 @@ def _write_jpegs(frames: dict, ids: list, folder_of) -> None:
                 folder = folder_of(i)
                 folder.mkdir(parents=True, exist_ok=True)
                 (folder / name).write_bytes(data)
-
-
-def _staging(root: Path) -> Path:
-    root.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
-    tmp.chmod(0o755)  # mkdtemp makes it private; the result is an ordinary folder
-    return tmp
 
 
 def _fmt(x: float) -> str:
@@ -326,17 +304,11 @@ def read_frames_folder(root) -> FramesFolder:
 
 def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:
     """Ground truth beside simulated frames: ``<id_column>,x,y,z`` in metres."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    os.close(fd)
-    try:
-        _write_csv(Path(tmp), (id_column, "x", "y", "z"),
+    from .writing import OutputSet
+
+    with OutputSet(path) as (tmp,):
+        _write_csv(tmp, (id_column, "x", "y", "z"),
                    [[i, *map(_fmt, p)] for i, p in zip(ids, np.asarray(xyz, float))])
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 class SurveyAppender:
@@ -441,14 +413,10 @@ class SurveyAppender:
         self._log("remove", point_id)
 
     def _write_points(self, rows) -> None:
-        fd, tmp = tempfile.mkstemp(prefix=".points.", dir=self.root)
-        os.close(fd)
-        try:
-            _write_csv(Path(tmp), POINTS_COLUMNS, [[i, *map(_fmt, p)] for i, p in rows])
-            os.chmod(tmp, 0o644)
-            os.replace(tmp, self.points)
-        finally:
-            Path(tmp).unlink(missing_ok=True)
+        from .writing import OutputSet
+
+        with OutputSet(self.points) as (tmp,):
+            _write_csv(tmp, POINTS_COLUMNS, [[i, *map(_fmt, p)] for i, p in rows])
 
     def _log(self, event: str, pid: str) -> None:
         with open(self.journal, "a", encoding="utf-8") as f:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -28,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .datasets import read_frames_folder, read_survey_bundle, write_truth_csv
-from .deployment import Deployment, atomic_write_text, save
+from .deployment import Deployment, save
 from .locator import FixWriter, Locator
 from .planning import plan_site, planned_deployment, site_from_dict
 from .reports import demo_figure, plan_maps, survey_plan_figure, write_calibration
@@ -36,6 +35,7 @@ from .sim.profiles import get_profile
 from .sim.scene import InstallErrors, make_scene
 from .sim.writers import deployment_of, simulate_frames, simulate_survey, trajectory
 from .survey import calibrate_survey, learn_region_map, plan_survey, survey_spots
+from .writing import OutputSet, write_text
 
 DEG = math.pi / 180.0
 
@@ -137,24 +137,17 @@ def check_target(out: Path) -> None:
 def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
     """Run the whole demo into the folder ``out`` (replaced if an earlier demo wrote it).
 
-    Written to a hidden folder beside ``out`` first and renamed at the end, so an interrupted
-    demo leaves no half-written folder behind."""
+    Written to a hidden folder beside ``out`` first and renamed at the end
+    (:mod:`vlpcal.writing`), so an interrupted demo leaves no half-written folder behind."""
     given, out = Path(out), Path(out).resolve()
     check_target(out)
-    stage = out.with_name(f".{out.name}.partial")
-    shutil.rmtree(stage, ignore_errors=True)
-    stage.mkdir(parents=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
     if out.exists():
         say(f"{given}/ holds an earlier demo's files: they will be replaced")
     t_start = time.perf_counter()
-    try:
+    with OutputSet(out, folders=True) as (stage,):
+        stage.chmod(0o755)
         result = _run(stage, seed, say)
-        if out.exists():
-            shutil.rmtree(out)
-        stage.rename(out)
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
     result.folder = given
     result.seconds = time.perf_counter() - t_start
     return result
@@ -169,7 +162,7 @@ def _run(root: Path, seed: int, say) -> DemoResult:
         say(f"[{k}/5 {time.perf_counter() - t0:5.1f} s] {text}")
 
     # 1. the installer's plan
-    atomic_write_text(root / "site.yaml", "# The demo's room (vlpcal-site, metres).\n"
+    write_text(root / "site.yaml", "# The demo's room (vlpcal-site, metres).\n"
                       + yaml.safe_dump(DEMO_SITE, sort_keys=False))
     site = site_from_dict(DEMO_SITE, "site.yaml")
     step(1, f"planning cameras for {site.name} ({_room_size(site.room)}, "
@@ -254,7 +247,7 @@ def _run(root: Path, seed: int, say) -> DemoResult:
                "robot_height_m": ROBOT_HEIGHT,
                "pipelines": [vars(r) for r in rows], "files": {k: v[0] for k, v in REDO.items()},
                "redo": {k: v[1] for k, v in REDO.items() if v[1]}}
-    atomic_write_text(root / "summary.json", json.dumps(summary, indent=2))
+    write_text(root / "summary.json", json.dumps(summary, indent=2))
     return res
 
 

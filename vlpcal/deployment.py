@@ -4,14 +4,12 @@ The one module that knows the file. Required keys exactly as DESIGN.md; every ot
 block (detector settings, fusion policy, region maps, corrections, provenance) is optional and
 kept as it was read (``Deployment.extra``), so a tool that does not know a block never drops it.
 Errors name the file, the key path (``cameras[2].fx``) and what was expected
-(:class:`DeploymentError`). Writes are atomic: a temporary file beside the target, then rename.
+(:class:`DeploymentError`). Writes go through :mod:`vlpcal.writing` (staged, then renamed).
 """
 
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -336,28 +334,13 @@ def load(path) -> Deployment:
     return from_dict(doc, str(path))
 
 
-def atomic_write_text(path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file in the same folder and a rename."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def save(deployment: Deployment, path, header: str = "") -> None:
-    """Write the deployment file atomically (cameras one per flow-style line for reading)."""
+def dumps(deployment: Deployment, header: str = "") -> str:
+    """The deployment file's text (cameras one per flow-style line for reading), checked: a
+    text that would not load is never returned."""
     import yaml
 
     doc = deployment.to_dict()
-    from_dict(doc, f"{path} (not written)")  # never write a file that would not load
+    from_dict(doc, f"{deployment.name} (not written)")
     cams = doc.pop("cameras")
     text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
     lines = ["cameras:"] + [
@@ -366,7 +349,14 @@ def save(deployment: Deployment, path, header: str = "") -> None:
     out = text + "\n".join(lines) + "\n"
     if header:
         out = "".join(f"# {line}\n" for line in header.splitlines()) + out
-    atomic_write_text(path, out)
+    return out
+
+
+def save(deployment: Deployment, path, header: str = "") -> None:
+    """Write the deployment file (staged and renamed: :mod:`vlpcal.writing`)."""
+    from .writing import write_text
+
+    write_text(path, dumps(deployment, header))
 
 
 def provenance(command: str, **fields) -> dict:

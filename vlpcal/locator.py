@@ -205,26 +205,24 @@ class Locator:
 
 
 class FixWriter:
-    """Fix rows to CSV or JSON lines, to a file (atomically: a temporary file, renamed on
-    :meth:`close`) or to stdout (``-``, flushed row by row so it pipes into other tools)."""
+    """Fix rows to CSV or JSON lines, to a file (staged, renamed into place on :meth:`close`:
+    :mod:`vlpcal.writing`) or to stdout (``-``, flushed row by row so it pipes into other tools)."""
 
     def __init__(self, path: str, fmt: str | None = None, extra_columns=()):
-        import os
         import sys
-        import tempfile
 
         self.fmt = fmt or ("jsonl" if str(path).endswith((".jsonl", ".json")) else "csv")
         self.columns = ROW_COLUMNS + tuple(extra_columns)
         self.path = path
+        self._set = None
         if path == "-":
-            self._tmp, self._f = None, sys.stdout
+            self._f = sys.stdout
         else:
-            if os.path.isdir(path):
-                raise IsADirectoryError(21, "is a folder", path)
-            folder = os.path.dirname(os.path.abspath(path))
-            fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", dir=folder)
-            os.chmod(self._tmp, 0o644)
-            self._f = os.fdopen(fd, "w", newline="")
+            from .writing import OutputSet
+
+            self._set = OutputSet(path)
+            (tmp,) = self._set.stage()
+            self._f = open(tmp, "w", newline="", encoding="utf-8")
         self._header = self.fmt != "csv"  # written with the first rows (or at close): an
         # input that fails before any fix leaves stdout clean
         if self.fmt == "csv":
@@ -253,18 +251,24 @@ class FixWriter:
     def close(self) -> None:
         """Finish the file and move it into place (also after an interruption: what was
         located so far is kept)."""
-        import os
+        from .writing import OutputError
 
-        self._start()
-        if self._tmp is None:
+        try:
+            self._start()
             self._f.flush()
-            return
-        self._f.close()
-        os.replace(self._tmp, self.path)
+            if self._set is not None:
+                self._f.close()
+        except OSError as e:
+            self.abort()
+            raise OutputError(f"{self.path}: could not write ({e.strerror}); nothing was "
+                              "replaced") from None
+        if self._set is not None:
+            self._set.commit()
 
     def abort(self) -> None:
-        import os
-
-        if self._tmp is not None:
-            self._f.close()
-            os.unlink(self._tmp)
+        if self._set is not None:
+            try:
+                self._f.close()
+            except OSError:
+                pass
+            self._set.discard()

@@ -20,15 +20,13 @@ def _pyplot():
 
 
 def save_figure(fig, path, dpi: int = 110) -> None:
-    """Write a matplotlib figure as PNG atomically (a temporary file, then rename), close it."""
+    """Write a matplotlib figure as PNG to ``path`` (a staging path of the caller's
+    :class:`~vlpcal.writing.OutputSet`: a figure is always part of a set) and close it."""
     plt = _pyplot()
-    tmp = path.with_name(f".{path.name}.tmp.png")
     try:
-        fig.savefig(tmp, dpi=dpi)
-        tmp.replace(path)
+        fig.savefig(path, dpi=dpi, format="png")
     finally:
         plt.close(fig)
-        tmp.unlink(missing_ok=True)
 
 
 def survey_plan_figure(path, dep, plan) -> None:
@@ -215,31 +213,21 @@ def plan_maps(path, site, cand) -> None:
 
 def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Path, Path]:
     """A survey calibration's files: the calibrated deployment ``out``, ``.report.json`` and
-    ``.png`` beside it, as one set: all three are written to staging files first and renamed
-    into place only when all exist (the deployment last), so an error or a kill leaves the
-    previous set whole. ``result`` is a ``survey.SurveyResult``."""
-    import os
-    import tempfile
-
-    from .deployment import atomic_write_text, save
+    ``.png`` beside it, as one :class:`~vlpcal.writing.OutputSet` (an error or a kill leaves
+    the previous set whole). Returns the deployment, report and figure paths. ``result`` is
+    a ``survey.SurveyResult``."""
+    from .deployment import dumps
+    from .writing import OutputSet
 
     out = Path(out)
-    paths = out, out.with_suffix(".report.json"), out.with_suffix(".png")
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        staged = [stage / p.name for p in paths]
-        save(result.deployment, staged[0], header=header)
-        atomic_write_text(staged[1], json.dumps(result.report(notes), indent=2))
-        cal = result.deployment.cameras
-        calibration_figure(staged[2], result.stats, result.per_point, result.points, cal,
+    paths = out.with_suffix(".report.json"), out.with_suffix(".png"), out  # the deployment last
+    with OutputSet(*paths) as (report, png, dep):
+        dep.write_text(dumps(result.deployment, header=header), encoding="utf-8")
+        report.write_text(json.dumps(result.report(notes), indent=2), encoding="utf-8")
+        calibration_figure(png, result.stats, result.per_point, result.points,
+                           result.deployment.cameras,
                            [r for r in result.cameras if r.get("lens_candidates")])
-        for src, dst in zip(reversed(staged), reversed(paths)):
-            os.replace(src, dst)
-    finally:
-        for f in stage.iterdir():
-            f.unlink()
-        stage.rmdir()
-    return paths
+    return paths[2], paths[0], paths[1]
 
 
 def demo_figure(path, site, truth, fixes_of: dict, cameras, shown: tuple) -> None:

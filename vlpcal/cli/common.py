@@ -14,13 +14,35 @@ class UserError(click.ClickException):
     exit_code = 2
 
 
+def _stop_on_signals() -> None:
+    """SIGTERM and SIGHUP (a service manager, a closed terminal) stop a command the way Ctrl-C
+    does, through Python, so staged outputs are cleaned (or a locate's fixes so far kept)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), interrupt)
+
+
 class OneLineErrors(click.Group):
     """A wrong option value (a folder given for a file, a missing file) is a user's mistake
     like any other: one line naming the option and where to look, not a usage block."""
 
     def invoke(self, ctx):
+        from ..writing import OutputError
+
+        _stop_on_signals()
         try:
             return super().invoke(ctx)
+        except OutputError as e:
+            raise UserError(str(e)) from None
         except click.UsageError as e:
             if type(e).__name__ == "NoArgsIsHelpError":  # a bare group: its help, as asked
                 raise
@@ -50,19 +72,31 @@ def _load_deployment(path):
 
 
 def _output_file(path, inputs=(), beside=(), what: str = ""):
-    """``path`` as a file to write, checked before any work: not a folder, in a folder that
-    exists and takes a new file, none of the command's ``inputs`` (files or folders: the output
-    may not be one of them or lie inside one), and neither are the files it writes ``beside``
-    it (suffixes, e.g. ``.png``) folders or inputs."""
+    """``path`` as a file to write, checked before any work (:mod:`vlpcal.writing` does the
+    writing): a regular file or a new name in a folder that takes a new file, none of the
+    command's ``inputs`` (files or folders: the output may not be one of them or lie inside
+    one), and the files it writes ``beside`` it (suffixes, e.g. ``.png``) neither collide with
+    it nor are folders or inputs."""
     import os
     import tempfile
     from pathlib import Path
+
+    from ..writing import OutputError, destination
 
     out = Path(path)
     if out.is_dir() or not out.parent.is_dir():
         raise UserError(f"{out}: cannot write {what + ' ' if what else ''}there (expected a "
                         "file in an existing folder)")
-    targets = [out] + [out.with_suffix(s) for s in beside]
+    companions = [out.with_suffix(s) for s in beside]
+    for t in companions:
+        if t.resolve() == out.resolve():
+            raise UserError(f"{out}: the command writes its {t.suffix} beside the output under "
+                            f"the same name; give the output its own suffix "
+                            f"(e.g. {out.with_suffix('.yaml').name})")
+    try:
+        targets = [destination(t) for t in [out] + companions]
+    except OutputError as e:
+        raise UserError(str(e)) from None
     for t in targets:
         r = t.resolve()
         for src in inputs:
@@ -70,14 +104,13 @@ def _output_file(path, inputs=(), beside=(), what: str = ""):
             if r == src or src in r.parents:
                 raise UserError(f"{out}: is (or would write {t.name} over) the command's own "
                                 f"input {src}; choose another output file")
-        if t != out and t.is_dir():
-            raise UserError(f"{out}: would write {t} beside it, which is a folder")
-    try:
-        fd, probe = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".probe", dir=out.parent)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as e:
-        raise UserError(f"{out}: cannot write in {out.parent} ({e.strerror})") from None
+    for folder in {t.parent for t in targets}:
+        try:
+            fd, probe = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".probe", dir=folder)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as e:
+            raise UserError(f"{out}: cannot write in {folder} ({e.strerror})") from None
     return out
 
 

@@ -29,8 +29,8 @@ def export_cameras(deployment_path, fmt, out, units):
     Example: vlpcal export -d planned.yaml --to anipose -o calibration.toml
     """
 
-    from ..deployment import atomic_write_text
     from ..interchange import to_anipose_toml, to_opencv_yaml
+    from ..writing import write_text
 
     dep = _load_deployment(deployment_path)
     out = _output_file(out, inputs=(deployment_path,))
@@ -48,7 +48,7 @@ def export_cameras(deployment_path, fmt, out, units):
         text = to_anipose_toml(dep.cameras, units, {"deployment": dep.name})
     else:
         text = to_opencv_yaml(dep.cameras)
-    atomic_write_text(out, text)
+    write_text(out, text)
     click.echo(f"wrote {len(dep.cameras)} cameras of {dep.name} to {out} ({fmt}"
                f"{', ' + units if fmt == 'anipose' else ', m'})")
 

@@ -62,6 +62,8 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
         writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else ())
     except OSError as e:
         raise UserError(f"{out}: cannot write the fixes there ({e.strerror})") from None
+    # from here on every way out either closes the writer (the fixes so far are kept) or
+    # aborts it (nothing replaced)
     t0 = time.perf_counter()
     statuses: Counter = Counter()
     notes = []
@@ -76,14 +78,18 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
     except KeyboardInterrupt:
         notes.append("interrupted: the fixes so far are kept")
         n = sum(statuses.values())
-    except click.ClickException:
-        writer.abort()
-        raise
     except BrokenPipeError:  # the reader of stdout has what it wanted (| head): stop quietly
         import os
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return
+    except OSError as e:  # the output's disk is full or went away
+        writer.abort()
+        raise UserError(f"{out}: could not write the fixes ({e.strerror}); nothing was "
+                        "replaced") from None
+    except BaseException:
+        writer.abort()
+        raise
     writer.close()
     secs = time.perf_counter() - t0
     if n and not quiet:

@@ -33,9 +33,10 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
     """
 
-    from ..deployment import save
+    from ..deployment import dumps
     from ..planning import SiteError, load_site, plan_site, planned_deployment
     from ..reports import plan_maps
+    from ..writing import OutputSet
 
     try:
         site = load_site(site_path)
@@ -91,9 +92,11 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                         f"{'s' if k > 1 else ''}, numbered from 1")
     chosen = result.candidates[candidate - 1]
     dep = planned_deployment(site, chosen, candidate, site_path)
-    save(dep, out, header=f"Planned by vlpcal plan from {site_path}: candidate {candidate}.")
     say("  drawing the maps…")
-    plan_maps(out.with_suffix(".png"), site, chosen)
+    with OutputSet(out.with_suffix(".png"), out) as (png, yaml_file):  # both, or neither
+        plan_maps(png, site, chosen)
+        yaml_file.write_text(dumps(dep, f"Planned by vlpcal plan from {site_path}: candidate "
+                                        f"{candidate}."), encoding="utf-8")
     click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
 
 
@@ -173,7 +176,10 @@ def check(site_path, deployment_path, maps):
         click.echo("  note: the deployment's room differs from the site's; the site's is used")
     if maps is not None:
         cand = Candidate(f"as in {deployment_path}", 0, 0, (), (), 0.0, list(dep.cameras), ev)
-        plan_maps(maps, site, cand)
+        from ..writing import OutputSet
+
+        with OutputSet(maps) as (png,):
+            plan_maps(png, site, cand)
         click.echo(f"  maps: {maps}")
     if why:
         click.echo(f"verdict: does not meet the site ({'; '.join(why)})")

@@ -61,8 +61,11 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
     if out.is_dir():
         raise UserError(f"{out}: is a folder (expected a points.csv file to write)")
     out = _output_file(out, inputs=(deployment_path,), beside=(".png",))
-    write_truth_csv(out, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
-    survey_plan_figure(out.with_suffix(".png"), dep, plan)
+    from ..writing import OutputSet
+
+    with OutputSet(out.with_suffix(".png"), out) as (png, csv_file):  # both, or neither
+        write_truth_csv(csv_file, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
+        survey_plan_figure(png, dep, plan)
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
                f"→ {out}, map {out.with_suffix('.png')}")
     ids = plan.camera_ids
