@@ -31,11 +31,12 @@ HOSTILE = {
 }
 
 
-def _vlpcal(*args, cwd=None, timeout=60):
-    """Run the command in a child process; its output, exit code and peak memory (MB)."""
+def _vlpcal(*args, cwd=None, timeout=60, prelude=""):
+    """Run the command in a child process (``prelude``: Python run first, e.g. a limit); its
+    output, exit code and peak memory (MB)."""
     # VmHWM: this process's peak since its exec (getrusage's ru_maxrss can carry the forked
     # parent's, a large pytest, across the exec)
-    code = ("import sys; from vlpcal.cli import main\n"
+    code = (prelude + "\nimport sys; from vlpcal.cli import main\n"
             "try:\n    main(sys.argv[1:], prog_name='vlpcal')\n"
             "finally:\n"
             "    hwm = [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM')]\n"
@@ -203,3 +204,162 @@ def test_a_small_jpeg_declaring_a_huge_image_is_not_decoded(tmp_path):
     rows = out.read_text().splitlines()
     assert len(rows) == 2 and rows[1].startswith("f1,")
     assert rss is not None and rss < 500, f"{rss:.0f} MB"
+
+
+# -- the output discipline: full disks, special targets, killed runs (vlpcal.writing) ----------
+
+#: a child whose files may not grow past 100 bytes: what a full disk looks like to a writer
+FULL_DISK = ("import resource, signal\nsignal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+             "resource.setrlimit(resource.RLIMIT_FSIZE, (100, 100))")
+SURVEY = ROOT / "surveys" / "paper-2024"
+
+
+def _outputs(tmp_path, command):
+    """(args, the files the command writes) for a command writing into ``tmp_path``."""
+    obs = SURVEY / "spots.csv"
+    return {
+        "export": (["export", "-d", DEPLOYMENT, "--to", "opencv", "-o", tmp_path / "c.yaml"],
+                   ["c.yaml"]),
+        "import": (["import", "--cameras", tmp_path / "in" / "cams.toml", "-b", SITE, "-o",
+                    tmp_path / "i.yaml"], ["i.yaml"]),
+        "locate": (["locate", "-d", SURVEY / "truth.yaml", "--observations", obs, "--out",
+                    tmp_path / "f.csv"], ["f.csv"]),
+        "survey plan": (["survey", "plan", "-d", DEPLOYMENT, "--out", tmp_path / "p.csv"],
+                        ["p.csv", "p.png"]),
+        "check --maps": (["check", "--site", SITE, "-d", DEPLOYMENT, "--maps",
+                          tmp_path / "m.png"], ["m.png"]),
+        "calibrate": (["survey", "calibrate", "-d", SURVEY / "nominal.yaml", "--survey",
+                       SURVEY / "survey", "--out", tmp_path / "cal.yaml", "--folds", "2"],
+                      ["cal.yaml", "cal.report.json", "cal.png"]),
+    }[command]
+
+
+def _snapshot(folder: Path) -> dict:
+    return {p.name: (p.is_symlink(), p.read_bytes() if p.is_file() else None)
+            for p in sorted(folder.iterdir())}
+
+
+@pytest.fixture(scope="module")
+def font_cache():
+    """matplotlib's font cache made before a child that cannot write files draws a figure."""
+    import matplotlib.font_manager  # noqa: F401
+
+
+@pytest.mark.parametrize("command", ["export", "import", "locate", "survey plan",
+                                     "check --maps", "calibrate"])
+def test_a_full_disk_is_one_line_and_loses_nothing(tmp_path, command, font_cache):
+    """Every command that writes, on a disk that takes no more bytes: one line naming the
+    output, exit 2, the previous files as they were, no temporary file left."""
+    args, files = _outputs(tmp_path, command)
+    if command == "import":  # a camera file to import, from vlpcal export
+        (tmp_path / "in").mkdir()
+        assert _vlpcal("export", "-d", DEPLOYMENT, "--to", "anipose", "-o",
+                       tmp_path / "in" / "cams.toml")[0] == 0
+    for name in files:
+        (tmp_path / name).write_bytes(b"the previous " + name.encode())
+    before = _snapshot(tmp_path)
+    code, out, err, _ = _vlpcal(*args, prelude=FULL_DISK, timeout=120)
+    lines = [line for line in err if line.startswith("Error")]  # calibrate also reports
+    assert code == 2, (out, err)
+    assert len(lines) == 1 and "Traceback" not in "".join(err), err
+    assert files[-1] in lines[0] or any(f in lines[0] for f in files), lines
+    assert "nothing was replaced" in lines[0] or "cannot write" in lines[0], lines
+    assert _snapshot(tmp_path) == before
+
+
+def test_a_symlink_at_out_is_written_through_and_stays_a_link(tmp_path):
+    real = tmp_path / "real.yaml"
+    real.write_text("old")
+    link = tmp_path / "link.yaml"
+    link.symlink_to(real)
+    code, out, err, _ = _vlpcal("export", "-d", DEPLOYMENT, "--to", "opencv", "-o", link)
+    assert code == 0, err
+    assert link.is_symlink() and real.read_text().startswith("%YAML")
+
+
+@pytest.mark.parametrize("command", ["export", "locate", "survey plan"])
+def test_a_fifo_at_out_is_refused_without_waiting(tmp_path, command):
+    args, files = _outputs(tmp_path, command)
+    os.mkfifo(tmp_path / files[0])
+    code, out, err, _ = _vlpcal(*args, timeout=30)
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and "special file" in lines[0], lines
+    assert (tmp_path / files[0]).is_fifo()
+
+
+#: a pid no process can have (beyond Linux's largest pid_max)
+DEAD = 4_194_305
+
+
+def test_what_a_killed_run_left_is_reclaimed_by_the_next(tmp_path):
+    """Staged files of a dead writer go; a staged folder too; another live writer's stay."""
+    stale = tmp_path / f".c.yaml.{DEAD}.1.vlpcal-tmp"
+    stale.write_text("half a file")
+    stale_dir = tmp_path / f".frames.{DEAD}.2.vlpcal-tmp"
+    (stale_dir / "f1").mkdir(parents=True)
+    alive = tmp_path / f".c.yaml.{os.getpid()}.3.vlpcal-tmp"  # this pytest is alive
+    alive.write_text("being written")
+    code, _, err, _ = _vlpcal("export", "-d", DEPLOYMENT, "--to", "opencv", "-o",
+                              tmp_path / "c.yaml")
+    assert code == 0, err
+    assert not stale.exists() and not stale_dir.exists() and alive.exists()
+
+
+@pytest.mark.parametrize("when", ["while staging", "while renaming"])
+def test_a_set_killed_midway_ends_old_or_new_never_mixed(tmp_path, when):
+    """SIGKILL (nothing Python can catch) in the middle of writing a two-file set: after the
+    next writer in the folder, both files are the old ones or both the new ones."""
+    a, b = tmp_path / "a.png", tmp_path / "a.yaml"
+    a.write_text("old a")
+    b.write_text("old b")
+    kill = {"while staging": "tmp_b.write_text('half')",
+            "while renaming": "real = os.replace\n"
+                              "def replace(s, t):\n"
+                              "    real(s, t)\n"
+                              "    os.kill(os.getpid(), signal.SIGKILL)\n"
+                              "os.replace = replace\n"}[when]
+    code = ("import os, signal\nfrom vlpcal.writing import OutputSet\n"
+            f"s = OutputSet({str(a)!r}, {str(b)!r})\n"
+            "tmp_a, tmp_b = s.stage()\ntmp_a.write_text('new a')\n"
+            + ("tmp_b.write_text('half')\nos.kill(os.getpid(), signal.SIGKILL)\n"
+               if when == "while staging" else "tmp_b.write_text('new b')\n" + kill
+               + "s.commit()\n"))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60)
+    assert r.returncode == -9, r.stderr
+    if when == "while renaming":
+        assert (a.read_text(), b.read_text()) == ("new a", "old b")  # mixed, for now
+    res, _, err, _ = _vlpcal("export", "-d", DEPLOYMENT, "--to", "opencv", "-o",
+                             tmp_path / "other.yaml")
+    assert res == 0, err
+    pair = (a.read_text(), b.read_text())
+    assert pair == {"while staging": ("old a", "old b"),
+                    "while renaming": ("new a", "new b")}[when]
+    assert not [p for p in tmp_path.iterdir() if ".vlpcal-" in p.name]
+
+
+def test_sigterm_removes_the_staged_output(tmp_path):
+    """A service manager's SIGTERM to the demo (which stages its whole folder from the start):
+    a short message, no traceback, no staged folder left, no output."""
+    import signal
+    import time
+
+    out = tmp_path / "demo"
+    proc = subprocess.Popen([sys.executable, "-m", "vlpcal", "demo", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=tmp_path)
+    deadline = time.monotonic() + 60
+    while not [p for p in tmp_path.iterdir() if ".vlpcal-" in p.name]:
+        assert time.monotonic() < deadline and proc.poll() is None, "the demo never started"
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode != 0 and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_two_files_of_one_set_may_not_be_one_file(tmp_path):
+    from vlpcal.writing import OutputError, OutputSet
+
+    with pytest.raises(OutputError, match="two of its files"):
+        OutputSet(tmp_path / "x.png", tmp_path / "x.png")
