@@ -363,3 +363,84 @@ def test_two_files_of_one_set_may_not_be_one_file(tmp_path):
 
     with pytest.raises(OutputError, match="two of its files"):
         OutputSet(tmp_path / "x.png", tmp_path / "x.png")
+
+
+# -- ids that are safe everywhere they go ------------------------------------------------------
+
+BAD_IDS = ["=HYPERLINK(\"http://x\")", "+1+1", "-C1", "@SUM(A1)", "C 1", "C1:ok", "C1+C2",
+           "a\nb", ".hidden", "x" * 65, "C/1", "Ç1"]
+
+
+@pytest.mark.parametrize("bad", BAD_IDS, ids=range(len(BAD_IDS)))
+def test_a_bad_camera_id_in_a_deployment_is_one_line(tmp_path, bad):
+    import yaml
+
+    doc = yaml.safe_load(DEPLOYMENT.read_text())
+    doc["cameras"][0]["id"] = bad
+    path = tmp_path / "d.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    code, out, err, _ = _vlpcal("locate", "-d", path, "--observations",
+                                SURVEY / "spots.csv")
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and "cameras[0].id" in lines[0], lines
+    assert "expected a camera id (letters, digits" in lines[0]
+
+
+@pytest.mark.parametrize("where", ["points.csv point_id", "observations frame_id",
+                                   "observations camera_id", "frames folder",
+                                   "frame file", "toml name"])
+def test_a_bad_id_in_any_file_is_one_line_naming_it(tmp_path, where):
+    bad = "=cmd|' /C calc'!A0"
+    if where == "points.csv point_id":
+        bundle = tmp_path / "survey"
+        bundle.mkdir()
+        (bundle / "points.csv").write_text(f"point_id,x,y,z\n{bad},1,1,0\n")
+        args = ["survey", "calibrate", "-d", DEPLOYMENT, "--survey", bundle, "--out",
+                tmp_path / "cal.yaml"]
+    elif where.startswith("observations"):
+        obs = tmp_path / "obs.csv"
+        row = f"{bad},C1,80,60" if "frame" in where else f"f1,{bad},80,60"
+        obs.write_text(f"frame_id,camera_id,u,v\n{row}\n")
+        args = ["locate", "-d", DEPLOYMENT, "--observations", obs, "--out",
+                tmp_path / "f.csv"]
+    elif where.startswith("frame"):
+        frames = tmp_path / "frames"
+        if where == "frames folder":  # a folder name that is not even UTF-8
+            (frames / os.fsdecode(b"f\xff1")).mkdir(parents=True)
+            (frames / os.fsdecode(b"f\xff1") / "C1.jpg").write_bytes(b"\xff\xd8\xff\xd9")
+        else:
+            (frames / "f1").mkdir(parents=True)
+            (frames / "f1" / "C1 copy.jpg").write_bytes(b"\xff\xd8\xff\xd9")
+        args = ["locate", "-d", DEPLOYMENT, "--frames", frames, "--out", tmp_path / "f.csv"]
+    else:
+        toml = tmp_path / "cams.toml"
+        assert _vlpcal("export", "-d", DEPLOYMENT, "--to", "anipose", "-o", toml)[0] == 0
+        toml.write_text(toml.read_text().replace('name = "C1"', 'name = "C\\n1"'))
+        args = ["import", "--cameras", toml, "-b", SITE, "-o", tmp_path / "i.yaml"]
+    code, out, err, _ = _vlpcal(*args)
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in lines[0], lines
+    assert "expected" in lines[0] and "id (letters, digits" in lines[0], lines
+    assert not [p for p in tmp_path.iterdir() if p.suffix in (".csv", ".yaml")
+                and p.name not in ("obs.csv",)], "an output was written"
+
+
+def test_cells_a_spreadsheet_would_run_are_neutralised():
+    from vlpcal.writing import spreadsheet_safe
+
+    assert spreadsheet_safe("=1+1") == "'=1+1" and spreadsheet_safe("@A1") == "'@A1"
+    assert spreadsheet_safe("-0.25") == "-0.25" and spreadsheet_safe(-0.25) == -0.25
+    assert spreadsheet_safe("C1+C2") == "C1+C2" and spreadsheet_safe("") == ""
+
+
+def test_a_million_row_points_file_is_read_in_linear_time(tmp_path):
+    """A duplicate at the end of 10⁶ rows: found (one line) within the timeout; the old check
+    compared each id with every one before it (hours)."""
+    bundle = tmp_path / "survey"
+    bundle.mkdir()
+    rows = "".join(f"P{i},1,1,0\n" for i in range(10 ** 6))
+    (bundle / "points.csv").write_text("point_id,x,y,z\n" + rows + "P7,1,1,0\n")
+    code, out, err, rss = _vlpcal("survey", "calibrate", "-d", DEPLOYMENT, "--survey", bundle,
+                                  "--out", tmp_path / "cal.yaml", timeout=120)
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and "duplicate point_id 'P7'" in lines[0], lines

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .reading import ID_RULE, is_id, shown
+
 POINTS_COLUMNS = ("point_id", "x", "y", "z")
 OBSERVATION_COLUMNS = ("camera_id", "u", "v")
 
@@ -40,11 +42,9 @@ def natural_key(text: str):
 
 
 def _check_id(value: str, where: str) -> str:
-    """An id that can name a folder or file: no slashes, no leading dot, no edge spaces."""
-    if not value or value.startswith(".") or value != value.strip() or "/" in value \
-            or "\\" in value:
-        raise DatasetError(f"{where}: expected an id usable as a folder name (no slashes, no "
-                           f"leading dot or spaces), got {value!r}")
+    """An id by the one rule (:func:`vlpcal.reading.is_id`): it names folders and files."""
+    if not is_id(value):
+        raise DatasetError(f"{where}: expected an id ({ID_RULE}), got {shown(value)}")
     return value
 
 
@@ -83,10 +83,12 @@ def _read_csv(path: Path, columns: tuple) -> list[dict]:
 
 
 def _write_csv(path: Path, columns, rows) -> None:
+    from .writing import spreadsheet_safe
+
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(columns)
-        w.writerows(rows)
+        w.writerows([spreadsheet_safe(c) for c in row] for row in rows)
 
 
 @contextmanager
@@ -188,12 +190,13 @@ def read_points(path, allow_empty: bool = False) -> tuple[list[str], np.ndarray]
     """A ``point_id,x,y,z`` file (a survey's ``points.csv``, or ``survey plan``'s output):
     ids in file order and ``N×3`` positions, m."""
     path = Path(path)
-    ids, xyz = [], []
+    ids, xyz, seen = [], [], set()
     for n, row in enumerate(_read_csv(path, POINTS_COLUMNS), start=2):
         where = f"{path} line {n}"
         pid = _check_id((row["point_id"] or "").strip(), f"{where} point_id")
-        if pid in ids:
+        if pid in seen:
             raise DatasetError(f"{where}: duplicate point_id {pid!r}")
+        seen.add(pid)
         ids.append(pid)
         xyz.append([_finite(row[c], f"{where} {c}") for c in ("x", "y", "z")])
     if not ids and not allow_empty:
@@ -290,9 +293,9 @@ def read_frames_folder(root) -> FramesFolder:
     ids, cams, files = [], set(), {}
     for d in root.iterdir():
         if d.is_dir() and not d.name.startswith("."):
-            ids.append(d.name)
+            ids.append(_check_id(d.name, f"{d}: frame id"))
             for f in d.glob("*.jpg"):
-                files[(d.name, f.stem)] = f
+                files[(d.name, _check_id(f.stem, f"{f}: camera id"))] = f
                 cams.add(f.stem)
     if not files:
         hint = (" — it looks like a survey bundle (points.csv): that goes to vlpcal survey "

@@ -16,7 +16,7 @@ from pathlib import Path
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
 from .geometry import Camera
-from .reading import shown
+from .reading import ID_RULE, is_id, shown
 
 FORMAT, VERSION = "vlpcal-deployment", 1
 CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
@@ -202,11 +202,8 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             if unknown:
                 fail(f"{where}.{unknown[0]}: unknown key (expected {', '.join(CAMERA_KEYS)})")
             cid = c["id"]
-            if isinstance(cid, bool) or not isinstance(cid, (str, int)) or not str(cid).strip() \
-                    or str(cid) != str(cid).strip() or str(cid).startswith(".") \
-                    or any(ch in str(cid) for ch in "/\\"):
-                fail(f"{where}.id: expected a camera name usable as a file name (no slashes, "
-                     f"no leading dot or spaces), got {shown(cid)}")
+            if not is_id(cid):
+                fail(f"{where}.id: expected a camera id ({ID_RULE}), got {shown(cid)}")
             cid = str(cid)
             if cid in seen:
                 fail(f"{where}.id: duplicate camera id {shown(cid)}")

@@ -176,6 +176,31 @@ def jpeg_size(buf: bytes) -> tuple[int, int] | None:
     return None
 
 
+class _QuietStderr:
+    """libjpeg writes its warnings about damaged data ("Corrupt JPEG data: 9 extraneous
+    bytes") straight to file descriptor 2, past Python: a damaged frame gets a status, not a
+    line on the user's terminal. The descriptor is redirected around a batch of decodes."""
+
+    def __enter__(self):
+        import os
+
+        try:
+            self._saved = os.dup(2)
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, 2)
+            os.close(null)
+        except OSError:
+            self._saved = None
+        return self
+
+    def __exit__(self, *exc):
+        import os
+
+        if self._saved is not None:
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+
+
 def decode_gray(data, shape=None) -> np.ndarray | None:
     """JPEG bytes → 8-bit grayscale (luma) image, or None when the bytes are not a whole JPEG
     or declare another size than ``shape`` (H, W) — more than :data:`MAX_PIXELS` without it —
@@ -195,7 +220,8 @@ def decode_gray(data, shape=None) -> np.ndarray | None:
                         else size[0] * size[1] > MAX_PIXELS):
         return None
     try:
-        img = _cv2.imdecode(np.frombuffer(buf, np.uint8), _cv2.IMREAD_GRAYSCALE)
+        with _QuietStderr():
+            img = _cv2.imdecode(np.frombuffer(buf, np.uint8), _cv2.IMREAD_GRAYSCALE)
     except _cv2.error:
         return None
     return img
@@ -653,6 +679,20 @@ def _to_stack(frames, shape=None):
     # with the size known, decoded frames go straight into the stack; else they are collected
     stack = np.empty((n, *want), np.uint8) if want is not None else None
     images = {}
+    with _QuietStderr():
+        stack = _decode_into(frames, codes, want, stack, images)
+    good = codes == 0
+    if not good.any():
+        return None, codes
+    if stack is None:
+        return np.stack([images[i] for i in sorted(images)]), codes
+    return (stack if good.all() else stack[good]), codes
+
+
+def _decode_into(frames, codes, want, stack, images):
+    """Decode ``frames`` into ``stack`` (the size known) or ``images`` (index → image),
+    setting ``codes`` for the frames that cannot be measured; returns the stack (widened
+    when a float frame came)."""
     for i, f in enumerate(frames):
         if f is None:
             codes[i] = _REASON_CODE[MISSING]
@@ -687,12 +727,7 @@ def _to_stack(frames, shape=None):
             stack[i] = im
         else:
             images[i] = im
-    good = codes == 0
-    if not good.any():
-        return None, codes
-    if stack is None:
-        return np.stack([images[i] for i in sorted(images)]), codes
-    return (stack if good.all() else stack[good]), codes
+    return stack
 
 
 def detect_spots(frames, method: str = DEFAULT_DETECTOR,

@@ -21,7 +21,7 @@ import sys
 import numpy as np
 
 from .geometry import Camera, rodrigues
-from .reading import shown
+from .reading import ID_RULE, is_id, shown
 
 #: metres per unit
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -156,8 +156,9 @@ def _camera_of_section(sec: dict, where: str, metres: float) -> Camera:
     name = str(sec.get("name", where.rsplit("[", 1)[-1].rstrip("]"))).strip()
     if size.min() < 1 or size.max() > 100000 or np.any(size != np.round(size)):
         raise InterchangeError(f"{where}.size: expected [width, height] in pixels")
-    if not name:
-        raise InterchangeError(f"{where}.name: expected a camera id")
+    if not is_id(name):
+        raise InterchangeError(f"{where}.name: expected a camera id ({ID_RULE}), got "
+                               f"{shown(name)}")
     position = -rodrigues(rvec).T @ tvec
     return Camera(id=name, width=int(size[0]), height=int(size[1]), fx=float(K[0, 0]),
                   fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]),
@@ -244,8 +245,11 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
         name = cid.string() if cid.isString() else (
             f"{cid.real():g}" if cid.isInt() or cid.isReal() else "")
         w, h = n.getNode("image_width").real(), n.getNode("image_height").real()
-        if not name or not (w >= 1 and h >= 1):
-            raise InterchangeError(f"{where}: expected an id, image_width and image_height")
+        if not is_id(name):
+            raise InterchangeError(f"{where}.id: expected a camera id ({ID_RULE}), got "
+                                   f"{shown(name)}")
+        if not (w >= 1 and h >= 1):
+            raise InterchangeError(f"{where}: expected image_width and image_height")
         cams.append(Camera(id=name, width=int(w), height=int(h), fx=K[0, 0], fy=K[1, 1],
                            cx=K[0, 2], cy=K[1, 2], dist=tuple(dist),
                            position=tuple(-rodrigues(rvec).T @ tvec),

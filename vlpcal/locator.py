@@ -238,11 +238,13 @@ class FixWriter:
     def write(self, fixes, extra: dict | None = None) -> None:
         import json
 
+        from .writing import spreadsheet_safe
+
         self._start()
         for fix in fixes:
             row = {**fix.row(), **(extra or {})}
             if self.fmt == "csv":
-                self._csv.writerow(row)
+                self._csv.writerow({k: spreadsheet_safe(v) for k, v in row.items()})
             else:
                 self._f.write(json.dumps({k: (None if row.get(k) == "" else row.get(k))
                                           for k in self.columns}) + "\n")

@@ -8,6 +8,7 @@ naming the file, the line and what was expected.
 from __future__ import annotations
 
 import os
+import re
 import stat
 from pathlib import Path
 
@@ -19,6 +20,25 @@ MAX_DEPTH = 32
 MAX_ALIASES = 16
 #: YAML nodes in a document
 MAX_NODES = 2_000_000
+
+
+#: characters of an id, at most: ids name files and folders, sit in CSV cells, in
+#: ``C1+C2`` and ``C1:ok C2:no_spot`` lists and in TOML section names
+ID_MAX = 64
+_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+#: the one rule for camera, point and frame ids, as messages state it
+ID_RULE = (f"letters, digits and _ - . only, not starting with - or ., at most {ID_MAX} "
+           "characters")
+
+
+def is_id(value) -> bool:
+    """Whether ``value`` (a string, or an integer as YAML reads ``id: 1``) is a valid id:
+    :data:`ID_RULE` (not starting with ``-``: an option, or a formula to a spreadsheet; not
+    ``.``: a hidden file or a parent folder)."""
+    if isinstance(value, bool) or not isinstance(value, (str, int)):
+        return False
+    text = str(value)
+    return len(text) <= ID_MAX and _ID.fullmatch(text) is not None
 
 
 class ReadError(ValueError):

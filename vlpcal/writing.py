@@ -219,3 +219,19 @@ def write_text(path, text: str) -> Path:
             f.flush()
             os.fsync(f.fileno())
     return Path(path)
+
+
+#: what a spreadsheet takes for the start of a formula in a CSV cell
+_FORMULA = ("=", "+", "-", "@", "\t", "\r")
+
+
+def spreadsheet_safe(cell):
+    """A CSV cell that a spreadsheet shows rather than runs (OWASP's CSV injection): text
+    starting like a formula gets a leading ``'``; numbers (``-0.5``) stay as they are. vlpcal's
+    ids cannot start so (:data:`vlpcal.reading.ID_RULE`): this guards everything else."""
+    if isinstance(cell, str) and cell.startswith(_FORMULA):
+        try:
+            float(cell)
+        except ValueError:
+            return "'" + cell
+    return cell
