@@ -444,3 +444,56 @@ def test_a_million_row_points_file_is_read_in_linear_time(tmp_path):
                                   "--out", tmp_path / "cal.yaml", timeout=120)
     lines = [line for line in out.splitlines() + err if line.strip()]
     assert code == 2 and len(lines) == 1 and "duplicate point_id 'P7'" in lines[0], lines
+
+
+# -- numbers checked for what they are ---------------------------------------------------------
+
+NUMBERS = {  # key path in the deployment → (value, what the message must say)
+    "fx huge": (("cameras", 0, "fx"), 1e308, "0.01× to 1000× the image width"),
+    "fx tiny": (("cameras", 0, "fx"), 1e-3, "0.01× to 1000× the image width"),
+    "cx far off": (("cameras", 0, "cx"), 1e9, "principal point within one image"),
+    "position 1e308": (("cameras", 0, "position"), [1e308, 0, 2], "-100000 to 100000 m"),
+    "camera 50 km away": (("cameras", 0, "position"), [50_000, 0, 2], "ten times the room"),
+    "rotation 100 rad": (("cameras", 0, "rotation"), [100, 0, 0], "up to 4π long"),
+    "distortion 1e5": (("cameras", 0, "dist"), [1e5, 0, 0, 0, 0], "-1000 to 1000"),
+    "ceiling 1e200": (("site", "ceiling_height"), 1e200, "0 to 100000 m"),
+    "width 1e9": (("cameras", 0, "width"), 10 ** 9, "up to 65535"),
+    "room 1e200": (("site", "room"), [[0, 0], [1e200, 0], [1e200, 1], [0, 1]],
+                   "-100000 to 100000 m"),
+}
+
+
+@pytest.mark.parametrize("case", list(NUMBERS))
+def test_a_number_out_of_its_range_is_one_line_with_the_range(tmp_path, case):
+    import yaml
+
+    keys, value, fragment = NUMBERS[case]
+    doc = yaml.safe_load(DEPLOYMENT.read_text())
+    node = doc
+    for k in keys[:-1]:
+        node = node[k]
+    node[keys[-1]] = value
+    path = tmp_path / "d.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    code, out, err, rss = _vlpcal("check", "--site", SITE, "-d", path)
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+    assert str(path) in lines[0] and "Warning" not in lines[0]
+    assert rss is not None and rss < 500
+
+
+@pytest.mark.parametrize("key,value,fragment", [
+    ("max_error_p95", 1e9, "the room's size"),
+    ("pixel_noise", 1e308, "spot noise in px"),
+    ("coverage", 7, "share from 0 to 1"),
+])
+def test_a_site_number_out_of_range_is_one_line(tmp_path, key, value, fragment):
+    import yaml
+
+    doc = yaml.safe_load(SITE.read_text())
+    doc["requirements"][key] = value
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    code, out, err, _ = _vlpcal("plan", "--site", path, "--out", tmp_path / "p.yaml")
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines

@@ -116,7 +116,19 @@ class Deployment:
         return doc
 
 
-def _number(value, where: str, *, positive: bool = False, integer: bool = False) -> float:
+#: m: the largest coordinate or length a file may state (100 km: larger is a unit mistake,
+#: and squares of it must stay far from overflow)
+MAX_LENGTH = 1e5
+#: focal length as a multiple of the image width: from a 179° view to a 0.06° one
+FOCAL_RANGE = (0.01, 1000.0)
+#: |distortion coefficient|: OpenCV's fits of wide lenses stay well inside
+MAX_DISTORTION = 1e3
+#: radians: the length of a rotation vector (one turn is 2π; a fit may wrap once more)
+MAX_ROTATION = 4 * math.pi
+
+
+def _number(value, where: str, *, positive: bool = False, integer: bool = False,
+            within: tuple | None = None, unit: str = "") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise DeploymentError(f"{where}: expected a number, got {shown(value)}")
     try:
@@ -129,21 +141,28 @@ def _number(value, where: str, *, positive: bool = False, integer: bool = False)
         raise DeploymentError(f"{where}: expected a whole number, got {shown(value)}")
     if positive and value <= 0:
         raise DeploymentError(f"{where}: expected a positive number, got {shown(value)}")
+    if within is not None and not within[0] <= value <= within[1]:
+        raise DeploymentError(f"{where}: expected {within[0]:g} to {within[1]:g}{unit}, got "
+                              f"{value:g}")
     return value
 
 
-def _vector(value, n: int, where: str) -> list:
+def _vector(value, n: int, where: str, within: tuple | None = None, unit: str = "") -> list:
     if not isinstance(value, (list, tuple)) or len(value) != n \
             or any(isinstance(v, (list, tuple, dict)) for v in value):
         raise DeploymentError(f"{where}: expected a list of {n} numbers, got {shown(value)}")
-    return [_number(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    return [_number(v, f"{where}[{i}]", within=within, unit=unit) for i, v in enumerate(value)]
+
+
+#: a coordinate in metres, as the range checks state it
+METRES = ((-MAX_LENGTH, MAX_LENGTH), " m")
 
 
 def _polygon(value, where: str) -> list:
     if not isinstance(value, (list, tuple)) or len(value) < 3:
         raise DeploymentError(f"{where}: expected a polygon of at least 3 [x, y] points, "
                               f"got {shown(value)}")
-    pts = [_vector(p, 2, f"{where}[{i}]") for i, p in enumerate(value)]
+    pts = [_vector(p, 2, f"{where}[{i}]", *METRES) for i, p in enumerate(value)]
     from shapely.geometry import Polygon
 
     poly = Polygon(pts)
@@ -180,7 +199,8 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
                 fail(f"site.{key}: missing")
         if not isinstance(site["name"], str) or not site["name"].strip():
             fail(f"site.name: expected a non-empty text, got {shown(site['name'])}")
-        height = _number(site["ceiling_height"], "site.ceiling_height", positive=True)
+        height = _number(site["ceiling_height"], "site.ceiling_height", positive=True,
+                         within=(0, MAX_LENGTH), unit=" m")
         room = _polygon(site["room"], "site.room")
         keep_out = site.get("keep_out")
         keep_out = [] if keep_out is None else keep_out
@@ -209,8 +229,12 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
                 fail(f"{where}.id: duplicate camera id {shown(cid)}")
             seen.add(cid)
             check_intrinsics(c, where)
-            _vector(c["position"], 3, f"{where}.position")
-            _vector(c["rotation"], 3, f"{where}.rotation")
+            _near_the_room(_vector(c["position"], 3, f"{where}.position", *METRES), room,
+                           height, f"{where}.position")
+            rvec = _vector(c["rotation"], 3, f"{where}.rotation")
+            if math.hypot(*rvec) > MAX_ROTATION:
+                fail(f"{where}.rotation: expected a rotation vector (radians) up to 4π long, "
+                     f"got one {math.hypot(*rvec):g} long")
             cameras.append(Camera.from_dict(c))
         unknown = sorted(set(site) - set(SITE_KEYS))
         if unknown:
@@ -241,11 +265,26 @@ def check_intrinsics(c: dict, where: str) -> None:
             raise DeploymentError(f"{where}.{key}: expected an image side in pixels up to "
                                   f"{MAX_IMAGE_SIDE} (the largest a JPEG frame can have), got "
                                   f"{shown(c[key])}")
+    w, h = c["width"], c["height"]
     for key in ("fx", "fy"):
-        _number(c[key], f"{where}.{key}", positive=True)
-    for key in ("cx", "cy"):
-        _number(c[key], f"{where}.{key}")
-    _vector(c["dist"], 5, f"{where}.dist")
+        _number(c[key], f"{where}.{key}", positive=True,
+                within=(FOCAL_RANGE[0] * w, FOCAL_RANGE[1] * w),
+                unit=f" px ({FOCAL_RANGE[0]:g}× to {FOCAL_RANGE[1]:g}× the image width)")
+    for key, side in (("cx", w), ("cy", h)):
+        _number(c[key], f"{where}.{key}", within=(-side, 2 * side),
+                unit=" px (the principal point within one image of the image)")
+    _vector(c["dist"], 5, f"{where}.dist", (-MAX_DISTORTION, MAX_DISTORTION))
+
+
+def _near_the_room(position, room, height: float, where: str) -> None:
+    """A camera more than ten times the room's size away from it is a unit or sign mistake."""
+    xs, ys = [p[0] for p in room], [p[1] for p in room]
+    size = max(max(xs) - min(xs), max(ys) - min(ys), height)
+    gap = max(min(xs) - position[0], position[0] - max(xs), min(ys) - position[1],
+              position[1] - max(ys), -position[2], position[2] - height, 0.0)
+    if gap > 10 * size:
+        raise DeploymentError(f"{where}: {gap:g} m from the room (expected a camera within ten "
+                              f"times the room's size, {10 * size:g} m, of it: a unit mistake?)")
 
 
 def _mapping(value, where: str) -> dict:

@@ -38,7 +38,12 @@ class OneLineErrors(click.Group):
     def invoke(self, ctx):
         from ..writing import OutputError
 
+        import warnings
+
         _stop_on_signals()
+        # numbers are checked where files are read and numeric edge cases end in statuses:
+        # numpy's floating-point notes (0/0 in an empty mean) are not the user's business
+        warnings.simplefilter("ignore", RuntimeWarning)
         try:
             return super().invoke(ctx)
         except OutputError as e:

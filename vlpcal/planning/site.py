@@ -6,7 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..deployment import DeploymentError, _mapping, _number, _polygon, check_intrinsics
+from ..deployment import (
+    MAX_LENGTH,
+    DeploymentError,
+    _mapping,
+    _number,
+    _polygon,
+    check_intrinsics,
+)
 from ..geometry import NADIR, Camera
 from ..reading import shown
 
@@ -65,7 +72,8 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         for key in ("name", "ceiling_height", "room"):
             if key not in site:
                 raise SiteError(f"site.{key}: missing")
-        ceiling = _number(site["ceiling_height"], "site.ceiling_height", positive=True)
+        ceiling = _number(site["ceiling_height"], "site.ceiling_height", positive=True,
+                          within=(0, MAX_LENGTH), unit=" m")
         room = _polygon(site["room"], "site.room")
         keep_out = [_polygon(p, f"site.keep_out[{i}]")
                     for i, p in enumerate(site.get("keep_out") or [])]
@@ -102,7 +110,9 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
                 any(f not in FAMILIES for f in families):
             raise SiteError(f"families: expected a list of {', '.join(FAMILIES)}, "
                             f"got {shown(families)}")
-        p95 = float(_number(req["max_error_p95"], "requirements.max_error_p95", positive=True))
+        extent = max(max(p[k] for p in room) - min(p[k] for p in room) for k in (0, 1))
+        p95 = float(_number(req["max_error_p95"], "requirements.max_error_p95", positive=True,
+                            within=(0, extent), unit=" m (the room's size)"))
         noise = float(_number(req["pixel_noise"], "requirements.pixel_noise", positive=True))
         if not 1e-6 <= noise <= min(cam["width"], cam["height"]):
             raise SiteError(f"requirements.pixel_noise: expected a spot noise in px between "
