@@ -361,15 +361,40 @@ def test_a_camera_back_on_the_network_is_used_again(site, tmp_path):
     assert (bundle.point_ids[-1], "C2") in bundle.frames
 
 
-def test_unattended_capture_stops_when_no_camera_sends_frames(site, tmp_path):
+def test_capture_checks_every_camera_before_the_first_point(site, tmp_path):
+    """No camera answers: one line naming each and why, exit 2, before the walk starts (the
+    first point is never announced) and nothing written."""
     scene, root = site
     cmd = [sys.executable, "-m", "vlpcal", "survey", "capture", "-d", str(root / "dep.yaml"),
            "--points", str(root / "points.csv"), "--survey", str(tmp_path / "s"), "--yes",
-           "--delay", "0", "--camera", "C1=http://127.0.0.1:9/none"]
+           "--delay", "0", "--camera", "C1=http://127.0.0.1:9/none",
+           "--camera", "C2=http://127.0.0.1:9/other"]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    assert res.returncode == 1
-    assert "no camera sent frames at S0001" in res.stderr and "Traceback" not in res.stderr
+    assert res.returncode == 2, res.stderr
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert len(lines) == 2 and lines[0].startswith("note: no --camera for C3"), lines
+    assert "no camera answered (C1: connection refused; C2: connection refused)" in lines[1]
+    assert "S0001" not in res.stdout and "Traceback" not in res.stderr
     assert not (tmp_path / "s").exists()  # nothing captured: nothing left behind
+
+
+def test_capture_says_which_cameras_answered(site, tmp_path):
+    """One camera of three answers with frames of the wrong size, one is off: each is named
+    before the walk, and the walk goes on with the one that answered properly."""
+    scene, root = site
+    rig = Rig(scene, tmp_path)
+    try:
+        port = rig.server.server_address[1]
+        cmd = [sys.executable, "-m", "vlpcal", "survey", "capture", "-d", str(root / "dep.yaml"),
+               "--points", str(root / "points.csv"), "--survey", str(tmp_path / "s"), "--yes",
+               "--delay", "0", "--camera", f"C1=http://127.0.0.1:{port}/C1",
+               "--camera", "C2=http://127.0.0.1:9/off", "--on-point", "exit 3"]
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    finally:
+        rig.close()
+    assert "camera C1: answered (160×120)" in res.stderr, res.stderr
+    assert "camera C2: connection refused; going on without it" in res.stderr, res.stderr
+    assert "--on-point 'exit 3' failed" in res.stderr  # the walk had started
 
 
 def test_device_frames_are_stored_as_jpeg(site):

@@ -497,3 +497,62 @@ def test_a_site_number_out_of_range_is_one_line(tmp_path, key, value, fragment):
     code, out, err, _ = _vlpcal("plan", "--site", path, "--out", tmp_path / "p.yaml")
     lines = [line for line in out.splitlines() + err if line.strip()]
     assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+
+
+# -- careless use caught -------------------------------------------------------------------------
+
+def _jpeg(width=160, height=120) -> bytes:
+    import cv2
+    import numpy as np
+
+    img = np.zeros((height, width), np.uint8)
+    img[height // 2 - 3:height // 2 + 3, width // 2 - 3:width // 2 + 3] = 255
+    return cv2.imencode(".jpg", img)[1].tobytes()
+
+
+@pytest.mark.parametrize("mistake", ["other camera ids", "other image size",
+                                     "spots of one camera"])
+def test_locate_refuses_frames_that_are_not_for_this_deployment(tmp_path, mistake):
+    frames = tmp_path / "frames"
+    for f in ("f1", "f2"):
+        (frames / f).mkdir(parents=True)
+        for cid in ("C1", "C2", "C3"):
+            name = f"cam{cid[1]}" if mistake == "other camera ids" else cid
+            size = (320, 240) if mistake == "other image size" else (160, 120)
+            (frames / f / f"{name}.jpg").write_bytes(_jpeg(*size))
+    if mistake == "spots of one camera":
+        obs = tmp_path / "obs.csv"
+        obs.write_text("frame_id,camera_id,u,v\nf1,C1,80,60\nf2,C1,81,60\n")
+        args = ["--observations", obs]
+    else:
+        args = ["--frames", frames]
+    code, out, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, *args, "--out", tmp_path / "f.csv")
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1, lines
+    assert "is this the right deployment" in lines[0], lines
+    expected = {"other camera ids": "other ids there: cam1, cam2, cam3",
+                "other image size": "C1 320×240 (the deployment says 160×120)",
+                "spots of one camera": "spots of only 1 of"}[mistake]
+    assert expected in lines[0], lines
+    assert not (tmp_path / "f.csv").exists()
+
+
+def test_a_fifo_or_a_device_among_the_frames_is_a_corrupt_frame(tmp_path):
+    """C1.jpg a FIFO (opening it would wait for a writer forever), C2.jpg a link to
+    /dev/zero (reading it never ends): each frame set keeps its row, with a status."""
+    frames = tmp_path / "frames"
+    (frames / "f1").mkdir(parents=True)
+    (frames / "f2").mkdir(parents=True)
+    for f in ("f1", "f2"):
+        (frames / f / "C3.jpg").write_bytes(_jpeg())
+    os.mkfifo(frames / "f1" / "C1.jpg")
+    (frames / "f1" / "C2.jpg").symlink_to("/dev/zero")
+    for cid in ("C1", "C2"):
+        (frames / "f2" / f"{cid}.jpg").write_bytes(_jpeg())
+    out = tmp_path / "f.csv"
+    code, _, err, rss = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", frames, "--out", out,
+                                timeout=60)
+    assert code == 0, err
+    rows = out.read_text().splitlines()
+    assert rows[1].startswith("f1,") and "C1:corrupt_frame C2:corrupt_frame" in rows[1], rows
+    assert rss is not None and rss < 500

@@ -120,6 +120,47 @@ class Burst:
             kept += 1
         return got
 
+    def check(self, cameras, timeout: float | None = None) -> dict:
+        """Before the first point: camera id → (answered, what it said in a few words), from
+        the first frame each sends within ``timeout`` (the live read timeout and a second) —
+        its size checked against the deployment's camera (``cameras``: Camera objects)."""
+        from .detection import jpeg_size
+        from .live import READ_TIMEOUT
+
+        timeout = READ_TIMEOUT + 1.0 if timeout is None else timeout
+        if self._sets is None:
+            self._sets = iter(self.grouper)
+        first: dict = {}
+        wanted = {c.id: c for c in cameras if c.id in self.grouper.sources}
+        start = time.monotonic()
+        while set(first) | set(self.grouper.stats.ended) < set(wanted) and \
+                time.monotonic() - start < timeout:
+            try:
+                fs = next(self._sets)
+            except StopIteration:
+                self._sets = None
+                break
+            for cid, frame in fs.frames.items():
+                first.setdefault(cid, frame)
+        out = {}
+        for cid, cam in wanted.items():
+            if cid not in first:
+                why = self.grouper.stats.ended.get(cid, f"no frame in {timeout:g} s")
+                out[cid] = (False, why)
+                continue
+            frame = first[cid]
+            size = jpeg_size(frame) if isinstance(frame, (bytes, bytearray)) else \
+                tuple(np.asarray(frame).shape[:2])
+            if size is None:
+                out[cid] = (False, "sends something that is not a JPEG frame")
+            elif tuple(size) != (cam.height, cam.width):
+                out[cid] = (False, f"sends {size[1]}×{size[0]} frames, the deployment says "
+                                   f"{cam.width}×{cam.height} (the wrong camera, or its "
+                                   "resolution setting?)")
+            else:
+                out[cid] = (True, f"answered ({size[1]}×{size[0]})")
+        return out
+
     def revive(self) -> list[str]:
         """Reopen the cameras that stopped (back on the network?); their ids."""
         return [cid for cid in list(self.grouper.stats.ended) if self.grouper.revive(cid)]

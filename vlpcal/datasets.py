@@ -48,6 +48,32 @@ def _check_id(value: str, where: str) -> str:
     return value
 
 
+#: bytes: a frame file larger than this is not a camera's JPEG (a 4K JPEG is a few MB)
+MAX_FRAME_BYTES = 32 * 2 ** 20
+
+
+def read_frame(path) -> bytes:
+    """A frame file's bytes; ``b""`` (a corrupt frame to the detector) when it is not a
+    regular file (a FIFO would block the reader forever, a link to ``/dev/zero`` never end),
+    is larger than :data:`MAX_FRAME_BYTES` or cannot be read."""
+    import stat
+
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError:
+        return b""
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_FRAME_BYTES:
+            return b""
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            return f.read(MAX_FRAME_BYTES + 1)[:MAX_FRAME_BYTES]
+    except OSError:
+        return b""
+    finally:
+        os.close(fd)
+
+
 def _finite(text: str, where: str) -> float:
     try:
         value = float(text)
@@ -152,9 +178,9 @@ class SurveyBundle:
         return sorted(ids, key=natural_key)
 
     def frame(self, point_id: str, camera_id: str) -> bytes | None:
-        """The JPEG bytes the camera took at the point (None: not seen)."""
+        """The JPEG bytes the camera took at the point (None: not seen; b"": unreadable)."""
         path = self.frames.get((point_id, camera_id))
-        return path.read_bytes() if path else None
+        return read_frame(path) if path else None
 
 
 def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
@@ -267,7 +293,7 @@ class FramesFolder:
 
     def frame(self, frame_id: str, camera_id: str) -> bytes | None:
         path = self.files.get((frame_id, camera_id))
-        return path.read_bytes() if path else None
+        return read_frame(path) if path else None
 
 
 def write_frames_folder(root, frame_ids, frames: dict, overwrite: bool = False) -> Path:

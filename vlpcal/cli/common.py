@@ -36,9 +36,9 @@ class OneLineErrors(click.Group):
     like any other: one line naming the option and where to look, not a usage block."""
 
     def invoke(self, ctx):
-        from ..writing import OutputError
-
         import warnings
+
+        from ..writing import OutputError
 
         _stop_on_signals()
         # numbers are checked where files are read and numeric edge cases end in statuses:

@@ -104,6 +104,39 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
     sys.stdout.flush()
 
 
+def _check_the_deployment_fits(loc, source, camera_ids, notes, folder=None) -> None:
+    """The likely mistake of a wrong deployment for the frames (or spots), caught before
+    any work: refused (exit 2) when most of its cameras have nothing here, or when most
+    cameras' frames are not the size the deployment says; a note when a few are absent."""
+    from ..detection import jpeg_size
+
+    dep, ids = loc.deployment, loc.camera_ids
+    present = [c for c in ids if c in camera_ids]
+    absent = [c for c in ids if c not in camera_ids]
+    hint = "is this the right deployment for them?"
+    if len(present) < 2 or len(absent) > len(ids) / 2:
+        others = ", ".join(c for c in camera_ids if c not in ids)[:200] or "none"
+        raise UserError(f"{source}: has {'frames' if folder else 'spots'} of only "
+                        f"{len(present)} of {dep.name}'s {len(ids)} cameras "
+                        f"({', '.join(present) or 'none'}; other ids there: {others}): {hint}")
+    if absent:
+        notes.append(f"{source}: nothing at all from camera(s) {', '.join(absent)} of "
+                     f"{dep.name}: {hint}")
+    if folder is None:
+        return
+    wrong = []
+    for cid in present:  # each camera's first frame: its header says its size
+        fid = next(f for f in folder.frame_ids if (f, cid) in folder.files)
+        size = jpeg_size(folder.frame(fid, cid))
+        cam = dep.camera(cid)
+        if size is not None and size != (cam.height, cam.width):
+            wrong.append(f"{cid} {size[1]}×{size[0]} (the deployment says "
+                         f"{cam.width}×{cam.height})")
+    if len(wrong) > len(present) / 2:
+        raise UserError(f"{source}: frames of another size than {dep.name}'s cameras: "
+                        f"{'; '.join(wrong)}: {hint}")
+
+
 def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> int:
     from ..datasets import DatasetError, read_frames_folder
 
@@ -111,10 +144,7 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
         folder = read_frames_folder(frames_dir)
     except DatasetError as e:
         raise UserError(str(e)) from None
-    absent = [c for c in loc.camera_ids if c not in folder.camera_ids]
-    if absent:
-        notes.append(f"{frames_dir}: no frames at all from camera(s) {', '.join(absent)} of "
-                     f"{loc.deployment.name}: is this the right deployment for these frames?")
+    _check_the_deployment_fits(loc, frames_dir, folder.camera_ids, notes, folder)
     unknown = sorted(set(folder.camera_ids) - set(loc.camera_ids))
     if unknown:
         files = sum(1 for (_, c) in folder.files if c in unknown)
@@ -129,12 +159,8 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
             for fid in chunk:
                 fs = {}
                 for cid in loc.camera_ids:
-                    path = folder.files.get((fid, cid))
-                    if path is not None:
-                        try:
-                            fs[cid] = path.read_bytes()
-                        except OSError:
-                            fs[cid] = b""  # unreadable: reported as a corrupt frame
+                    if (fid, cid) in folder.files:  # unreadable: b"", a corrupt frame
+                        fs[cid] = folder.frame(fid, cid)
                 sets.append(fs)
             fixes = loc.locate_batch(sets, chunk)
             statuses.update(fixes.counts())
@@ -161,6 +187,7 @@ def _locate_observations(loc, path, writer, statuses, notes) -> int:
             uv[index[cid], frame_index[fid]] = p
         else:
             unknown.add(cid)
+    _check_the_deployment_fits(loc, path, sorted({c for (_, c) in obs}), notes)
     if unknown:
         notes.append(f"ignored spots of camera(s) {', '.join(sorted(unknown))} that "
                      f"{loc.deployment.name} does not have")

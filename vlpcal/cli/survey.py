@@ -133,6 +133,18 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
                    err=True)
     from pathlib import Path
 
+    # every camera is asked for a frame before the walk starts (and before any file exists)
+    grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: None)
+    frames = Burst(grouper, burst)
+    answers = frames.check(dep.cameras)
+    if not any(ok for ok, _ in answers.values()):
+        grouper.stop()
+        said = "; ".join(f"{cid}: {what}" for cid, (_, what) in answers.items())
+        raise UserError(f"no camera answered ({said}): check their power, network and the "
+                        "--camera URLs before the walk; nothing was written")
+    for cid, (ok, what) in answers.items():
+        click.echo(f"camera {cid}: {what}" + ("" if ok else "; going on without it"),
+                   err=True)
     bundle = Path(survey_path)
     created = not bundle.exists()
     try:
@@ -196,8 +208,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
             raise UserError(f"--on-point {cmd!r} failed (exit {res.returncode}) at {pid}; "
                             "the survey so far is kept: fix the rig and run again to resume")
 
-    grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: say(f"! {m}"))
-    session = CaptureSession(dep, ids, xyz, appender, Burst(grouper, burst), ask, say,
+    grouper.on_event = lambda m: say(f"! {m}")
+    session = CaptureSession(dep, ids, xyz, appender, frames, ask, say,
                              on_point=move if on_point else None, delay=delay,
                              check_every=check_every, unattended=yes)
     try:
