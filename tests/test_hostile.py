@@ -556,3 +556,69 @@ def test_a_fifo_or_a_device_among_the_frames_is_a_corrupt_frame(tmp_path):
     rows = out.read_text().splitlines()
     assert rows[1].startswith("f1,") and "C1:corrupt_frame C2:corrupt_frame" in rows[1], rows
     assert rss is not None and rss < 500
+
+
+# -- live sources that trickle, stall or never end -------------------------------------------------
+
+@pytest.fixture
+def hostile_camera():
+    """An HTTP server whose paths misbehave: /trickle sends an MJPEG part a byte every 0.1 s;
+    /endless answers image/jpeg without a length and sends zeros for ever."""
+    import threading
+    import time
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    class Handler(BaseHTTPRequestHandler):
+        def log_message(self, *a):
+            pass
+
+        def do_GET(self):
+            self.send_response(200)
+            kind = self.path.strip("/")
+            ctype = "image/jpeg" if kind == "endless" else \
+                "multipart/x-mixed-replace;boundary=frame"
+            self.send_header("Content-Type", ctype)
+            self.end_headers()
+            try:
+                if kind == "endless":
+                    while True:
+                        self.wfile.write(b"\0" * 65536)
+                head = b"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: 5000\r\n\r\n"
+                self.wfile.write(head)
+                for _ in range(10 ** 6):
+                    self.wfile.write(b"\xff")
+                    self.wfile.flush()
+                    time.sleep(0.1)
+            except OSError:
+                pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    server.daemon_threads = True
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    yield f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+
+
+@pytest.mark.parametrize("kind,why", [("trickle", "no whole frame in 5 s"),
+                                      ("endless", "more than 4 MB without a whole frame")])
+def test_locate_live_from_a_trickling_or_endless_camera_ends(tmp_path, hostile_camera, kind,
+                                                             why):
+    """No --duration: the camera is a stopped camera after the read timeout, and with no
+    camera left, locate ends (one line, exit 1, nothing written), memory bounded."""
+    out = tmp_path / "live.csv"
+    code, _, err, rss = _vlpcal("locate", "-d", DEPLOYMENT, "--camera",
+                                f"C1={hostile_camera}/{kind}", "--out", out, timeout=60)
+    lines = [line for line in err if line.startswith("Error")]
+    assert code == 1 and len(lines) == 1 and why in lines[0], err
+    assert not out.exists() and rss is not None and rss < 500, rss
+
+
+def test_survey_capture_refuses_a_trickling_camera_before_the_walk(tmp_path, hostile_camera):
+    points = ROOT / "surveys" / "paper-2024" / "survey" / "points.csv"
+    code, out, err, _ = _vlpcal("survey", "capture", "-d", DEPLOYMENT, "--points", points,
+                                "--survey", tmp_path / "s", "--yes", "--camera",
+                                f"C1={hostile_camera}/trickle", timeout=60)
+    lines = [line for line in err if line.startswith("Error")]
+    assert code == 2 and len(lines) == 1 and "no whole frame in 5 s" in lines[0], err
+    assert not (tmp_path / "s").exists()

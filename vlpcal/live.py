@@ -20,31 +20,43 @@ READ_TIMEOUT = 5.0
 MAX_PART = 4 * 1024 * 1024
 
 
+class Stalled(TimeoutError):
+    """A source that sends, but too slowly to make a frame within the read timeout."""
+
+
 def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
-    """JPEG frames from a ``multipart/x-mixed-replace`` HTTP stream.
+    """JPEG frames from a ``multipart/x-mixed-replace`` HTTP stream (or one snapshot).
 
     Parts are read by their ``Content-Length`` when the server gives one (the ESP32 camera
-    server does), otherwise by scanning for the JPEG end-of-image marker.
+    server does), otherwise by scanning for the JPEG end-of-image marker. Every read is
+    bounded: a part (or a snapshot) may not exceed :data:`MAX_PART` bytes, and each frame must
+    arrive whole within ``timeout`` s of the one before (a camera that trickles a byte a second
+    is a stalled camera, however long the command was asked to run).
     """
     import urllib.request
 
     with urllib.request.urlopen(url, timeout=timeout) as resp:
         ctype = resp.headers.get("Content-Type", "")
-        if "multipart" not in ctype and "jpeg" in ctype:
-            yield resp.read()  # a single snapshot
-            return
         buf = b""
+        since = time.monotonic()  # when the frame being read was begun
 
         def more():
             nonlocal buf
+            if time.monotonic() - since > timeout:
+                raise Stalled(f"no whole frame in {timeout:g} s (the camera sends too slowly)")
             chunk = resp.read1(65536)
             if chunk:
                 buf += chunk
             if len(buf) > MAX_PART:
-                raise ValueError(f"no MJPEG part boundary in {MAX_PART // 2**20} MB: "
-                                 "not a multipart JPEG stream")
+                raise ValueError(f"more than {MAX_PART // 2**20} MB without a whole frame: "
+                                 "not a camera's JPEG stream")
             return bool(chunk)
 
+        if "multipart" not in ctype and "jpeg" in ctype:  # a single snapshot
+            while more():
+                pass
+            yield buf
+            return
         while True:
             # headers of the next part (CRLF, or bare LF as some servers send)
             while not (b"\r\n\r\n" in buf or b"\n\n" in buf):
@@ -58,6 +70,9 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
                 if name.strip().lower() == b"content-length" and value.strip().isdigit():
                     length = int(value.strip())
             if length is not None:
+                if length > MAX_PART:
+                    raise ValueError(f"a part of {length} bytes (more than "
+                                     f"{MAX_PART // 2**20} MB): not a camera's JPEG stream")
                 while len(buf) < length:
                     if not more():
                         return
@@ -70,6 +85,7 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
                     start = buf.find(b"\xff\xd8")
                 frame, buf = buf[start:end + 2], buf[end + 2:]
             yield frame
+            since = time.monotonic()
 
 
 def device_frames(device: str) -> Iterator:
@@ -105,6 +121,8 @@ def failure(e: Exception) -> str:
         return f"HTTP {e.code} {e.reason}"
     if isinstance(e, urllib.error.URLError):
         e = e.reason if isinstance(e.reason, Exception) else ValueError(str(e.reason))
+    if isinstance(e, Stalled):
+        return str(e)
     if isinstance(e, (socket.timeout, TimeoutError)):
         return f"no data for {READ_TIMEOUT:g} s"
     if isinstance(e, OSError) and e.strerror:
