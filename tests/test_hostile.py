@@ -622,3 +622,23 @@ def test_survey_capture_refuses_a_trickling_camera_before_the_walk(tmp_path, hos
     lines = [line for line in err if line.startswith("Error")]
     assert code == 2 and len(lines) == 1 and "no whole frame in 5 s" in lines[0], err
     assert not (tmp_path / "s").exists()
+
+
+def test_locate_to_stdout_without_q_keeps_stdout_for_the_fixes(tmp_path):
+    """The progress bar goes to stderr: piped without -q, stdout is the CSV alone."""
+    frames = tmp_path / "frames"
+    (frames / "f1").mkdir(parents=True)
+    for cid in ("C1", "C2", "C3"):
+        (frames / "f1" / f"{cid}.jpg").write_bytes(_jpeg())
+    code, out, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", frames)
+    assert code == 0, err
+    assert out.splitlines()[0].startswith("frame_id,x,y,z,status"), out[:200]
+
+
+def test_show_takes_the_deployment_as_argument_or_option():
+    for args in (["show", DEPLOYMENT], ["show", "-d", DEPLOYMENT]):
+        code, out, err, _ = _vlpcal(*args)
+        assert code == 0 and "cameras" in out.splitlines()[0], (out, err)
+        assert " 360" not in out
+    code, out, err, _ = _vlpcal("show")
+    assert code == 2 and len([e for e in err if e.strip()]) == 1

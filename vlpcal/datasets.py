@@ -172,10 +172,20 @@ class SurveyBundle:
     xyz: np.ndarray  # N×3 measured positions, m
     frames: dict = field(default_factory=dict)  # (point_id, camera_id) → Path
     observations: dict = field(default_factory=dict)  # (point_id, camera_id) → (u, v)
+    #: the free survey (issue 15): moments when the LED was somewhere unknown, in order
+    free_ids: list = field(default_factory=list)
+    free_frames: dict = field(default_factory=dict)  # (set_id, camera_id) → Path
+    free_observations: dict = field(default_factory=dict)  # (set_id, camera_id) → (u, v)
 
     def camera_ids(self) -> list[str]:
-        ids = {c for _, c in self.frames} | {c for _, c in self.observations}
+        ids = {c for _, c in self.frames} | {c for _, c in self.observations} | \
+            {c for _, c in self.free_frames} | {c for _, c in self.free_observations}
         return sorted(ids, key=natural_key)
+
+    def free_frame(self, set_id: str, camera_id: str) -> bytes | None:
+        """A free set's JPEG from the camera (None: not seen; b"": unreadable)."""
+        path = self.free_frames.get((set_id, camera_id))
+        return read_frame(path) if path else None
 
     def frame(self, point_id: str, camera_id: str) -> bytes | None:
         """The JPEG bytes the camera took at the point (None: not seen; b"": unreadable)."""
@@ -184,11 +194,13 @@ class SurveyBundle:
 
 
 def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
-                        observations: dict | None = None, overwrite: bool = False) -> Path:
+                        observations: dict | None = None, overwrite: bool = False,
+                        free_frames: dict | None = None, free_ids=None) -> Path:
     """Write a survey bundle.
 
     ``frames``: camera id → one JPEG (bytes, or None when not seen) per point;
-    ``observations``: camera id → ``N×2`` pixels (NaN when not seen).
+    ``observations``: camera id → ``N×2`` pixels (NaN when not seen); ``free_frames``: camera
+    id → one JPEG or None per free set ``free_ids`` (``free/frames/``).
     """
     root = Path(root)
     xyz = np.asarray(xyz, dtype=float)
@@ -209,6 +221,10 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
                     for cam, uv in observations.items() for i, p in enumerate(ids)
                     if np.isfinite(uv[i]).all()]
             _write_csv(tmp / "observations.csv", ("point_id", *OBSERVATION_COLUMNS), rows)
+        if free_frames:
+            sids = [_check_id(str(s), f"free set {i}") for i, s in enumerate(free_ids)]
+            _check_lengths(free_frames, len(sids), "free frames")
+            _write_jpegs(free_frames, sids, lambda s: tmp / "free" / "frames" / s)
     return root
 
 
@@ -237,7 +253,13 @@ def read_survey_bundle(root) -> SurveyBundle:
         raise DatasetError(f"{root}: not a folder (expected a survey bundle with points.csv)")
     path = root / "points.csv"
     if not path.is_file():
-        raise DatasetError(f"{path}: missing (a survey bundle needs points.csv)")
+        if (root.parent / "points.csv").is_file():
+            hint = f": {root} looks like a bundle's frames folder; give its parent, {root.parent}"
+        elif any(root.glob("*/*.jpg")):
+            hint = ": it holds frames only, like a locate frames folder (vlpcal locate --frames)"
+        else:
+            hint = ""
+        raise DatasetError(f"{path}: missing (a survey bundle needs points.csv){hint}")
     ids, xyz = read_points(path)
     known = set(ids)
     frames = {}
@@ -257,7 +279,35 @@ def read_survey_bundle(root) -> SurveyBundle:
         for (pid, _cid) in observations:
             if pid not in known:
                 raise DatasetError(f"{opath}: point {pid!r} is not in points.csv")
-    return SurveyBundle(root, ids, xyz, frames, observations)
+    bundle = SurveyBundle(root, ids, xyz, frames, observations)
+    _read_free(root / "free", bundle)
+    return bundle
+
+
+def _read_free(free: Path, bundle: SurveyBundle) -> None:
+    """The free survey of a bundle, if any: ``free/frames/<set_id>/<camera_id>.jpg`` or
+    ``free/observations.csv`` (``set_id,camera_id,u,v``); sets in natural order."""
+    if not free.is_dir():
+        return
+    ids = set()
+    fdir = free / "frames"
+    if fdir.is_dir():
+        for d in fdir.iterdir():
+            if d.is_dir() and not d.name.startswith("."):
+                sid = _check_id(d.name, f"{d}: set id")
+                for f in d.glob("*.jpg"):
+                    bundle.free_frames[(sid, _check_id(f.stem, f"{f}: camera id"))] = f
+                ids.add(sid)
+    opath = free / "observations.csv"
+    if opath.is_file():
+        if bundle.free_frames:
+            raise DatasetError(f"{free}: has both frames/ and observations.csv (expected one)")
+        bundle.free_observations, order = read_observations(opath, "set_id")
+        ids.update(order)
+    if not ids:
+        raise DatasetError(f"{free}: no free sets (expected frames/<set_id>/<camera_id>.jpg "
+                           "or observations.csv with set_id,camera_id,u,v)")
+    bundle.free_ids = sorted(ids, key=lambda t: (natural_key(t), t))
 
 
 def read_observations(path, id_column: str = "frame_id") -> tuple[dict, list[str]]:

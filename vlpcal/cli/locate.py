@@ -138,6 +138,8 @@ def _check_the_deployment_fits(loc, source, camera_ids, notes, folder=None) -> N
 
 
 def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> int:
+    import sys
+
     from ..datasets import DatasetError, read_frames_folder
 
     try:
@@ -151,8 +153,9 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
         notes.append(f"ignored {files} frames of camera(s) {', '.join(unknown)} that "
                      f"{loc.deployment.name} does not have")
     ids = folder.frame_ids
-    with click.progressbar(length=len(ids), label="locating", file=None if not quiet else
-                           open("/dev/null", "w"), show_pos=True) as bar:
+    # progress to stderr (stdout may be the fixes), and only where a person watches
+    with click.progressbar(length=len(ids), label="locating", file=sys.stderr,
+                           hidden=quiet, show_pos=True) as bar:
         for s in range(0, len(ids), batch):
             chunk = ids[s:s + batch]
             sets = []

@@ -10,8 +10,11 @@ from .common import _load_deployment, main
 
 
 @main.command("show")
-@click.argument("deployment_path", metavar="DEPLOYMENT", type=click.Path(dir_okay=False))
-def show(deployment_path):
+@click.argument("deployment_path", metavar="DEPLOYMENT", type=click.Path(dir_okay=False),
+                required=False)
+@click.option("--deployment", "-d", "deployment_option", type=click.Path(dir_okay=False),
+              help="The deployment (as the other commands take it; or give it as the argument).")
+def show(deployment_path, deployment_option):
     """Print what a deployment holds: the room, every camera (image, lens, where it hangs and
     how it points), the detector and fusion the locator will use (region map, residual limit),
     pixel corrections, the spot noise behind predicted errors, and where the file came from
@@ -21,7 +24,9 @@ def show(deployment_path):
     """
     import numpy as np
 
-    dep = _load_deployment(deployment_path)
+    if (deployment_path is None) == (deployment_option is None):
+        raise click.UsageError("give one deployment: vlpcal show D (or -d D)")
+    dep = _load_deployment(deployment_path or deployment_option)
     room = np.asarray(dep.room, float)
     span = np.ptp(room, axis=0)
     area = 0.5 * abs(np.dot(room[:, 0], np.roll(room[:, 1], 1))
@@ -35,7 +40,7 @@ def show(deployment_path):
     for c in dep.cameras:
         axis = c.R[2]  # the optical axis in the world
         tilt = math.degrees(math.acos(max(-1.0, min(1.0, -axis[2]))))
-        yaw = math.degrees(c.yaw) % 360
+        yaw = round(math.degrees(c.yaw)) % 360  # as printed: 359.7 shows as 0, not 360
         x, y, z = c.position
         click.echo(f"{c.id[:8]:8s} {f'{c.width}×{c.height}':>9s} {c.fx:7.1f} {c.fy:7.1f} "
                    f"{c.cx:6.1f} {c.cy:6.1f} {c.dist[0]:8.3f} {x:7.3f} {y:7.3f} {z:6.3f} "

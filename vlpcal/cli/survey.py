@@ -295,6 +295,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
 
     Example: vlpcal survey calibrate -d nominal.yaml --survey survey/ --out calibrated.yaml
     """
+    import sys
 
     from ..datasets import DatasetError, read_survey_bundle
     from ..reports import write_calibration
@@ -323,7 +324,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     _check_survey_positions(survey_path, dep, X, ids)
     try:
         with click.progressbar(length=folds + 1, label="calibrating (lens choice and all, "
-                               "then k-fold)", hidden=quiet) as bar:
+                               "then k-fold)", hidden=quiet, file=sys.stderr) as bar:
             result = calibrate_survey(
                 dep, X, uv, ids, lens, folds, point_sigma,
                 progress=lambda i, n: bar.update(1),
@@ -334,8 +335,8 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     paths = write_calibration(out, result, notes,
                               header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
     label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
-    click.echo(f"\nwrote {paths[0]} (fusion: {result.fusion}, the row '{label}'), "
-               f"{paths[1]}, {paths[2]}")
+    click.echo(f"\nwrote {paths[0]} (fusion {result.fusion}: the table's row '{label}', the "
+               f"best held out), {paths[1]}, {paths[2]}")
 
 
 def _print_calibration(result, folds: int) -> None:
