@@ -224,10 +224,57 @@ def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Pa
     with OutputSet(*paths) as (report, png, dep):
         dep.write_text(dumps(result.deployment, header=header), encoding="utf-8")
         report.write_text(json.dumps(result.report(notes), indent=2), encoding="utf-8")
-        calibration_figure(png, result.stats, result.per_point, result.points,
-                           result.deployment.cameras,
-                           [r for r in result.cameras if r.get("lens_candidates")])
+        if hasattr(result, "calibration"):  # a free survey's
+            free_calibration_figure(png, result)
+        else:
+            calibration_figure(png, result.stats, result.per_point, result.points,
+                               result.deployment.cameras,
+                               [r for r in result.cameras if r.get("lens_candidates")])
     return paths[2], paths[0], paths[1]
+
+
+def free_calibration_figure(path, result) -> None:
+    """A free survey seen from above — where the LED went (coloured by how many cameras saw
+    it: where the motion covered the room poorly shows), the references with their
+    left-out errors, the cameras — and each reference's left-out error beside the datum
+    floor the references allow. ``result``: a ``survey.FreeSurveyResult``."""
+    plt = _pyplot()
+    cal, dep = result.calibration, result.deployment
+    fig, (top, bars) = plt.subplots(1, 2, figsize=(13, 5), constrained_layout=True,
+                                    gridspec_kw={"width_ratios": [1.6, 1]})
+    room = np.array(list(dep.room) + [dep.room[0]])
+    top.plot(room[:, 0], room[:, 1], "k-", lw=1)
+    F = cal.free_xyz
+    ok = np.isfinite(F).all(axis=1)
+    if ok.any():
+        views = np.array([c.project(F[ok])[2] for c in dep.cameras])
+        sc = top.scatter(F[ok, 0], F[ok, 1], c=views.sum(axis=0), s=4, cmap="viridis",
+                         vmin=1, vmax=max(2, len(dep.cameras)))
+        fig.colorbar(sc, ax=top, label="cameras that see the fitted LED position")
+    top.plot(result.points[:, 0], result.points[:, 1], "r^", ms=7, label="reference points")
+    for pid, p, e in zip(result.reference_ids, result.points, cal.leave_one_out):
+        top.annotate(pid + (f" {e * 1000:.1f} mm" if np.isfinite(e) else ""), p[:2],
+                     fontsize=7, xytext=(4, 4), textcoords="offset points", color="r")
+    for c in dep.cameras:
+        top.plot(*c.position[:2], "ks", ms=6)
+        top.annotate(c.id, c.position[:2], fontsize=8, xytext=(4, -10), textcoords="offset points")
+    top.set_aspect("equal")
+    top.set_xlabel("x (m)")
+    top.set_ylabel("y (m)")
+    top.legend(fontsize=7, loc="upper right")
+    top.set_title(f"{dep.name}: {cal.used_sets} free LED positions fitted of "
+                  f"{result.free_sets} sets", fontsize=9)
+    e = cal.leave_one_out * 1000
+    bars.bar(range(len(e)), np.nan_to_num(e), color="#2a7ab0")
+    bars.axhline(cal.datum_floor * 1000, color="r", ls="--",
+                 label=f"datum floor {cal.datum_floor * 1000:.1f} mm")
+    bars.axhline(cal.point_sigma * 1000 * np.sqrt(3), color="0.5", ls=":",
+                 label=f"the tape's own 3D noise {cal.point_sigma * 1000 * np.sqrt(3):.1f} mm")
+    bars.set_xticks(range(len(e)), result.reference_ids, rotation=90, fontsize=7)
+    bars.set_ylabel("left-out error (mm)")
+    bars.legend(fontsize=7)
+    bars.set_title("each reference fitted without it, against its record", fontsize=9)
+    save_figure(fig, path, dpi=110)
 
 
 def demo_figure(path, site, truth, fixes_of: dict, cameras, shown: tuple) -> None:

@@ -23,15 +23,23 @@ from .common import UserError, _floats, main
               help="Random test positions to render as a locate frames folder.")
 @click.option("--trajectory", default=0, show_default=True, type=click.IntRange(0),
               help="Frames of a robot's LED path (h = 0.15 m) to render instead of test points.")
+@click.option("--free-sets", default=0, show_default=True, type=click.IntRange(0, 100_000),
+              help="Also a free survey (OUT/free-survey/): this many moments of an LED carried "
+                   "through the room, with the reference points survey plan --free asks for.")
+@click.option("--free-height", type=float, default=None,
+              help="The free survey's LED on a robot at this height, m (instead of a pole).")
+@click.option("--references", type=click.IntRange(2, 200), default=None,
+              help="Reference points of the free survey (default: as survey plan --free).")
 @click.option("--overwrite", is_flag=True, help="Replace what is in --out.")
 @click.option("--describe", is_flag=True, help="Print the profile's parameters and sources.")
 def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, trajectory,
-             overwrite, describe):
+             free_sets, free_height, references, overwrite, describe):
     """Simulate an install: nominal and true deployments, a survey bundle, a frames folder.
 
     Writes OUT/nominal.yaml (the cameras as planned), OUT/truth.yaml (as really installed, for
     evaluation), OUT/survey/ (a survey bundle, tape-measure noise on points.csv),
-    OUT/frames/ (a locate frames folder) and OUT/frames.truth.csv.
+    OUT/frames/ (a locate frames folder) and OUT/frames.truth.csv; with --free-sets, a free
+    survey OUT/free-survey/ (reference points and free/ sets).
 
     Example: vlpcal simulate --profile cheap-wide --seed 3 --out sim-cheap
     """
@@ -80,7 +88,7 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     # --overwrite replaces what this command writes, all of it (never anything else)
     import shutil
 
-    for name in ("survey", "frames"):
+    for name in ("survey", "frames", "free-survey"):
         shutil.rmtree(out / name, ignore_errors=True)
     (out / "frames.truth.csv").unlink(missing_ok=True)
     nominal, truth = write_deployments(scene, out)
@@ -88,6 +96,19 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     click.echo(f"{profile.name} (seed {seed}): {nominal}, {truth}")
     click.echo(f"survey: {len(pts)} points at h = {', '.join(map(str, heights))} m "
                f"→ {out / 'survey'}")
+    if free_sets:
+        from ..sim.writers import deployment_of, simulate_free_survey
+        from ..survey import plan_references
+
+        if free_height is not None and not 0 <= free_height <= top:
+            raise click.BadParameter(f"expected a height from 0 to {top:g} m",
+                                     param_hint="--free-height")
+        refs = plan_references(deployment_of(scene, "nominal"), references)
+        simulate_free_survey(scene, out / "free-survey", refs.xyz, free_sets, seed=seed,
+                             height=free_height, overwrite=True)
+        click.echo(f"free survey: {len(refs.ids)} reference points and {free_sets} free sets "
+                   + (f"(a robot at h = {free_height:g} m) " if free_height is not None else
+                      "(an LED on a pole) ") + f"→ {out / 'free-survey'}")
     if trajectory:
         test = path_of(scene, trajectory, seed=seed)
     else:

@@ -280,9 +280,12 @@ class PointSigma(click.ParamType):
               help="Measurement uncertainty of a surveyed position, m per axis (e.g. 0.003 "
                    "for a tape measure, 0.0001 for a machined target); auto estimates it from "
                    "the fit.")
+@click.option("--free-height", type=float, default=None,
+              help="A free survey's LED was always at this height, m (on a robot or a cart): "
+                   "then two reference points suffice.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds, point_sigma,
-                     quiet):
+                     free_height, quiet):
     """Calibrate the cameras from a survey and report held-out accuracy.
 
     Each camera's pose and as much of its lens as the survey supports and needs (--lens auto:
@@ -322,6 +325,12 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
         click.echo(note, err=True)
     X, ids = bundle.xyz, bundle.point_ids
     _check_survey_positions(survey_path, dep, X, ids)
+    if bundle.free_ids:
+        return _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
+                               quiet, deployment_path, survey_path)
+    if free_height is not None:
+        raise UserError(f"{survey_path}: --free-height is for a free survey (a free/ folder); "
+                        "this bundle has none")
     try:
         with click.progressbar(length=folds + 1, label="calibrating (lens choice and all, "
                                "then k-fold)", hidden=quiet, file=sys.stderr) as bar:
@@ -337,6 +346,69 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
     click.echo(f"\nwrote {paths[0]} (fusion {result.fusion}: the table's row '{label}', the "
                f"best held out), {paths[1]}, {paths[2]}")
+
+
+def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes, quiet,
+                    deployment_path, survey_path) -> None:
+    """``survey calibrate`` on a bundle with a free survey (issue 15)."""
+    import math
+    import sys
+
+    import numpy as np
+
+    from ..reports import write_calibration
+    from ..survey import SurveyError, calibrate_free_survey, free_spots
+
+    if free_height is not None and not (0 <= free_height < dep.ceiling_height):
+        raise UserError(f"--free-height {free_height:g}: expected a height from the floor to "
+                        f"below the ceiling ({dep.ceiling_height:g} m)")
+    uv_free, free_notes = free_spots(dep, bundle)
+    for note in free_notes:
+        click.echo(note, err=True)
+    n_ref = len(bundle.point_ids)
+    try:
+        with click.progressbar(length=5 + n_ref, label="calibrating from the free survey",
+                               hidden=quiet, file=sys.stderr) as bar:
+            result = calibrate_free_survey(
+                dep, bundle.xyz, uv, bundle.point_ids, uv_free, lens, point_sigma, free_height,
+                progress=lambda i, n: bar.update(1),
+                sources={"deployment": str(deployment_path), "survey": str(survey_path)})
+    except SurveyError as e:
+        raise UserError(f"{survey_path}: {e}") from None
+    cal = result.calibration
+    click.echo(f"free survey: {result.free_sets} sets (moments a camera saw the LED), "
+               f"{cal.used_sets} used (seen by "
+               + ("a camera at the stated height" if free_height is not None else
+                  "two or more cameras")
+               + f"); {sum(cal.rejected.values())} spots rejected, {cal.dropped_sets} sets of "
+               "two views that disagree dropped; references ±"
+               f"{cal.point_sigma * 1000:.2g} mm per axis ("
+               + ("estimated" if cal.point_sigma_estimated else "as stated")
+               + f"), spots ±{cal.pixel_sigma:.3g} px")
+    for words in result.lens:
+        click.echo(f"  {words}")
+    click.echo(f"\n{'camera':8s} {'spread px':>9s} {'free sets':>9s} {'rejected':>8s} "
+               f"{'moved':>9s} {'turned °':>8s}  lens")
+    for r in result.cameras:
+        click.echo(f"{r['camera'][:8]:8s} {r['spread_px']:9.3f} {r['free_sets_seen']:9d} "
+                   f"{r['rejected_spots']:8d} {r['moved_m'] * 1000:6.1f} mm "
+                   f"{r['turned_deg']:8.2f}  {r['lens_model']}")
+    loo = cal.leave_one_out[np.isfinite(cal.leave_one_out)]
+    if len(loo):
+        tape = cal.point_sigma * 1000 * math.sqrt(3)
+        click.echo(f"\nreferences, each left out in turn (the others fix the room, its spots "
+                   f"place it): mean {loo.mean() * 1000:.1f} mm, max {loo.max() * 1000:.1f} mm "
+                   f"over {len(loo)} points (their own tape, ±{tape:.1f} mm in 3D, included)")
+    else:
+        click.echo("\nreferences: too few to leave one out (the rest must still fix the room)")
+    click.echo(f"your {n_ref} reference points fix the room to about "
+               f"{cal.datum_floor * 1000:.1f} mm (the datum floor: no calibration does "
+               "better); measure more points, or more precisely, to do better")
+    paths = write_calibration(out, result, notes + free_notes,
+                              header=f"Calibrated by vlpcal survey calibrate from {survey_path} "
+                                     "(free survey).")
+    click.echo(f"\nwrote {paths[0]} (fusion robust: all cameras by least squares), {paths[1]}, "
+               f"{paths[2]}")
 
 
 def _print_calibration(result, folds: int) -> None:

@@ -43,6 +43,52 @@ def trajectory(scene: Scene, n: int, height: float = 0.15, seed: int = 0) -> np.
     return np.c_[x, y, np.full(n, height)]
 
 
+def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
+              ) -> np.ndarray:
+    """A free survey's LED (``n×3``): a person sweeping the room with the LED on a pole, up
+    and down between the floor and 40 % of the ceiling's height — or, with ``height``, a robot
+    driving the room at that height. Both wander over the whole floor (a Lissajous figure with
+    incommensurate frequencies, jittered, as a hand or a planner would)."""
+    from shapely.geometry import Polygon
+
+    rng = np.random.default_rng([scene.seed, seed, STREAM_PATH, 2])
+    x0, y0, x1, y1 = Polygon(scene.profile.room).buffer(-0.1).bounds
+    t = np.linspace(0, 1, n)
+    fx, fy, fz = 7.0, 7.0 * np.sqrt(2) + rng.uniform(-0.3, 0.3), 23.0 * np.sqrt(3)
+    phase = rng.uniform(0, 2 * np.pi, 3)
+    x = (x0 + x1) / 2 + (x1 - x0) / 2 * np.sin(2 * np.pi * fx * t + phase[0])
+    y = (y0 + y1) / 2 + (y1 - y0) / 2 * np.sin(2 * np.pi * fy * t + phase[1])
+    xy = np.c_[x, y] + rng.normal(0, 0.02 * min(x1 - x0, y1 - y0), (n, 2))
+    xy = np.clip(xy, [x0, y0], [x1, y1])
+    if height is None:
+        top = 0.4 * scene.profile.ceiling_height
+        z = top * (0.5 + 0.5 * np.sin(2 * np.pi * fz * t + phase[2]))
+    else:
+        z = np.full(n, float(height))
+    return np.c_[xy, z]
+
+
+def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int = 0,
+                         height: float | None = None, overwrite: bool = False):
+    """A free survey bundle (issue 15): the ``references`` (true positions) taped to
+    ± ``profile.tape`` per axis with their frames, and ``n_free`` free sets of the LED moved
+    along :func:`free_path` (its positions unrecorded, as in life). Returns (measured
+    references, the free path's true positions)."""
+    refs = np.asarray(references, float)
+    path = free_path(scene, n_free, height, seed)
+    frames, seen = render_scene(scene, np.vstack([refs, path]), seed=seed)
+    rng = np.random.default_rng([scene.seed, seed, STREAM_TAPE])
+    measured = refs + rng.normal(0.0, scene.profile.tape, refs.shape)
+    n = len(refs)
+    kept = {cid: [f if s else None for f, s in zip(jpegs, seen[k])]
+            for k, (cid, jpegs) in enumerate(frames.items())}
+    write_survey_bundle(root, [f"R{i + 1:02d}" for i in range(n)], measured,
+                        {c: v[:n] for c, v in kept.items()}, overwrite=overwrite,
+                        free_frames={c: v[n:] for c, v in kept.items()},
+                        free_ids=[f"F{i + 1:05d}" for i in range(n_free)])
+    return measured, path
+
+
 def deployment_of(scene: Scene, which: str = "nominal") -> Deployment:
     """The scene's ``nominal`` (what the installer believes) or ``true`` cameras as a file."""
     p = scene.profile

@@ -24,15 +24,23 @@ from .calibration import (
 )
 from .held_out import HELD_OUT, error_stats, held_out
 from .lens import LENS_MODELS, MIN_POINTS_POSE, lens_params, lens_support
-from .pipeline import FUSION_OF, SurveyResult, calibrate_survey
-from .plan import MIN_POINTS_PLANNED, SurveyPlan, plan_survey
+from .pipeline import (
+    FUSION_OF,
+    FreeSurveyResult,
+    SurveyResult,
+    calibrate_free_survey,
+    calibrate_survey,
+)
+from .plan import MIN_POINTS_PLANNED, SurveyPlan, plan_references, plan_survey
 from .regions import learn_region_map, region_cell
-from .spots import survey_spots
+from .spots import free_spots, survey_spots
 
 __all__ = [
     "FUSION_OF", "HELD_OUT", "LENS_MODELS", "MIN_POINTS_PLANNED", "MIN_POINTS_POSE",
     "Calibration", "CameraFit", "LensChoice", "SurveyError", "SurveyPlan", "SurveyResult",
     "calibrate", "calibrate_survey", "choose_lens", "error_stats", "estimate_precision",
     "fit_camera", "fold_of", "held_out", "learn_region_map", "lens_params", "lens_support",
-    "plan_survey", "refine_jointly", "region_cell", "survey_spots",
+    "plan_survey", "plan_references", "refine_jointly", "region_cell", "survey_spots",
+    "free_spots",
+    "calibrate_free_survey", "FreeSurveyResult",
 ]

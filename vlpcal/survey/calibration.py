@@ -269,17 +269,20 @@ def _pattern(npars, obs, n_pts):
 
 
 def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
-                   point_sigma: float = 0.003, pixel_sigma: float = 0.1,
-                   models: list[str] | None = None):
+                   point_sigma=0.003, pixel_sigma: float = 0.1,
+                   models: list[str] | None = None, iterations: int = 60):
     """Bundle adjustment: every camera's pose (and the lens its model frees) and every
     surveyed position together, each position free within its measurement uncertainty
-    (``point_sigma`` m per axis) against spots of ``pixel_sigma`` px.
+    (``point_sigma`` m per axis: one for all, or N×3 per coordinate, ``inf`` for a position
+    nothing measured — a free survey's LED, whose start ``X`` is only a start) against spots
+    of ``pixel_sigma`` px.
 
     ``obs``: list per camera of (point indices, uv K×2) — the observations kept by
     :func:`fit_camera`. Returns (cameras, adjusted positions N×3).
     """
 
     X = np.asarray(X, float)
+    prior = (1.0 / np.broadcast_to(np.asarray(point_sigma, float), X.shape)).ravel()
     if models is None:
         models = ["full" if intrinsics else "pose"] * len(cameras)
     npars = [6 + len(lens_params(m)) for m in models]
@@ -287,7 +290,6 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
     p0 = np.concatenate([*(to_vector(c, m) for c, m in zip(cameras, models)), X.ravel()])
 
     rows, cols, shape = _pattern(npars, obs, len(X))
-    prior = np.full(3 * len(X), 1.0 / point_sigma)
 
     def unpack(p):
         pts = p[off[-1]:].reshape(-1, 3)
@@ -298,7 +300,7 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
         pts, cams = unpack(p)
         out = [np.nan_to_num((c.project(pts[idx])[0] - uv) / pixel_sigma, nan=1e4).ravel()
                for c, (idx, uv) in zip(cams, obs)]
-        out.append(((pts - X) / point_sigma).ravel())
+        out.append((pts - X).ravel() * prior)
         return np.concatenate(out)
 
     def jac(p):
@@ -310,9 +312,11 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
             _, Jc, Jp = project_with_jacobian(c, pts[idx], m)
             data += [Jc.reshape(-1) / pixel_sigma, Jp.reshape(-1) / pixel_sigma]
         data.append(prior)
-        return csr_matrix((np.concatenate(data), (rows, cols)), shape=shape)
+        # a point beyond the lens's valid field has no derivative: no pull, not a NaN
+        return csr_matrix((np.nan_to_num(np.concatenate(data), nan=0.0, posinf=0.0,
+                                         neginf=0.0), (rows, cols)), shape=shape)
 
-    x = _sparse_levenberg_marquardt(resid, jac, p0, f_scale=3.0)
+    x = _sparse_levenberg_marquardt(resid, jac, p0, f_scale=3.0, iterations=iterations)
     cams = [from_vector(c, x[off[k]:off[k + 1]], m)
             for k, (c, m) in enumerate(zip(cameras, models))]
     return cams, x[off[-1]:].reshape(-1, 3)
@@ -359,12 +363,14 @@ def _sparse_levenberg_marquardt(resid, jac, p0, f_scale: float, iterations: int 
     return p
 
 
-def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params):
+def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params,
+                measured=None):
     """How many of each group's residuals are free to show its noise (the redundancy
     numbers of a variance-component estimate): per point, the share of its position that its
     observations determine, tr(I_obs (I_prior + I_obs)⁻¹), with I_obs = Σ JᵀJ / σ_px² over the
-    cameras that saw it and I_prior = I / σ_X²; the cameras' own parameters come out of the
-    pixels' share. Returns (r_points, r_pixels)."""
+    cameras that saw it and I_prior = diag(1 / σ_X²) (``point_sigma``: a scalar or N×3, ``inf``
+    where nothing was measured); the cameras' own parameters come out of the pixels' share.
+    Returns (r_points over the ``measured`` points, r_pixels)."""
     n = len(adjusted)
     info = np.zeros((n, 3, 3))
     n_px = 0
@@ -372,21 +378,29 @@ def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params):
         J = np.nan_to_num(cam.jacobian(adjusted[idx]))  # K×2×3
         np.add.at(info, idx, np.einsum("kai,kaj->kij", J, J) / pixel_sigma ** 2)
         n_px += 2 * len(idx)
-    M = info + np.eye(3) / point_sigma ** 2
+    sig = np.broadcast_to(np.asarray(point_sigma, float), (n, 3))
+    M = info + np.eye(3)[None] / sig[:, None, :] ** 2
     t = np.einsum("nij,nji->n", info, np.linalg.pinv(M))
-    return float(t.sum()), float(n_px - n_cam_params - t.sum())
+    mine = slice(None) if measured is None else measured
+    return float(t[mine].sum()), float(n_px - n_cam_params - t.sum())
 
 
 def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: int = 5,
-                       point_sigma: float | None = None):
+                       point_sigma: float | None = None, free=None,
+                       fixed_height: float | None = None):
     """The survey positions' measurement precision (m per axis) and the spots' (px), by
     variance components: refine jointly, compare each group's residuals with its redundancy,
     rescale, repeat. Bounded below by what the spots can resolve — a tenth of a point's
     spot-noise precision (distance / f · σ_px) — since finer position noise cannot be told from
     none. A stated ``point_sigma`` is kept and only the spots' precision estimated (weighting
     the spots by a scatter that includes the tape's would waste them).
+
+    ``free`` (bool per point): positions nothing measured (a free survey's LED: ``X`` is only
+    their start), at height ``fixed_height`` when one is stated (an LED on a robot).
     Returns (point_sigma, pixel_sigma, cameras, adjusted)."""
     X = np.asarray(X, float)
+    free = np.zeros(len(X), bool) if free is None else np.asarray(free, bool)
+    measured = ~free
     npars = sum(6 + len(lens_params(m)) for m in models)
     per_px = np.median(np.concatenate([
         np.linalg.norm(c.to_camera(X[idx]), axis=1) / (0.5 * (c.fx + c.fy))
@@ -394,15 +408,23 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     floor = 0.1 * per_px * pixel_sigma
     s_px = pixel_sigma
     s_x = point_sigma if point_sigma is not None else max(per_px * pixel_sigma, floor)
+
+    def sigmas(s_x):
+        sig = np.full(X.shape, float(s_x))
+        sig[free] = np.inf
+        if fixed_height is not None:
+            sig[free, 2] = 1e-3 * floor  # stated: as good as exact
+        return sig
+
     cams, adj = cameras, X
     for _ in range(iterations):
-        cams, adj = refine_jointly(cams, X, obs, point_sigma=s_x, pixel_sigma=s_px,
+        cams, adj = refine_jointly(cams, X, obs, point_sigma=sigmas(s_x), pixel_sigma=s_px,
                                    models=models)
-        r_x, r_px = _redundancy(cams, adj, obs, s_x, s_px, npars)
+        r_x, r_px = _redundancy(cams, adj, obs, sigmas(s_x), s_px, npars, measured)
         v_px = np.concatenate([(c.project(adj[idx])[0] - uv).ravel()
                                for c, (idx, uv) in zip(cams, obs)])
         v_px = np.clip(v_px, -3 * s_px, 3 * s_px)  # as robust as the fit's loss
-        v_x = np.clip((adj - X).ravel(), -3 * s_x, 3 * s_x)
+        v_x = np.clip((adj - X)[measured].ravel(), -3 * s_x, 3 * s_x)
         new_px = float(np.sqrt(np.sum(v_px ** 2) / max(r_px, 1.0)))
         new_x = float(np.sqrt(np.sum(v_x ** 2) / max(r_x, 1e-9))) if r_x > 0.5 else s_x
         new_x = max(new_x, floor) if point_sigma is None else point_sigma

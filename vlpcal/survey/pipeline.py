@@ -116,3 +116,79 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
                             extra)
     return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
                         np.asarray(X, float), precision, words, folds)
+
+
+@dataclass
+class FreeSurveyResult:
+    """A deployment calibrated from a free survey (issue 15) and the report behind it."""
+
+    deployment: object
+    calibration: object  #: :class:`~.free.FreeCalibration`
+    cameras: list  #: per camera: spread_px, free sets, rejected spots, moved, turned, lens
+    lens: list  #: per camera, the lens decision in words
+    reference_ids: list
+    points: np.ndarray  #: N×3 the references as measured
+    free_sets: int  #: in the bundle
+    free_height: float | None = None
+    fusion: str = "robust"
+
+    def report(self, notes=()) -> dict:
+        cal = self.calibration
+        return {"free_survey": {"sets": self.free_sets, "used": cal.used_sets,
+                                "dropped_sets": cal.dropped_sets,
+                                "free_height_m": self.free_height},
+                "references": [{"point_id": p, "left_out_error_m": None if not np.isfinite(e)
+                                else float(e)} for p, e in zip(self.reference_ids,
+                                                               cal.leave_one_out)],
+                "datum_floor_m": cal.datum_floor, "cameras": self.cameras, "lens": self.lens,
+                "fusion": self.fusion,
+                "precision": {"point_sigma_m": cal.point_sigma,
+                              "estimated": cal.point_sigma_estimated,
+                              "pixel_sigma_px": cal.pixel_sigma},
+                "notes": list(notes)}
+
+
+def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
+                          point_sigma: float | str = "auto", free_height: float | None = None,
+                          progress=None, sources: dict | None = None) -> FreeSurveyResult:
+    """Calibrate ``dep``'s cameras from a free survey (:func:`~.free.calibrate_free`): the
+    references ``X``/``uv``/``ids`` and the free sets' spots ``uv_free``; the region map
+    learned from the fitted free positions, the all-camera fusion, the residual limit from
+    the free spots' spread. Returns the calibrated deployment and its report."""
+    from ..deployment import Deployment, provenance
+    from ..geometry import rodrigues
+    from .calibration import lens_sentence
+    from .free import calibrate_free
+
+    cams = dep.cameras
+    cal = calibrate_free(cams, X, uv, ids, uv_free, lens=lens, point_sigma=point_sigma,
+                         free_height=free_height, room=dep.room, progress=progress)
+    ok = np.isfinite(cal.free_xyz).all(axis=1)
+    rmap = learn_region_map(cal.cameras, np.asarray(uv_free)[:, ok], cal.free_xyz[ok], dep.room,
+                            pair_method=dep.pair_method)
+    worst = max((v for v in cal.spread_px.values() if np.isfinite(v)), default=1.0)
+    extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
+    extra["fusion"] = {**extra.get("fusion", {}), "method": "robust",
+                       "max_residual": RESIDUAL_LIMIT * worst, "region_map": rmap.to_dict()}
+    extra["provenance"] = provenance(
+        "vlpcal survey calibrate", **{"from": {**(sources or {}), "references": len(ids),
+                                                "free_sets": int(np.shape(uv_free)[1])}},
+        lens={c.camera_id: c.chosen for c in cal.lens}, point_sigma_m=cal.point_sigma,
+        point_sigma_estimated=cal.point_sigma_estimated, datum_floor_m=cal.datum_floor,
+        free_height_m=free_height)
+    rows, words = [], []
+    for nom, c, choice in zip(cams, cal.cameras, cal.lens):
+        dR = rodrigues(c.rotation) @ rodrigues(nom.rotation).T
+        angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
+        sentence = lens_sentence(choice, c, nom)
+        words.append(sentence)
+        seen = int(np.isfinite(np.asarray(uv_free)[cams.index(nom)]).all(axis=1).sum())
+        rows.append({"camera": c.id, "spread_px": cal.spread_px[c.id], "free_sets_seen": seen,
+                     "rejected_spots": cal.rejected[c.id],
+                     "moved_m": float(np.linalg.norm(np.subtract(c.position, nom.position))),
+                     "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
+                     "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
+    calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
+                            extra)
+    return FreeSurveyResult(calibrated, cal, rows, words, list(ids), np.asarray(X, float),
+                            int(np.shape(uv_free)[1]), free_height)

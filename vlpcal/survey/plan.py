@@ -104,3 +104,63 @@ def _walking_order(pts: np.ndarray) -> np.ndarray:
             order.extend(row.tolist())
             x_at = pts[row[-1], 0]
     return np.array(order, int)
+
+
+def plan_references(deployment, count: int | None = None, heights=None,
+                    margin_px: float = 5.0) -> SurveyPlan:
+    """Where a free survey's reference points go (issue 15): where two or more cameras see
+    them, spread over the room (farthest-point order) at two heights, and where cameras
+    overlap only in pairs (a line of cameras chained by small overlaps) at least two in every
+    overlap. ``count``: 6 where some point is seen by three cameras or more, else four per
+    overlapping pair, at most 12 — or as given. Ids ``R01``… in walking order."""
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    cams = deployment.cameras
+    room = Polygon(deployment.room)
+    for poly in deployment.keep_out:
+        room = room.difference(Polygon(poly))
+    if heights is None:
+        heights = (0.0, round(0.15 * deployment.ceiling_height, 2))
+    x0, y0, x1, y1 = room.bounds
+    step = min(x1 - x0, y1 - y0) / 24
+    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = xy[contains_xy(room, xy[:, 0], xy[:, 1])]
+    cand = np.concatenate([np.c_[xy, np.full(len(xy), h)] for h in heights])
+    seen = np.stack([c.project(cand, margin=margin_px)[2] for c in cams])
+    two = seen.sum(axis=0) >= 2
+    cand, seen = cand[two], seen[:, two]
+    if not len(cand):
+        raise SurveyError("no point of the room is seen by two cameras: a free survey needs "
+                          "cameras that overlap")
+    pairs = [(k, j) for k in range(len(cams)) for j in range(k + 1, len(cams))
+             if (seen[k] & seen[j]).any()]
+    triples = (seen.sum(axis=0) >= 3).mean() >= 0.5  # cameras overlap in threes, mostly
+    if count is None:
+        count = 6 if triples else min(12, max(6, 4 * len(pairs)))
+    chosen: list = []
+
+    def farthest(pool, n):
+        for _ in range(n):
+            free = np.setdiff1d(pool, chosen)
+            if not len(free):
+                return
+            if chosen:
+                d = np.min(np.linalg.norm(cand[free, None, :2] - cand[None, chosen, :2], axis=2)
+                           + 0.5 * np.abs(cand[free, None, 2] - cand[None, chosen, 2]), axis=1)
+                chosen.append(int(free[np.argmax(d)]))
+            else:
+                centre = cand[pool, :2].mean(axis=0)
+                chosen.append(int(free[np.argmax(np.linalg.norm(cand[free, :2] - centre, axis=1))]))
+
+    if not triples:  # every overlap gets its share (two at least, at both heights)
+        for k, j in pairs:
+            farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(pairs)))
+    farthest(np.arange(len(cand)), max(0, count - len(chosen)))
+    pts = cand[chosen[:max(count, len(chosen))]]
+    order = _walking_order(pts)
+    pts = pts[order]
+    seen = np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
+    return SurveyPlan([f"R{i + 1:02d}" for i in range(len(pts))], pts, seen,
+                      [c.id for c in cams])

@@ -1,0 +1,320 @@
+"""Calibration from a freely moving LED and a few measured reference points (issue 15).
+
+As motion-capture suites do: the cameras calibrate each other from what they see of the LED
+at the same moments (a *free set*: one moment, the LED somewhere nobody measured), and a
+handful of tape-measured *reference points* fix the world's origin, axes and scale. One
+bundle adjustment (:func:`~.calibration.refine_jointly`) over every camera's pose and lens,
+every free position (no prior) and every reference (within its measurement precision, estimated
+by variance components unless stated). With ``free_height`` every free position is at that
+height (an LED on a robot): the floor plane then fixes the vertical, the tilts and, with two
+references, everything else.
+
+Accuracy without a full survey: each reference left out in turn (its prior removed, its spots
+kept) against its measured position, the free spots' reprojection spread per camera, and the
+*datum floor*: how far the references' own measurement noise moves the whole frame
+(:func:`datum_floor`), which no calibration can beat.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import Camera
+from .calibration import choose_lens, estimate_precision, fold_of, refine_jointly
+from .errors import SurveyError
+from .lens import LENS_MODELS
+
+#: free sets two cameras must share to count as linked (a relative pose needs five)
+MIN_SHARED = 8
+#: a spot farther from its fitted position than this many spot-noise sigmas is rejected
+REJECT_SIGMAS = 5.0
+#: free positions per camera given to the lens choice (spread over the image, enough to tell
+#: the models apart, few enough to stay fast)
+LENS_POINTS = 600
+
+
+@dataclass
+class FreeCalibration:
+    """The cameras fitted to a free survey, and what the fit found."""
+
+    cameras: list[Camera]
+    models: list[str]
+    lens: list  #: LensChoice per camera
+    free_xyz: np.ndarray  #: M×3 fitted LED positions (NaN: the set was not used)
+    references: np.ndarray  #: N×3 adjusted reference positions
+    point_sigma: float  #: m per axis, the references' precision
+    point_sigma_estimated: bool
+    pixel_sigma: float  #: px, the spots' precision
+    used_sets: int
+    rejected: dict  #: camera id → spots rejected (the one view of a set that disagrees)
+    spread_px: dict  #: camera id → RMS reprojection of its free spots, px
+    leave_one_out: np.ndarray  #: per reference: m from its record, fitted without it (NaN)
+    datum_floor: float  #: m, predicted RMS error of the frame the references fix
+    dropped_sets: int = 0  #: free sets of two views that disagree (which is wrong: unknown)
+    notes: list = field(default_factory=list)
+
+
+def datum_floor(references, sigma: float, where, free_height: bool = False) -> float:
+    """RMS displacement (m) at the points ``where`` of the frame that ``references`` measured to
+    ±``sigma`` per axis define: the similarity transform (translation, rotation, scale; with a
+    known floor plane only x, y, yaw and scale) fitted to their noise, linearised."""
+    R = np.asarray(references, float)
+    c = R.mean(axis=0)
+
+    def design(P):
+        d = np.asarray(P, float) - c
+        n = len(d)
+        rows = np.zeros((n, 3, 7))
+        rows[:, :, :3] = np.eye(3)
+        # small rotation ω × d: columns ω_x, ω_y, ω_z
+        rows[:, 0, 4], rows[:, 0, 5] = d[:, 2], -d[:, 1]
+        rows[:, 1, 3], rows[:, 1, 5] = -d[:, 2], d[:, 0]
+        rows[:, 2, 3], rows[:, 2, 4] = d[:, 1], -d[:, 0]
+        rows[:, :, 6] = d
+        if free_height:  # z, and the tilts ω_x, ω_y, are fixed by the plane
+            rows = rows[:, :2][:, :, [0, 1, 5, 6]]
+        return rows.reshape(-1, rows.shape[-1])
+
+    A = design(R)
+    cov = sigma ** 2 * np.linalg.pinv(A.T @ A)
+    B = design(where)
+    k = 2 if free_height else 3
+    per = np.einsum("ij,jk,ik->i", B, cov, B).reshape(-1, k).sum(axis=1)
+    return float(np.sqrt(per.mean()))
+
+
+def _linkage(camera_ids, seen) -> None:
+    """Refuse cameras that never saw the LED with another, and camera groups no shared
+    sightings link (named)."""
+    C = len(camera_ids)
+    shared = seen.astype(int) @ seen.T.astype(int)
+    for k in range(C):
+        if shared[k, np.arange(C) != k].max(initial=0) == 0:
+            raise SurveyError(f"camera {camera_ids[k]}: never saw the free LED together with "
+                              "another camera (move the LED where it and a neighbour both "
+                              "see it)")
+    linked = shared >= MIN_SHARED
+    group, todo = {0}, [0]
+    while todo:
+        k = todo.pop()
+        for j in np.flatnonzero(linked[k]):
+            if j not in group:
+                group.add(int(j))
+                todo.append(int(j))
+    if len(group) < C:
+        a = ", ".join(camera_ids[k] for k in sorted(group))
+        b = ", ".join(camera_ids[k] for k in range(C) if k not in group)
+        raise SurveyError(f"cameras {a} and {b} are not linked by shared sightings (fewer than "
+                          f"{MIN_SHARED} free sets seen by one of each): move the LED through "
+                          "where they overlap")
+
+
+def _check_references(X, seen_ref, free_height) -> None:
+    need = 2 if free_height is not None else 3
+    used = np.asarray(X, float)[seen_ref.any(axis=0)]
+    if len(used) < need:
+        raise SurveyError(f"{len(used)} reference point{'s' if len(used) != 1 else ''} seen by "
+                          f"a camera; fixing the room's frame needs at least {need}"
+                          + (" (or --free-height and 2)" if free_height is None else ""))
+    s = np.linalg.svd(used - used.mean(axis=0), compute_uv=False)
+    if free_height is None and s[1] <= 1e-3 * s[0]:
+        raise SurveyError("the reference points lie on one line: they cannot fix the room's "
+                          "rotation about it (add a point off the line)")
+    if s[0] <= 0:
+        raise SurveyError("the reference points are all at one place")
+
+
+def _start(cameras, uv_free, free_height):
+    """Free positions from the nominal cameras: triangulated where two or more saw the LED,
+    the ray met with the plane z = ``free_height`` where one did (when stated)."""
+    from ..triangulation import triangulate
+
+    seen = np.isfinite(uv_free).all(axis=2)
+    X = np.full((uv_free.shape[1], 3), np.nan)
+    two = seen.sum(axis=0) >= 2
+    if two.any():
+        X[two] = triangulate(cameras, uv_free[:, two]).X
+    if free_height is not None:
+        for k, cam in enumerate(cameras):
+            one = seen[k] & ~np.isfinite(X).all(axis=1)
+            if one.any():
+                d = cam.rays(uv_free[k, one])
+                t = (free_height - cam.center[2]) / d[:, 2]
+                X[one] = cam.center + t[:, None] * d
+        X[np.isfinite(X).all(axis=1), 2] = free_height
+    return X
+
+
+def _observations(uv_all, keep):
+    return [(np.flatnonzero(keep[k]), uv_all[k, keep[k]]) for k in range(len(uv_all))]
+
+
+def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
+                   point_sigma: float | str = "auto", free_height: float | None = None,
+                   room=None, progress=None) -> FreeCalibration:
+    """Calibrate every camera from a free survey: ``X`` N×3 the references' measured
+    positions, ``uv`` C×N×2 their spots, ``uv_free`` C×M×2 the free sets' spots (NaN: not seen).
+    ``lens``: ``"auto"`` (chosen per camera as for a tape survey, against free positions the
+    *other* cameras fix) or a model of :data:`~.lens.LENS_MODELS`. ``room``: the floor polygon
+    the datum floor is judged over. ``progress(i, n)``."""
+    X, uv, uv_free = np.asarray(X, float), np.asarray(uv, float), np.asarray(uv_free, float)
+    C, N = len(nominal), len(X)
+    ids_c = [c.id for c in nominal]
+    seen_f = np.isfinite(uv_free).all(axis=2)
+    seen_r = np.isfinite(uv).all(axis=2)
+    _linkage(ids_c, seen_f)
+    _check_references(X, seen_r, free_height)
+    estimated = isinstance(point_sigma, str)
+    stated = None if estimated else float(point_sigma)
+    step = 0
+    total = 5 + N
+
+    def tick():
+        nonlocal step
+        step += 1
+        if progress:
+            progress(step, total)
+
+    F0 = _start(nominal, uv_free, free_height)
+    usable = np.isfinite(F0).all(axis=1)
+    if free_height is None:
+        usable &= seen_f.sum(axis=0) >= 2
+    free_idx = np.flatnonzero(usable)
+    P0 = np.vstack([X, F0[free_idx]])
+    free = np.r_[np.zeros(N, bool), np.ones(len(free_idx), bool)]
+    uv_all = np.concatenate([uv, uv_free[:, free_idx]], axis=1)
+    keep = np.isfinite(uv_all).all(axis=2)
+    rejected = dict.fromkeys(ids_c, 0)
+
+    def adjust(cams, models, keep):
+        obs = _observations(uv_all, keep)
+        s_px0 = 0.1
+        return obs, estimate_precision(cams, P0, obs, models, s_px0, point_sigma=stated,
+                                       free=free, fixed_height=free_height)
+
+    models = ["pose"] * C
+    cams = list(nominal)
+    dropped = 0
+    for _ in range(3):  # fit; reject what does not fit; fit again
+        obs, (s_x, s_px, cams, adj) = adjust(cams, models, keep)
+        tick()
+        err = np.full(keep.shape, 0.0)
+        for k, cam in enumerate(cams):
+            idx = np.flatnonzero(keep[k])
+            e = np.linalg.norm(cam.project(adj[idx])[0] - uv_all[k, idx], axis=1)
+            err[k, idx] = np.nan_to_num(e, nan=np.inf)
+        wrong = err.max(axis=0) > REJECT_SIGMAS * s_px
+        if not wrong.any():
+            break
+        views = keep.sum(axis=0)
+        # three views or more (or a reference, which its record holds): the worst spot is the
+        # one that disagrees; two views of a free LED that disagree cannot say which is wrong
+        blame = wrong & ((views >= 3) | ~free | (free_height is not None))
+        worst = err.argmax(axis=0)
+        for j in np.flatnonzero(blame):
+            keep[worst[j], j] = False
+            rejected[ids_c[worst[j]]] += 1
+        pair = wrong & ~blame
+        keep[:, pair] = False
+        dropped += int(pair.sum())
+        if free_height is None:  # a free set left with one view fixes nothing
+            keep[:, N:] &= keep[:, N:].sum(axis=0) >= 2
+    choices = []
+    if lens == "auto":
+        refs = _others(cams, adj, uv_all, keep)
+        starts = []
+        for k, cam in enumerate(nominal):
+            idx = np.flatnonzero(keep[k])
+            if len(idx) > LENS_POINTS:  # spread over the image: every n-th by position
+                order = np.lexsort((uv_all[k, idx, 0], uv_all[k, idx, 1]))
+                idx = idx[order[np.linspace(0, len(idx) - 1, LENS_POINTS).astype(int)]]
+            fit, choice = choose_lens(cam, refs[k][idx], uv_all[k, idx], [""] * len(idx),
+                                      fold_of(len(idx), 5))
+            choices.append(choice)
+            models[k] = fit.model
+            starts.append(cams[k] if fit.model == "pose" else _with_pose(fit.camera, cams[k]))
+        cams = starts
+    else:
+        if lens not in LENS_MODELS:
+            raise ValueError(f"lens: expected auto or one of {', '.join(LENS_MODELS)}")
+        models = [lens] * C
+    tick()
+    obs, (s_x, s_px, cams, adj) = adjust(cams, models, keep)
+    tick()
+    # each reference left out: its prior removed (its spots kept), where the rest put it
+    loo = np.full(N, np.nan)
+    need = 2 if free_height is not None else 3
+    if seen_r.any(axis=0).sum() > need:
+        base = np.where(free[:, None], np.inf, s_x)
+        if free_height is not None:
+            base[free, 2] = 1e-9
+        for i in range(N):
+            tick()
+            if keep[:, i].sum() < (1 if free_height is not None else 2):
+                continue
+            sig = base.copy()
+            sig[i] = np.inf
+            _, moved = refine_jointly(cams, np.vstack([X[:i], adj[i:i + 1], X[i + 1:N],
+                                                       adj[N:]]), obs, point_sigma=sig,
+                                      pixel_sigma=s_px, models=models, iterations=6)
+            loo[i] = float(np.linalg.norm(moved[i] - X[i]))
+    free_xyz = np.full((uv_free.shape[1], 3), np.nan)
+    free_xyz[free_idx] = adj[N:]
+    spread = {}
+    for k, cam in enumerate(cams):
+        idx = np.flatnonzero(keep[k] & free)
+        err = np.linalg.norm(cam.project(adj[idx])[0] - uv_all[k, idx], axis=1)
+        spread[ids_c[k]] = float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan")
+    where = adj[N:] if room is None else _floor_points(room, adj[N:])
+    floor = datum_floor(X[seen_r.any(axis=0)], s_x, where, free_height is not None)
+    if not choices:
+        from .calibration import _lens_choice, fit_camera
+
+        for k, cam in enumerate(cams):
+            idx = np.flatnonzero(keep[k])
+            fit = fit_camera(nominal[k], adj[idx], uv_all[k, idx], [""] * len(idx), models[k],
+                             start=cam)
+            choices.append(_lens_choice(fit, cam.id, True, {}, adj[idx]))
+    return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
+                           estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum()),
+                           rejected, spread, loo, floor, dropped)
+
+
+def _with_pose(lens_cam: Camera, pose_cam: Camera) -> Camera:
+    """``lens_cam``'s lens on ``pose_cam``'s pose (the joint fit's, not a single camera's)."""
+    from dataclasses import replace
+
+    return replace(lens_cam, position=pose_cam.position, rotation=pose_cam.rotation)
+
+
+def _others(cams, adj, uv_all, keep) -> list:
+    """Per camera, every position as the *other* cameras see it (triangulated from their kept
+    spots where two or more saw it; the joint fit's position elsewhere): a lens is judged
+    against positions its own spots did not place."""
+    from ..triangulation import triangulate
+
+    clean = np.where(keep[..., None], uv_all, np.nan)
+    out = []
+    for k in range(len(cams)):
+        others = clean.copy()
+        others[k] = np.nan
+        two = np.isfinite(others).all(axis=2).sum(axis=0) >= 2
+        R = adj.copy()
+        if two.any():
+            T = triangulate(cams, others[:, two]).X
+            ok = np.isfinite(T).all(axis=1)
+            R[np.flatnonzero(two)[ok]] = T[ok]
+        out.append(R)
+    return out
+
+
+def _floor_points(room, free_xyz) -> np.ndarray:
+    """Where accuracy matters: the room's floor on a grid, at the free positions' heights."""
+    room = np.asarray(room, float)
+    lo, hi = room.min(axis=0), room.max(axis=0)
+    g = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], 12), np.linspace(lo[1], hi[1], 12)),
+                 -1).reshape(-1, 2)
+    zs = np.nanpercentile(free_xyz[:, 2], [10, 50, 90]) if len(free_xyz) else [0.0]
+    return np.vstack([np.c_[g, np.full(len(g), z)] for z in zs])
