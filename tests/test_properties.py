@@ -132,9 +132,9 @@ ID = st.from_regex(rf"\A[A-Za-z0-9_][A-Za-z0-9_.-]{{0,{ID_MAX - 1}}}\Z")
 @given(ids=st.lists(ID, min_size=2, max_size=3, unique=True))
 def test_every_id_the_rule_admits_survives_every_file(tmp_path, ids):
     """Deployment YAML, points CSV, anipose TOML, OpenCV YAML (or its clear refusal)."""
-    import yaml
-
     import dataclasses
+
+    import yaml
 
     base = deployment.from_dict(yaml.safe_load(DEP))
     cams = [dataclasses.replace(c, id=i) for c, i in zip(base.cameras, ids)]
