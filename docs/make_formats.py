@@ -114,10 +114,15 @@ seen when it projects 2 px inside the image; its error is `sqrt(trace(F⁻¹))`,
 points.csv                         point_id,x,y,z — measured LED positions, m
 frames/<point_id>/<camera_id>.jpg  what each camera saw with the LED there (missing = not seen)
 observations.csv                   optional: point_id,camera_id,u,v — spots cameras reported
+free/frames/<set_id>/<camera_id>.jpg  optional, a free survey: the LED somewhere unknown, one folder per moment
+free/observations.csv              or instead: set_id,camera_id,u,v
 ```
 
 Written by `vlpcal simulate` (and by a survey capture), read by `vlpcal survey calibrate`.
 `vlpcal survey plan --out points.csv` writes the planned `point_id,x,y,z` to measure.
+With `free/`, `points.csv` holds the reference points (at least 3, not on one line; 2 with
+`--free-height`) and the free LED calibrates the cameras with them (a bundle adjustment);
+without it the bundle is calibrated from its points alone.
 Example: `surveys/paper-2024/survey/`.
 
 ## Locate input and output

@@ -127,9 +127,15 @@ def test_a_robot_at_a_known_height_needs_two_references(free_case):
     true, refs, measured, free, uv_r, uv_f = free_case
     rng = np.random.default_rng(5)
     robot = np.c_[free[:, :2], np.full(len(free), 0.15)]
-    cal = calibrate_free([_off(c, rng, 0.03, 2.0) for c in true], measured[:2], uv_r[:, :2],
-                         ["R0", "R1"], _spots(true, robot, rng), lens="pose", free_height=0.15)
+    uv_robot = _spots(true, robot, rng)
+    nominal = [_off(c, rng, 0.03, 2.0) for c in true]
+    cal = calibrate_free(nominal, measured[:2], uv_r[:, :2], ["R0", "R1"], uv_robot,
+                         lens="pose", free_height=0.15)
     assert _error(cal.cameras, true, np.random.default_rng(2)) < 0.01
+    assert np.isnan(cal.leave_one_out).all()  # one left out leaves too few to fix the room
+    cal = calibrate_free(nominal, measured[:4], uv_r[:, :4], ["R0", "R1", "R2", "R3"],
+                         uv_robot, lens="pose", free_height=0.15)
+    assert np.isfinite(cal.leave_one_out).all() and cal.leave_one_out.max() < 0.01
 
 
 def test_survey_calibrate_on_a_simulated_free_survey_end_to_end(tmp_path):

@@ -247,9 +247,9 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
     loo = np.full(N, np.nan)
     need = 2 if free_height is not None else 3
     if seen_r.any(axis=0).sum() > need:
-        base = np.where(free[:, None], np.inf, s_x)
+        base = np.where(free[:, None], np.inf, np.full((len(free), 3), s_x))
         if free_height is not None:
-            base[free, 2] = 1e-9
+            base[free, 2] = 1e-3 * s_x  # stated: as good as exact
         for i in range(N):
             tick()
             if keep[:, i].sum() < (1 if free_height is not None else 2):

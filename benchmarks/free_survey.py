@@ -1,0 +1,196 @@
+"""The free survey (issue 15): cameras calibrated from a freely moving LED and a few measured
+reference points, against the datum floor those points allow and the full tape survey.
+
+Per profile: a simulated install; the reference points ``survey plan --free`` asks for
+(:func:`vlpcal.survey.plan_references` on the nominal cameras), taped to the profile's
+precision; 1800 free sets (3 minutes at 10 sets/s) of an LED on a pole — and of a robot at a
+known height with two references; calibrated with default flags. Test frames never used (the
+survey benchmark's offset grid at four heights) are located with the calibrated cameras, the
+true cameras, the *datum floor* (the true cameras moved by the similarity transform that maps
+the references' true positions onto their measured ones: a perfect calibration in the frame
+those points define) and the full tape survey's calibration (the survey benchmark's grid).
+Then, on paper-2024, the held-out error against the number of references and their precision.
+
+    python benchmarks/free_survey.py [--seed 0] [--quick]
+
+Prints tables; writes benchmarks/out/free_survey.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import _common  # noqa: F401  (one-core setup before numpy)
+import numpy as np
+from _common import table, write_json
+
+from vlpcal import deployment
+from vlpcal.datasets import read_survey_bundle
+from vlpcal.deployment import Deployment
+from vlpcal.geometry import rodrigues, rotation_vector
+from vlpcal.locator import Locator
+from vlpcal.sim.profiles import PROFILES, get_profile
+from vlpcal.sim.scene import make_scene, render_scene
+from vlpcal.sim.writers import (
+    deployment_of,
+    grid_points,
+    simulate_free_survey,
+    simulate_survey,
+    write_deployments,
+)
+from vlpcal.survey import (
+    calibrate_free_survey,
+    calibrate_survey,
+    free_spots,
+    plan_references,
+    survey_spots,
+)
+
+FREE_SETS = 1800
+ROBOT_HEIGHT = 0.15
+
+
+def similarity(A, B):
+    """Scale, rotation, translation with B ≈ s R A + t (Umeyama)."""
+    ca, cb = A.mean(0), B.mean(0)
+    U, S, Vt = np.linalg.svd((A - ca).T @ (B - cb))
+    D = np.diag([1, 1, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    s = np.trace(np.diag(S) @ D) / np.sum((A - ca) ** 2)
+    return s, R, cb - s * R @ ca
+
+
+def moved(cameras, s, R, t):
+    out = []
+    for c in cameras:
+        pos = s * R @ np.asarray(c.position) + t
+        out.append(replace(c, position=tuple(pos),
+                           rotation=tuple(rotation_vector(rodrigues(c.rotation) @ R.T))))
+    return out
+
+
+class Test:
+    """Test frames never used by any calibration: locate them with any cameras."""
+
+    def __init__(self, scene, seed):
+        cand = grid_points(scene, 0.11, (0.0, 0.15, 0.35, 0.7), min_cameras=2) + [0.013,
+                                                                                0.017, 0]
+        rng = np.random.default_rng(seed)
+        self.X = cand[rng.choice(len(cand), min(400, len(cand)), replace=False)]
+        frames, _ = render_scene(scene, self.X, seed=seed + 77)
+        self.sets = [{c: frames[c][i] for c in frames} for i in range(len(self.X))]
+        self.base = deployment_of(scene, "true")
+
+    def error(self, cams) -> float:
+        d = Deployment(self.base.name, self.base.ceiling_height, self.base.room, list(cams),
+                       self.base.keep_out, {})
+        X = Locator(d).locate_batch(self.sets).X
+        return float(np.nanmean(np.linalg.norm(X - self.X, axis=1)))
+
+
+def free_run(scene, tmp: Path, seed: int, refs_xyz, height=None, tape=None) -> dict:
+    if tape is not None:
+        scene = replace(scene, profile=replace(scene.profile, tape=tape))
+    root = tmp / f"free-{len(refs_xyz)}-{height}-{tape}"
+    measured, _ = simulate_free_survey(scene, root, refs_xyz, FREE_SETS, seed=seed,
+                                       height=height, overwrite=True)
+    dep = deployment_of(scene, "nominal")
+    b = read_survey_bundle(root)
+    uv, _ = survey_spots(dep, b)
+    uvf, _ = free_spots(dep, b)
+    t0 = time.perf_counter()
+    res = calibrate_free_survey(dep, b.xyz, uv, b.point_ids, uvf, free_height=height)
+    secs = time.perf_counter() - t0
+    # the references' true positions in the order the bundle lists them (R01…)
+    order = [int(p[1:]) - 1 for p in b.point_ids]
+    s, R, t = similarity(np.asarray(refs_xyz)[order], b.xyz)
+    return {"result": res, "seconds": secs, "floor_cams": moved(scene.true, s, R, t),
+            "sets_used": res.calibration.used_sets}
+
+
+def run_profile(name: str, seed: int, tmp: Path) -> list[dict]:
+    scene = make_scene(get_profile(name), seed)
+    write_deployments(scene, tmp)
+    test = Test(scene, seed)
+    true_err = test.error(scene.true)
+    # the full tape survey (the survey benchmark's grid), default flags
+    survey = grid_points(scene, 0.2, (0.0, 0.35, 0.7))
+    simulate_survey(scene, tmp / "survey", survey, seed=seed, overwrite=True)
+    b = read_survey_bundle(tmp / "survey")
+    dep = deployment.load(tmp / "nominal.yaml")
+    uv, _ = survey_spots(dep, b)
+    tape_err = test.error(calibrate_survey(dep, b.xyz, uv, b.point_ids).deployment.cameras)
+    rows = []
+    plan = plan_references(deployment_of(scene, "nominal"))
+    variants = [("pole", plan.xyz, None)]
+    robot = plan_references(deployment_of(scene, "nominal"), 2, heights=(ROBOT_HEIGHT,))
+    variants.append((f"robot h={ROBOT_HEIGHT:g}", robot.xyz, ROBOT_HEIGHT))
+    for label, refs, height in variants:
+        r = free_run(scene, tmp, seed, refs, height)
+        free_err = test.error(r["result"].deployment.cameras)
+        floor = test.error(r["floor_cams"])
+        rows.append({"profile": name, "variant": label, "cameras": len(scene.true),
+                     "references": len(refs), "free_sets": FREE_SETS,
+                     "sets_used": r["sets_used"], "calibrate_s": r["seconds"],
+                     "free_mm": free_err * 1000, "floor_mm": floor * 1000,
+                     "predicted_floor_mm": r["result"].calibration.datum_floor * 1000,
+                     "vs_floor": free_err / floor, "tape_survey_mm": tape_err * 1000,
+                     "tape_points": len(survey), "true_mm": true_err * 1000,
+                     "lens": ",".join(r["result"].calibration.models)})
+        print(f"  {name} {label}: {free_err * 1000:.2f} mm (floor {floor * 1000:.2f} mm), "
+              f"{r['seconds']:.1f} s", file=sys.stderr)
+    return rows
+
+
+def references_table(seed: int, tmp: Path, quick: bool) -> list[dict]:
+    scene = make_scene(get_profile("paper-2024"), seed)
+    test = Test(scene, seed)
+    rows = []
+    for tape in (0.002, 0.001):
+        for n in ((6, 12) if quick else (4, 6, 12, 24)):
+            refs = plan_references(deployment_of(scene, "nominal"), n).xyz
+            r = free_run(scene, tmp, seed, refs, tape=tape)
+            rows.append({"references": len(refs), "tape_mm": tape * 1000,
+                         "free_mm": test.error(r["result"].deployment.cameras) * 1000,
+                         "floor_mm": test.error(r["floor_cams"]) * 1000})
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quick", action="store_true", help="two reference counts, not four")
+    args = ap.parse_args(argv)
+    rows = []
+    for name in PROFILES:
+        with tempfile.TemporaryDirectory() as tmp:
+            rows += run_profile(name, args.seed, Path(tmp))
+    with tempfile.TemporaryDirectory() as tmp:
+        refs = references_table(args.seed, Path(tmp), args.quick)
+    print(f"Free survey: {FREE_SETS} free sets and the reference points survey plan --free "
+          "asks for, default flags; mean 3D error on test frames never used, mm (one core)")
+    print(table(rows, [("profile", "profile", ""), ("variant", "LED", ""),
+                       ("cameras", "cams", "d"), ("references", "refs", "d"),
+                       ("sets_used", "sets used", "d"), ("calibrate_s", "calibrate s", ".1f"),
+                       ("lens", "lens", ""), ("free_mm", "free survey", ".2f"),
+                       ("floor_mm", "datum floor", ".2f"),
+                       ("predicted_floor_mm", "floor predicted", ".2f"),
+                       ("vs_floor", "÷ floor", ".2f"), ("tape_survey_mm", "tape survey", ".2f"),
+                       ("tape_points", "tape pts", "d"), ("true_mm", "true cams", ".2f")]))
+    print("\npaper-2024, pole: held-out error against the references' count and precision, mm")
+    print(table(refs, [("references", "refs", "d"), ("tape_mm", "tape ± mm", ".0f"),
+                       ("free_mm", "free survey", ".2f"), ("floor_mm", "datum floor", ".2f")]))
+    ok = all(r["vs_floor"] <= 1.2 for r in rows)
+    print(f"\nwithin 1.2 × the datum floor on every profile and variant: {'yes' if ok else 'NO'}")
+    path = write_json("free_survey", {"seed": args.seed, "rows": rows, "references": refs})
+    print(f"wrote {path}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
