@@ -158,7 +158,7 @@ def plan_references(deployment, count: int | None = None, heights=None,
         for k, j in pairs:
             farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(pairs)))
     farthest(np.arange(len(cand)), max(0, count - len(chosen)))
-    pts = cand[chosen[:max(count, len(chosen))]]
+    pts = cand[chosen[:count]]
     order = _walking_order(pts)
     pts = pts[order]
     seen = np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
