@@ -642,3 +642,153 @@ def test_show_takes_the_deployment_as_argument_or_option():
         assert " 360" not in out
     code, out, err, _ = _vlpcal("show")
     assert code == 2 and len([e for e in err if e.strip()]) == 1
+
+
+def test_a_planted_journal_cannot_move_or_delete_anything_outside_vlpcals_names(tmp_path):
+    """A hidden '.x.<dead pid>.1.vlpcal-commit' naming files elsewhere: ignored (and said so),
+    never followed."""
+    import json
+
+    victim = tmp_path / "elsewhere"
+    (victim / "keep").mkdir(parents=True)
+    (victim / "keep" / "f").write_text("x")
+    secret = tmp_path / "secret"
+    secret.write_text("secret")
+    out = tmp_path / "out"
+    out.mkdir()
+    json.dump([[str(secret), str(out / "moved"), str(victim)]],
+              open(out / f".a.{DEAD}.1.vlpcal-commit", "w"))
+    code, _, err, _ = _vlpcal("export", "-d", DEPLOYMENT, "--to", "opencv", "-o",
+                              out / "c.yaml")
+    assert code == 0, err
+    assert secret.read_text() == "secret" and (victim / "keep" / "f").exists()
+    assert not (out / "moved").exists() and "not a journal vlpcal wrote" in " ".join(err)
+
+
+# -- the breaker's findings (a hostile-input probe of 190 inputs) ---------------------------------
+
+@pytest.mark.parametrize("args,fragment", [
+    (["survey", "plan", "-d", DEPLOYMENT, "--out", "{tmp}/s.csv", "--step", "nan"],
+     "finite number"),
+    (["survey", "plan", "-d", DEPLOYMENT, "--out", "{tmp}/s.csv", "--heights",
+      ",".join(str(i / 200) for i in range(300))], "at most 12 numbers"),
+    (["simulate", "--out", "{tmp}/sim", "--survey-step", "nan"], "finite number"),
+    (["locate", "-d", DEPLOYMENT, "--camera", "C1=http://127.0.0.1:9/x", "--duration", "nan",
+      "--out", "{tmp}/f.csv"], "finite number"),
+    (["locate", "-d", DEPLOYMENT, "--camera", "C1=http://127.0.0.1:9/x", "--tolerance", "inf",
+      "--out", "{tmp}/f.csv"], "inf is not in the range"),
+    (["locate", "-d", DEPLOYMENT, "--camera", "C1=ftp://127.0.0.1/x", "--out", "{tmp}/f.csv"],
+     "expected an http(s):// MJPEG URL or a video device"),
+    (["plan", "--site", SITE, "--out", "{tmp}/p.yaml", "--max-cameras", "100000"],
+     "100000 is not in the range"),
+])
+def test_options_that_are_not_numbers_or_sources_are_one_line(tmp_path, args, fragment):
+    args = [str(a).format(tmp=tmp_path) for a in args]
+    code, out, err, rss = _vlpcal(*args, timeout=60)
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+    assert rss is not None and rss < 500
+
+
+def test_a_number_of_5000_digits_and_yaml_12_floats(tmp_path):
+    doc = DEPLOYMENT.read_text()
+    huge = tmp_path / "huge.yaml"
+    huge.write_text(doc.replace("fx: ", "fx: " + "9" * 5000 + " #", 1)
+                    if "fx: " in doc else doc.replace("fx", "fx", 1))
+    import yaml
+
+    d = yaml.safe_load(doc)
+    d["cameras"][0]["fx"] = "HUGE"
+    text = yaml.safe_dump(d).replace("HUGE", "9" * 5000)
+    huge.write_text(text)
+    code, out, err, _ = _vlpcal("show", huge)
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and "a number of 5000 digits" in lines[0], lines
+    d["cameras"][0]["fx"] = "FX"
+    ok = tmp_path / "e.yaml"
+    ok.write_text(yaml.safe_dump(d).replace("FX", "1.533e2").replace("1.533e2", "1533e-1"))
+    code, out, err, _ = _vlpcal("show", ok)
+    assert code == 0 and "153.3" in out, (out, err)
+
+
+def test_a_server_reply_with_escapes_and_line_breaks_is_one_printable_line(tmp_path):
+    import socket
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(4)
+
+    def answer():
+        for _ in range(4):
+            try:
+                c, _ = srv.accept()
+            except OSError:
+                return
+            c.recv(4096)
+            c.sendall(b"HTTP/1.0 500 \x1b]0;pwned\x07RED\r\nline2\r\n\r\n")
+            c.close()
+
+    threading.Thread(target=answer, daemon=True).start()
+    port = srv.getsockname()[1]
+    code, out, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--camera",
+                                f"C1=http://127.0.0.1:{port}/", "--out", tmp_path / "f.csv")
+    srv.close()
+    text = "\n".join(err)
+    assert "\x1b" not in text and "\x07" not in text, text
+    errors = [line for line in err if line.startswith("Error")]
+    assert code == 1 and len(errors) == 1, err
+
+
+def test_two_cameras_seeing_one_pixel_is_degenerate_not_a_far_fix(tmp_path):
+    """Rays that meet only hundreds of metres away: no fix (degenerate), not 'ok'."""
+    frames = tmp_path / "same" / "x"
+    frames.mkdir(parents=True)
+    spot = _jpeg()
+    for cid in ("C2", "C3"):
+        (frames / f"{cid}.jpg").write_bytes(spot)
+    code, out, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", tmp_path / "same",
+                                "--out", "-")
+    assert code == 0, err
+    row = out.splitlines()[1].split(",")
+    assert row[4] in ("degenerate", "outside_room") and row[1] == "", row
+
+
+def test_simulate_and_demo_refuse_a_folder_holding_files_they_did_not_write(tmp_path):
+    out = tmp_path / "sim"
+    assert _vlpcal("simulate", "--out", out, "--test-points", "3", timeout=120)[0] == 0
+    (out / "my-notes.txt").write_text("mine")
+    before = _snapshot(out)
+    code, o, err, _ = _vlpcal("simulate", "--out", out, "--test-points", "3", "--overwrite",
+                              timeout=120)
+    lines = [line for line in o.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and "my-notes.txt" in lines[0], lines
+    assert _snapshot(out) == before
+
+
+def test_simulate_killed_leaves_no_partial_folder(tmp_path):
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "vlpcal", "simulate", "--out",
+                             str(tmp_path / "simk"), "--test-points", "200", "--trajectory",
+                             "2000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not [p for p in tmp_path.iterdir() if ".vlpcal-" in p.name]:
+        assert time.monotonic() < deadline and proc.poll() is None
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode != 0 and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_capture_refuses_a_point_outside_the_room(tmp_path):
+    points = tmp_path / "p.csv"
+    points.write_text("point_id,x,y,z\nS1,1,1,0\nS2,1e308,0,0\n")
+    code, out, err, _ = _vlpcal("survey", "capture", "-d", DEPLOYMENT, "--points", points,
+                                "--survey", tmp_path / "s", "--yes", "--camera",
+                                "C1=http://127.0.0.1:9/x")
+    lines = [line for line in out.splitlines() + err if line.strip()]
+    assert code == 2 and len(lines) == 1 and "point S2" in lines[0], lines

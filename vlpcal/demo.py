@@ -148,6 +148,13 @@ def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
     with OutputSet(out, folders=True) as (stage,):
         stage.chmod(0o755)
         result = _run(stage, seed, say)
+        if out.exists():  # the earlier demo's folder goes as a whole: only if it is all ours
+            import os
+
+            foreign = sorted(set(os.listdir(out)) - set(os.listdir(stage)))
+            if foreign:
+                raise DemoError(f"{given}: holds {foreign[0]}, which the demo does not write; "
+                                "move it out (or choose another --out): nothing was replaced")
     result.folder = given
     result.seconds = time.perf_counter() - t_start
     return result

@@ -106,14 +106,27 @@ def device_frames(device: str) -> Iterator:
 
 
 def open_source(spec: str) -> Callable[[], Iterator]:
-    """A factory of frames for a ``--camera`` value: an http(s) URL or a video device."""
+    """A factory of frames for a ``--camera`` value: an http(s) URL or a video device
+    (``/dev/videoN`` or its number); anything else is refused (ValueError), before OpenCV's
+    backends would try it as a file or a stream of their own."""
+    import re
+
     if spec.startswith(("http://", "https://")):
         return lambda: mjpeg_frames(spec)
-    return lambda: device_frames(spec)
+    if re.fullmatch(r"[0-9]{1,3}|/dev/video[0-9]{1,3}|/dev/v4l/by-[a-z]+/[^/]+", spec):
+        return lambda: device_frames(spec)
+    raise ValueError("expected an http(s):// MJPEG URL or a video device (/dev/videoN or N)")
 
 
 def failure(e: Exception) -> str:
-    """Why a source stopped, in a few words (not Python's repr of the exception)."""
+    """Why a source stopped, in a few words (not Python's repr of the exception), as one
+    printable line whatever the server sent."""
+    from .reading import one_line
+
+    return one_line(_why(e), 200)
+
+
+def _why(e: Exception) -> str:
     import socket
     import urllib.error
 

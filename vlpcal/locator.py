@@ -119,6 +119,10 @@ class Locator:
         import shapely
 
         self._room = shapely.Polygon(deployment.room)
+        #: m: the room's size (its larger side or the ceiling height), against which a fix's
+        #: predicted error says whether it is a position at all
+        self._size = max(float(np.ptp(np.asarray(deployment.room, float), axis=0).max()),
+                         float(deployment.ceiling_height))
         offsets = deployment.pixel_offsets
         self._offset = np.array([offsets.get(c, (0.0, 0.0)) for c in self.camera_ids])
 
@@ -160,6 +164,14 @@ class Locator:
                    pair_method=self.pair_method, max_residual=self.max_residual)
         sigma = predicted_rms_error(self.cameras, res.X, res.used, self.pixel_noise)
         status = res.status.copy()
+        # rays that nearly meet only far away (two cameras seeing one pixel): a predicted
+        # error as large as the room is no position in it
+        vague = np.isfinite(res.X).all(axis=1) & ~(sigma < self._size)
+        if vague.any():
+            res.X[vague] = np.nan
+            res.used[:, vague] = False
+            sigma[vague] = np.nan
+            status[vague] = "degenerate"
         out = self._outside(res.X, sigma)
         if out.any():  # e.g. a floor reflection taken for the LED: a fix under the floor
             res.X[out] = np.nan

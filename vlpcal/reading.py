@@ -20,6 +20,8 @@ MAX_DEPTH = 32
 MAX_ALIASES = 16
 #: YAML nodes in a document
 MAX_NODES = 2_000_000
+#: characters of a number (a double has 17 significant digits; Python refuses 4300+)
+MAX_NUMBER_CHARS = 400
 
 
 #: characters of an id, at most: ids name files and folders, sit in CSV cells, in
@@ -39,6 +41,25 @@ def is_id(value) -> bool:
         return False
     text = str(value)
     return len(text) <= ID_MAX and _ID.fullmatch(text) is not None
+
+
+def one_line(text: str, limit: int = 1000) -> str:
+    """``text`` as one printable line: line breaks and tabs as spaces, other control
+    characters (a terminal's escape sequences, from a file name or a server's reply) and
+    undecodable bytes shown escaped, cut to ``limit`` characters."""
+    out = []
+    for ch in str(text):
+        o = ord(ch)
+        if ch in "\r\n\t":
+            out.append(" ")
+        elif o < 32 or o == 127 or 0x80 <= o < 0xA0:
+            out.append(f"\\x{o:02x}")
+        elif 0xDC80 <= o <= 0xDCFF:  # a byte that was not UTF-8 (a file name)
+            out.append(f"\\x{o - 0xDC00:02x}")
+        else:
+            out.append(ch)
+    line = re.sub(" {2,}", " ", "".join(out)).strip()
+    return line if len(line) <= limit else line[:limit - 1] + "…"
 
 
 class ReadError(ValueError):
@@ -117,6 +138,18 @@ def _loader():
                 seen[key] = key_node.start_mark.line
             return super().construct_mapping(node, deep)
 
+        def construct_yaml_int(self, node):
+            if len(str(node.value)) > MAX_NUMBER_CHARS:  # int() of 10⁵ digits: refused
+                raise _Refused(node.start_mark, f"a number of {len(str(node.value))} digits")
+            return super().construct_yaml_int(node)
+
+    BoundedLoader.add_constructor("tag:yaml.org,2002:int", BoundedLoader.construct_yaml_int)
+    # YAML 1.2 (and JSON) floats without a dot, 1e5 and -2E-3, are numbers, not text
+    import re as _re
+
+    BoundedLoader.add_implicit_resolver(
+        "tag:yaml.org,2002:float", _re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$"),
+        list("-+0123456789"))
     return BoundedLoader
 
 

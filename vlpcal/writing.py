@@ -23,6 +23,7 @@ import json
 import os
 import shutil
 import stat
+import sys
 from pathlib import Path
 
 #: marks vlpcal's staging names: ``.<target>.<pid>.<n>.vlpcal-tmp`` (and ``-old``, ``-commit``)
@@ -53,7 +54,7 @@ def destination(path, folder: bool = False) -> Path:
                               f"{'folder' if folder else 'file'} to write")
     if not target.parent.is_dir():
         raise OutputError(f"{path}: its folder {target.parent} does not exist")
-    return target
+    return Path(os.path.abspath(target))
 
 
 def _alive(pid: int) -> bool:
@@ -81,10 +82,25 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
+def _ours(folder: Path, move) -> bool:
+    """Whether a journal's move stays among vlpcal's own names in ``folder``: the staged file
+    (and a replaced folder's old name) carry the marker, and all three lie in ``folder`` — a
+    planted journal cannot move or delete anything else."""
+    if not (isinstance(move, list) and len(move) == 3 and all(isinstance(m, str) for m in move)):
+        return False
+    staged, target, old = (Path(m) if m else None for m in move)
+    inside = all(p is None or (p.parent == folder and p.name not in ("", ".", ".."))
+                 for p in (staged, target, old))
+    marked = MARK in staged.name and staged.name.startswith(".") and (
+        old is None or (MARK in old.name and old.name.startswith(".")))
+    return inside and marked and target is not None
+
+
 def reclaim(folder) -> list[str]:
     """Tidy what killed writers left in ``folder``: finish the renames of a committed set,
-    remove staged files and replaced folders. Returns what was done, one line each."""
-    folder = Path(folder)
+    remove staged files and replaced folders. Says what was done on stderr, one line each,
+    and returns those lines."""
+    folder = Path(folder).absolute()
     done = []
     try:
         names = [n for n in os.listdir(folder) if MARK in n and n.startswith(".")]
@@ -98,6 +114,8 @@ def reclaim(folder) -> list[str]:
         if name.endswith(MARK + "commit"):
             try:
                 moves = json.loads(path.read_text(encoding="utf-8"))
+                if not all(_ours(folder, m) for m in moves):
+                    raise ValueError("a journal naming files outside its folder")
                 for staged, target, old in moves:
                     if os.path.lexists(staged):
                         if old and os.path.isdir(target):
@@ -109,11 +127,14 @@ def reclaim(folder) -> list[str]:
                 done.append(f"{folder}: finished writing {names} (a run was stopped while "
                             "renaming)")
             except (OSError, ValueError, TypeError):
-                pass
+                done.append(f"{folder}: ignored {name} (not a journal vlpcal wrote) and "
+                            "removed it")
             path.unlink(missing_ok=True)
         else:
             _remove(path)
             done.append(f"{folder}: removed {name} (left by a stopped run)")
+    for line in done:
+        print(line, file=sys.stderr)
     return done
 
 

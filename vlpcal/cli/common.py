@@ -13,6 +13,11 @@ class UserError(click.ClickException):
 
     exit_code = 2
 
+    def __init__(self, message: str):
+        from ..reading import one_line
+
+        super().__init__(one_line(message))
+
 
 def _stop_on_signals() -> None:
     """SIGTERM and SIGHUP (a service manager, a closed terminal) stop a command the way Ctrl-C
@@ -38,6 +43,7 @@ class OneLineErrors(click.Group):
     def invoke(self, ctx):
         import warnings
 
+        from ..reading import one_line
         from ..writing import OutputError
 
         _stop_on_signals()
@@ -53,6 +59,9 @@ class OneLineErrors(click.Group):
                 raise
             where = e.ctx.command_path if e.ctx else "vlpcal"
             raise UserError(f"{e.format_message()} (see {where} --help)") from None
+        except click.ClickException as e:  # whatever it quotes, one printable line
+            e.message = one_line(e.message)
+            raise
 
 
 @click.group(cls=OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
@@ -119,12 +128,39 @@ def _output_file(path, inputs=(), beside=(), what: str = ""):
     return out
 
 
+class Finite(click.FloatRange):
+    """A number in a range that is a number: NaN and infinity refused (a range check alone
+    lets NaN through, and ``--duration nan`` would never end)."""
+
+    name = "number"
+
+    def convert(self, value, param, ctx):
+        import math
+
+        v = super().convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"expected a finite number, got {value!r}", param, ctx)
+        return v
+
+
 def _floats(text: str, option: str) -> list[float]:
+    import math
+
     try:
-        return [float(t) for t in text.split(",") if t.strip()]
+        values = [float(t) for t in text.split(",") if t.strip()]
     except ValueError:
         raise click.BadParameter(f"expected numbers separated by commas, got {text!r}",
                                  param_hint=option) from None
+    if not all(map(math.isfinite, values)):
+        raise click.BadParameter(f"expected finite numbers, got {text!r}", param_hint=option)
+    if len(values) > MAX_LIST:
+        raise click.BadParameter(f"expected at most {MAX_LIST} numbers, got {len(values)}",
+                                 param_hint=option)
+    return values
+
+
+#: numbers a comma-separated option takes (LED heights: a survey needs two to four)
+MAX_LIST = 12
 
 
 def _camera_sources(cameras, dep) -> dict:
@@ -143,5 +179,8 @@ def _camera_sources(cameras, dep) -> dict:
                             f"(it has {', '.join(ids)})")
         if cid in sources:
             raise UserError(f"--camera {spec!r}: camera {cid} given twice")
-        sources[cid] = open_source(src)
+        try:
+            sources[cid] = open_source(src)
+        except ValueError as e:
+            raise UserError(f"--camera {spec!r}: {e}") from None
     return sources

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .common import UserError, _floats, main
+from .common import Finite, UserError, _floats, main
 
 
 @main.command()
@@ -15,7 +15,7 @@ from .common import UserError, _floats, main
               help="Seed of the install and frames.")
 @click.option("--out", type=click.Path(file_okay=False), required=False,
               help="Folder to write (created; must not exist unless --overwrite).")
-@click.option("--survey-step", default=0.3, show_default=True, type=click.FloatRange(0.05, 2.0),
+@click.option("--survey-step", default=0.3, show_default=True, type=Finite(0.05, 2.0),
               help="Spacing of the survey grid, m.")
 @click.option("--survey-heights", default="0,0.35,0.7", show_default=True,
               help="LED heights of the survey, m, comma-separated.")
@@ -26,7 +26,7 @@ from .common import UserError, _floats, main
 @click.option("--free-sets", default=0, show_default=True, type=click.IntRange(0, 100_000),
               help="Also a free survey (OUT/free-survey/): this many moments of an LED carried "
                    "through the room, with the reference points survey plan --free asks for.")
-@click.option("--free-height", type=float, default=None,
+@click.option("--free-height", type=Finite(0, 1e4), default=None,
               help="The free survey's LED on a robot at this height, m (instead of a pole).")
 @click.option("--references", type=click.IntRange(2, 200), default=None,
               help="Reference points of the free survey (default: as survey plan --free).")
@@ -45,19 +45,9 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     """
     from pathlib import Path
 
-    import numpy as np
-
     from ..sim.profiles import get_profile
     from ..sim.scene import make_scene
-    from ..sim.writers import (
-        grid_points,
-        simulate_frames,
-        simulate_survey,
-        write_deployments,
-    )
-    from ..sim.writers import (
-        trajectory as path_of,
-    )
+    from ..sim.writers import grid_points
 
     try:
         profile = get_profile(profile_name)
@@ -84,27 +74,60 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     if not len(pts):
         raise click.BadParameter("no camera sees any point of that survey grid",
                                  param_hint="--survey-step")
-    out.mkdir(parents=True, exist_ok=True)
-    # --overwrite replaces what this command writes, all of it (never anything else)
-    import shutil
+    # --overwrite replaces what this command writes, all of it, as one folder (never
+    # anything else: a folder holding other files is refused)
+    import os
 
-    for name in ("survey", "frames", "free-survey"):
-        shutil.rmtree(out / name, ignore_errors=True)
-    (out / "frames.truth.csv").unlink(missing_ok=True)
-    nominal, truth = write_deployments(scene, out)
-    simulate_survey(scene, out / "survey", pts, seed=seed, overwrite=True)
-    click.echo(f"{profile.name} (seed {seed}): {nominal}, {truth}")
+    from ..writing import OutputSet
+
+    if out.exists():
+        foreign = sorted(set(os.listdir(out)) - SIMULATED)
+        if foreign:
+            raise UserError(f"{out}: holds {foreign[0]}, which vlpcal simulate does not "
+                            "write; choose another --out (--overwrite replaces only a folder "
+                            "of simulate's files)")
+    if free_sets and free_height is not None and not 0 <= free_height <= top:
+        raise click.BadParameter(f"expected a height from 0 to {top:g} m",
+                                 param_hint="--free-height")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with OutputSet(out, folders=True) as (stage,):
+        stage.chmod(0o755)
+        _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
+                       references, trajectory, test_points)
+
+
+#: what vlpcal simulate writes in its --out folder
+SIMULATED = {"nominal.yaml", "truth.yaml", "survey", "frames", "frames.truth.csv",
+             "free-survey"}
+
+
+def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
+                   references, trajectory, test_points) -> None:
+    """Write the simulated install into ``stage`` (``out`` once renamed), saying what goes
+    where."""
+    import numpy as np
+
+    from ..sim.writers import (
+        grid_points,
+        simulate_frames,
+        simulate_survey,
+        write_deployments,
+    )
+    from ..sim.writers import (
+        trajectory as path_of,
+    )
+
+    write_deployments(scene, stage)
+    simulate_survey(scene, stage / "survey", pts, seed=seed, overwrite=True)
+    click.echo(f"{profile.name} (seed {seed}): {out / 'nominal.yaml'}, {out / 'truth.yaml'}")
     click.echo(f"survey: {len(pts)} points at h = {', '.join(map(str, heights))} m "
                f"→ {out / 'survey'}")
     if free_sets:
         from ..sim.writers import deployment_of, simulate_free_survey
         from ..survey import plan_references
 
-        if free_height is not None and not 0 <= free_height <= top:
-            raise click.BadParameter(f"expected a height from 0 to {top:g} m",
-                                     param_hint="--free-height")
         refs = plan_references(deployment_of(scene, "nominal"), references)
-        simulate_free_survey(scene, out / "free-survey", refs.xyz, free_sets, seed=seed,
+        simulate_free_survey(scene, stage / "free-survey", refs.xyz, free_sets, seed=seed,
                              height=free_height, overwrite=True)
         click.echo(f"free survey: {len(refs.ids)} reference points and {free_sets} free sets "
                    + (f"(a robot at h = {free_height:g} m) " if free_height is not None else
@@ -116,7 +139,7 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
         cand = grid_points(scene, 0.02, (0.0, 0.15, 0.35, 0.7), min_cameras=2)
         test = cand[rng.choice(len(cand), min(test_points, len(cand)), replace=False)]
     if len(test):
-        simulate_frames(scene, out / "frames", test, seed=seed + 1, overwrite=True)
+        simulate_frames(scene, stage / "frames", test, seed=seed + 1, overwrite=True)
         click.echo(f"frames: {len(test)} {'trajectory' if trajectory else 'test'} positions "
                    f"→ {out / 'frames'} (truth in {out / 'frames.truth.csv'})")
 

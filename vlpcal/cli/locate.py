@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .common import UserError, _camera_sources, _load_deployment, _output_file, main
+from .common import Finite, UserError, _camera_sources, _load_deployment, _output_file, main
 
 
 @main.command()
@@ -23,9 +23,9 @@ from .common import UserError, _camera_sources, _load_deployment, _output_file, 
               help="Output format (default: from --out's extension; csv for stdout).")
 @click.option("--batch", default=512, show_default=True, type=click.IntRange(1),
               help="Frame sets located together (folders).")
-@click.option("--tolerance", default=0.05, show_default=True, type=click.FloatRange(0.001),
+@click.option("--tolerance", default=0.05, show_default=True, type=Finite(0.001, 10.0),
               help="Live: frames arriving within this many seconds form one set.")
-@click.option("--duration", type=click.FloatRange(0, min_open=True), default=None,
+@click.option("--duration", type=Finite(0, 1e7, min_open=True), default=None,
               help="Live: stop after this many seconds (more than 0; none: until stopped).")
 @click.option("--max-sets", type=click.IntRange(1), default=None,
               help="Live: stop after this many frame sets.")

@@ -7,7 +7,15 @@ import math
 
 import click
 
-from .common import UserError, _camera_sources, _floats, _load_deployment, _output_file, main
+from .common import (
+    Finite,
+    UserError,
+    _camera_sources,
+    _floats,
+    _load_deployment,
+    _output_file,
+    main,
+)
 
 
 @main.group()
@@ -23,7 +31,7 @@ def survey():
               type=click.Path(dir_okay=False), help="The deployment (room, cameras).")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="points.csv to write; a printable map (.png) goes beside it.")
-@click.option("--step", default=0.3, show_default=True, type=click.FloatRange(0.05, 2.0),
+@click.option("--step", default=0.3, show_default=True, type=Finite(0.05, 2.0),
               help="Grid spacing, m (made finer where a camera or pair needs more points).")
 @click.option("--heights", default="0,0.35,0.7", show_default=True,
               help="LED heights to survey, m, comma-separated (two or more).")
@@ -87,7 +95,7 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
               help="A live camera: ID=http://…/stream (MJPEG) or ID=/dev/videoN. Repeat.")
 @click.option("--yes", is_flag=True,
               help="Non-interactive: capture and accept every point (for scripted rigs).")
-@click.option("--delay", type=click.FloatRange(0), default=None,
+@click.option("--delay", type=Finite(0, 3600.0), default=None,
               help="Seconds to wait at each point before grabbing  [default: 1 with --yes, "
                    "else 0]")
 @click.option("--on-point", "on_point", default=None, metavar="COMMAND",
@@ -126,6 +134,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
         ids, xyz = read_points(points_path)
     except DatasetError as e:
         raise UserError(str(e)) from None
+    _check_survey_positions(points_path, dep, xyz, ids)
     sources = _camera_sources(cameras, dep)
     missing = [c.id for c in dep.cameras if c.id not in sources]
     if missing:
@@ -280,7 +289,7 @@ class PointSigma(click.ParamType):
               help="Measurement uncertainty of a surveyed position, m per axis (e.g. 0.003 "
                    "for a tape measure, 0.0001 for a machined target); auto estimates it from "
                    "the fit.")
-@click.option("--free-height", type=float, default=None,
+@click.option("--free-height", type=Finite(0, 1e4), default=None,
               help="A free survey's LED was always at this height, m (on a robot or a cart): "
                    "then two reference points suffice.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
