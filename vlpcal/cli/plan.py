@@ -17,7 +17,7 @@ from .common import UserError, _load_deployment, _output_file, main
               help="Deployment to write; maps per LED height (.png) go beside it.")
 @click.option("--candidate", default=1, show_default=True, type=click.IntRange(1),
               help="Which ranked candidate to export.")
-@click.option("--max-cameras", default=120, show_default=True, type=click.IntRange(2, 400),
+@click.option("--max-cameras", default=120, show_default=True, type=click.IntRange(2, 250),
               help="Give up above this many cameras.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
 def plan(site_path, out, candidate, max_cameras, quiet):
