@@ -201,8 +201,13 @@ def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool
     return frames, inside
 
 
+#: pixels rendered at once (a chunk of frames): bounds the float arrays a chunk needs to
+#: ~16 MB each, whatever the image size
+CHUNK_PIXELS = 2 ** 21
+
+
 def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
-                 chunk: int = 256) -> tuple[dict, np.ndarray]:
+                 chunk: int | None = None) -> tuple[dict, np.ndarray]:
     """JPEG frames of an LED at each world point ``N×3`` from every true camera.
 
     Returns ``(frames, seen)``: camera id → one JPEG per point, and ``C×N`` whether the LED's
@@ -214,10 +219,11 @@ def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
     frames, seen = {}, []
     for k, cam in enumerate(scene.true):
         jpegs, inside = [], []
-        for s in range(0, len(points), chunk):
+        step = chunk or max(1, CHUNK_PIXELS // (cam.width * cam.height))
+        for s in range(0, len(points), step):
             rngs = [np.random.default_rng([scene.seed, seed, STREAM_FRAMES, k + 1, i + 1])
-                    for i in range(s, min(s + chunk, len(points)))]
-            imgs, ins = render_camera(cam, points[s:s + chunk], look, rngs, distractors)
+                    for i in range(s, min(s + step, len(points)))]
+            imgs, ins = render_camera(cam, points[s:s + step], look, rngs, distractors)
             jpegs += [encode_jpeg(f, look.jpeg_quality) for f in imgs]
             inside.append(ins)
         frames[cam.id] = jpegs
