@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import Camera
-from .calibration import choose_lens, estimate_precision, fold_of, refine_jointly
+from .calibration import estimate_precision, refine_jointly
 from .errors import SurveyError
 from .lens import LENS_MODELS
 
@@ -30,9 +30,6 @@ from .lens import LENS_MODELS
 MIN_SHARED = 8
 #: a spot farther from its fitted position than this many spot-noise sigmas is rejected
 REJECT_SIGMAS = 5.0
-#: free positions per camera given to the lens choice (spread over the image, enough to tell
-#: the models apart, few enough to stay fast)
-LENS_POINTS = 600
 
 
 @dataclass
@@ -156,9 +153,9 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
                    room=None, progress=None) -> FreeCalibration:
     """Calibrate every camera from a free survey: ``X`` N×3 the references' measured
     positions, ``uv`` C×N×2 their spots, ``uv_free`` C×M×2 the free sets' spots (NaN: not seen).
-    ``lens``: ``"auto"`` (chosen per camera as for a tape survey, against free positions the
-    *other* cameras fix) or a model of :data:`~.lens.LENS_MODELS`. ``room``: the floor polygon
-    the datum floor is judged over. ``progress(i, n)``."""
+    ``lens``: ``"auto"`` (one model for every camera, chosen by the free LED's held-out
+    consistency: :func:`_joint_lens_choice`) or a model of :data:`~.lens.LENS_MODELS`.
+    ``room``: the floor polygon the datum floor is judged over. ``progress(i, n)``."""
     X, uv, uv_free = np.asarray(X, float), np.asarray(uv, float), np.asarray(uv_free, float)
     C, N = len(nominal), len(X)
     ids_c = [c.id for c in nominal]
@@ -223,19 +220,20 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
             keep[:, N:] &= keep[:, N:].sum(axis=0) >= 2
     choices = []
     if lens == "auto":
-        refs = _others(cams, adj, uv_all, keep)
-        starts = []
-        for k, cam in enumerate(nominal):
+        sig = np.where(free[:, None], np.inf, np.full((len(free), 3), s_x))
+        if free_height is not None:
+            sig[free, 2] = 1e-3 * s_x
+        chosen, held = _joint_lens_choice(cams, adj, sig, uv_all, keep, free, s_px)
+        models = [chosen] * C
+        from .calibration import _lens_choice, fit_camera
+
+        for k, cam in enumerate(cams):
             idx = np.flatnonzero(keep[k])
-            if len(idx) > LENS_POINTS:  # spread over the image: every n-th by position
-                order = np.lexsort((uv_all[k, idx, 0], uv_all[k, idx, 1]))
-                idx = idx[order[np.linspace(0, len(idx) - 1, LENS_POINTS).astype(int)]]
-            fit, choice = choose_lens(cam, refs[k][idx], uv_all[k, idx], [""] * len(idx),
-                                      fold_of(len(idx), 5))
-            choices.append(choice)
-            models[k] = fit.model
-            starts.append(cams[k] if fit.model == "pose" else _with_pose(fit.camera, cams[k]))
-        cams = starts
+            fit = fit_camera(nominal[k], adj[idx], uv_all[k, idx], [""] * len(idx), chosen,
+                             start=cam)
+            cand = {m: {"held_out_px": v, "supported": True, "reason": ""}
+                    for m, v in held.items()}
+            choices.append(_lens_choice(fit, cam.id, False, cand, adj[idx]))
     else:
         if lens not in LENS_MODELS:
             raise ValueError(f"lens: expected auto or one of {', '.join(LENS_MODELS)}")
@@ -282,32 +280,50 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
                            rejected, spread, loo, floor, dropped)
 
 
-def _with_pose(lens_cam: Camera, pose_cam: Camera) -> Camera:
-    """``lens_cam``'s lens on ``pose_cam``'s pose (the joint fit's, not a single camera's)."""
-    from dataclasses import replace
+def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 400,
+                       folds: int = 2):
+    """One lens model for every camera, chosen by held-out consistency of the free LED: per
+    model, the joint fit on the references and all but a fold of (a sample of) the free sets,
+    then the held-out sets triangulated with the fitted cameras and their reprojection error —
+    with two views, how far the spots are from seeing one point. The simplest model within one
+    standard error of the best (paired over the sets). Returns (model, {model: held-out px})."""
+    from ..triangulation import reprojection_errors, triangulate
 
-    return replace(lens_cam, position=pose_cam.position, rotation=pose_cam.rotation)
-
-
-def _others(cams, adj, uv_all, keep) -> list:
-    """Per camera, every position as the *other* cameras see it (triangulated from their kept
-    spots where two or more saw it; the joint fit's position elsewhere): a lens is judged
-    against positions its own spots did not place."""
-    from ..triangulation import triangulate
-
-    clean = np.where(keep[..., None], uv_all, np.nan)
-    out = []
-    for k in range(len(cams)):
-        others = clean.copy()
-        others[k] = np.nan
-        two = np.isfinite(others).all(axis=2).sum(axis=0) >= 2
-        R = adj.copy()
-        if two.any():
-            T = triangulate(cams, others[:, two]).X
-            ok = np.isfinite(T).all(axis=1)
-            R[np.flatnonzero(two)[ok]] = T[ok]
-        out.append(R)
-    return out
+    C = len(cams)
+    cols = np.flatnonzero(free & (keep.sum(axis=0) >= 2))
+    sub = np.random.default_rng(0).permutation(cols)[:sets]
+    fold = np.arange(len(sub)) % folds
+    fixed = np.flatnonzero(~free)
+    loss, px = {}, {}
+    for m in LENS_MODELS:
+        e = np.full(len(sub), np.nan)
+        for f in range(folds):
+            train = np.r_[fixed, sub[fold != f]]
+            test = sub[fold == f]
+            kk = keep[:, train]
+            obs = [(np.flatnonzero(kk[k]), uv_all[k, train][kk[k]]) for k in range(C)]
+            try:
+                fitted, _ = refine_jointly(cams, P[train], obs, point_sigma=sig[train],
+                                           pixel_sigma=s_px, models=[m] * C, iterations=25)
+            except (ValueError, np.linalg.LinAlgError):
+                break
+            uvt = np.where(keep[:, test, None], uv_all[:, test], np.nan)
+            X = triangulate(fitted, uvt).X
+            r = reprojection_errors(fitted, uvt, X)
+            e[fold == f] = np.sqrt(np.nanmean(np.where(np.isfinite(uvt[..., 0]), r, np.nan) ** 2,
+                                              axis=0))
+        if not np.isfinite(e).any():
+            break
+        loss[m], px[m] = e ** 2, float(np.sqrt(np.nanmean(e ** 2)))
+    ok = np.logical_and.reduce([np.isfinite(v) for v in loss.values()])
+    if len(loss) < 2 or ok.sum() < 2:
+        return "pose", px
+    best = min(loss, key=lambda m: loss[m][ok].mean())
+    for m in loss:
+        d = loss[m][ok] - loss[best][ok]
+        if d.mean() <= d.std(ddof=1) / np.sqrt(len(d)):
+            return m, px
+    return best, px
 
 
 def _floor_points(room, free_xyz) -> np.ndarray:
