@@ -4,7 +4,7 @@ reference points, against the datum floor those points allow and the full tape s
 Per profile: a simulated install; the reference points ``survey plan --free`` asks for
 (:func:`vlpcal.survey.plan_references` on the nominal cameras), taped to the profile's
 precision; 1800 free sets (3 minutes at 10 sets/s) of an LED on a pole — and of a robot at a
-known height with two references; calibrated with default flags. Test frames never used (the
+known height with the same references; calibrated with default flags. Test frames never used (the
 survey benchmark's offset grid at four heights) are located with the calibrated cameras, the
 true cameras, the *datum floor* (the true cameras moved by the similarity transform that maps
 the references' true positions onto their measured ones: a perfect calibration in the frame

@@ -310,8 +310,9 @@ def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 400,
             uvt = np.where(keep[:, test, None], uv_all[:, test], np.nan)
             X = triangulate(fitted, uvt).X
             r = reprojection_errors(fitted, uvt, X)
-            e[fold == f] = np.sqrt(np.nanmean(np.where(np.isfinite(uvt[..., 0]), r, np.nan) ** 2,
-                                              axis=0))
+            sq = np.where(np.isfinite(uvt[..., 0]) & np.isfinite(r), r, 0.0) ** 2
+            n = (np.isfinite(uvt[..., 0]) & np.isfinite(r)).sum(axis=0)
+            e[fold == f] = np.where(n > 0, np.sqrt(sq.sum(axis=0) / np.maximum(n, 1)), np.nan)
         if not np.isfinite(e).any():
             break
         loss[m], px[m] = e ** 2, float(np.sqrt(np.nanmean(e ** 2)))
