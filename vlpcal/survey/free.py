@@ -280,7 +280,7 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
                            rejected, spread, loo, floor, dropped)
 
 
-def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 400,
+def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 1200,
                        folds: int = 2):
     """One lens model for every camera, chosen by held-out consistency of the free LED: per
     model, the joint fit on the references and all but a fold of (a sample of) the free sets,
