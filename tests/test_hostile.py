@@ -792,3 +792,20 @@ def test_capture_refuses_a_point_outside_the_room(tmp_path):
                                 "C1=http://127.0.0.1:9/x")
     lines = [line for line in out.splitlines() + err if line.strip()]
     assert code == 2 and len(lines) == 1 and "point S2" in lines[0], lines
+
+
+def test_a_600_byte_site_of_a_15_m_room_plans_in_bounded_memory(tmp_path):
+    """The breaker's case: a 15 × 15 m room at --max-cameras 250 (a 225-camera plan) took
+    746 MB while the lattice search judged 96 lattices at once at every sample point."""
+    import yaml
+
+    doc = yaml.safe_load(SITE.read_text())
+    doc["site"]["room"] = [[0, 0], [15, 0], [15, 15], [0, 15]]
+    doc["site"].pop("keep_out", None)
+    site = tmp_path / "room15.yaml"
+    site.write_text(yaml.safe_dump(doc))
+    assert site.stat().st_size < 10_000
+    code, out, err, rss = _vlpcal("plan", "-q", "--site", site, "--max-cameras", "250",
+                                  "--out", tmp_path / "p.yaml", timeout=300)
+    assert code == 0, err
+    assert rss is not None and rss < 500, f"{rss:.0f} MB"

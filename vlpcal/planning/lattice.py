@@ -28,9 +28,9 @@ SPACING_RANGE = (0.25, 1.1)
 SCREEN_SLACK = 0.02
 #: lattices judged at once, at most (memory: 6 × levels × batch × sample points floats)
 BATCH = 96
-#: sample-point values per batch (about 100 MB of floats per array): a large room judges fewer
-#: lattices at once
-BATCH_VALUES = 2 ** 24
+#: values per batch array (6 × levels × batch × sample points: 64 MB of floats; counting only
+#: the points let a 15 m room's plan reach 700 MB): a large room judges fewer lattices at once
+BATCH_VALUES = 2 ** 23
 
 
 @dataclass
@@ -217,7 +217,8 @@ def lattice_search(site: Site, families=("square",), step: float = 0.05,
         if low > limit:
             continue
         idx = np.flatnonzero(counts <= limit)
-        batch = max(1, min(BATCH, BATCH_VALUES // model.inside.size))
+        batch = max(1, min(BATCH, BATCH_VALUES // (6 * len(model.levels)
+                                                    * model.inside.size)))
         for start in range(0, len(idx), batch):
             chunk = idx[start:start + batch]
             subs = [(c[chunk], r[chunk], m[chunk].astype(float)) for c, r, m in every]
