@@ -809,3 +809,26 @@ def test_a_600_byte_site_of_a_15_m_room_plans_in_bounded_memory(tmp_path):
                                   "--out", tmp_path / "p.yaml", timeout=300)
     assert code == 0, err
     assert rss is not None and rss < 500, f"{rss:.0f} MB"
+
+
+@pytest.mark.parametrize("plant", ["fifo", "zero", "deep", "folder", "huge pid", "odd digit"])
+def test_planted_leftovers_are_ignored_without_a_hang_or_a_traceback(tmp_path, plant):
+    """The re-check's findings: a journal that is a FIFO or a link to /dev/zero, nested JSON,
+    a folder; names with a pid past any integer or a non-ASCII digit."""
+    j = tmp_path / f".x.yaml.{DEAD}.1.vlpcal-commit"
+    if plant == "fifo":
+        os.mkfifo(j)
+    elif plant == "zero":
+        j.symlink_to("/dev/zero")
+    elif plant == "deep":
+        j.write_text("[" * 3000)
+    elif plant == "folder":
+        j.mkdir()
+    elif plant == "huge pid":
+        (tmp_path / ".x.99999999999999999999.1.vlpcal-tmp").write_text("x")
+    else:
+        (tmp_path / ".x.\u00b2.1.vlpcal-tmp").write_text("x")
+    code, _, err, rss = _vlpcal("export", "-d", DEPLOYMENT, "--to", "opencv", "-o",
+                                tmp_path / "x.yaml", timeout=30)
+    assert code == 0 and "Traceback" not in " ".join(err), err
+    assert rss is not None and rss < 500

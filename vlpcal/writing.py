@@ -62,7 +62,7 @@ def _alive(pid: int) -> bool:
         return True
     try:
         os.kill(pid, 0)
-    except ProcessLookupError:
+    except (ProcessLookupError, OverflowError, ValueError):
         return False
     except PermissionError:
         return True
@@ -72,7 +72,8 @@ def _alive(pid: int) -> bool:
 def _owner(name: str) -> int | None:
     """The writer's pid in a staging name ``.<target>.<pid>.<n>.vlpcal-…``, or None."""
     parts = name.rsplit(MARK, 1)[0].rsplit(".", 2)
-    return int(parts[1]) if len(parts) == 3 and parts[1].isdigit() else None
+    ok = len(parts) == 3 and parts[1].isascii() and parts[1].isdigit() and len(parts[1]) < 12
+    return int(parts[1]) if ok else None
 
 
 def _remove(path: Path) -> None:
@@ -91,9 +92,11 @@ def _ours(folder: Path, move) -> bool:
     staged, target, old = (Path(m) if m else None for m in move)
     inside = all(p is None or (p.parent == folder and p.name not in ("", ".", ".."))
                  for p in (staged, target, old))
-    marked = MARK in staged.name and staged.name.startswith(".") and (
-        old is None or (MARK in old.name and old.name.startswith(".")))
-    return inside and marked and target is not None
+    if target is None or staged is None or staged.is_symlink():
+        return False
+    marked = staged.name.startswith(f".{target.name}.") and MARK in staged.name and (
+        old is None or (old.name.startswith(f".{target.name}.") and MARK in old.name))
+    return inside and marked
 
 
 def reclaim(folder) -> list[str]:
@@ -113,7 +116,9 @@ def reclaim(folder) -> list[str]:
             continue
         if name.endswith(MARK + "commit"):
             try:
-                moves = json.loads(path.read_text(encoding="utf-8"))
+                from .reading import read_text
+
+                moves = json.loads(read_text(path, "a journal", max_bytes=2 ** 20))
                 if not all(_ours(folder, m) for m in moves):
                     raise ValueError("a journal naming files outside its folder")
                 for staged, target, old in moves:
@@ -126,10 +131,10 @@ def reclaim(folder) -> list[str]:
                 names = ", ".join(Path(m[1]).name for m in moves)
                 done.append(f"{folder}: finished writing {names} (a run was stopped while "
                             "renaming)")
-            except (OSError, ValueError, TypeError):
+            except (OSError, ValueError, TypeError, RecursionError):
                 done.append(f"{folder}: ignored {name} (not a journal vlpcal wrote) and "
                             "removed it")
-            path.unlink(missing_ok=True)
+            _remove(path)
         else:
             _remove(path)
             done.append(f"{folder}: removed {name} (left by a stopped run)")

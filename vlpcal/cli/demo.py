@@ -19,9 +19,9 @@ from .common import Finite, UserError, _floats, main
               help="Spacing of the survey grid, m.")
 @click.option("--survey-heights", default="0,0.35,0.7", show_default=True,
               help="LED heights of the survey, m, comma-separated.")
-@click.option("--test-points", default=100, show_default=True, type=click.IntRange(0),
+@click.option("--test-points", default=100, show_default=True, type=click.IntRange(0, 100_000),
               help="Random test positions to render as a locate frames folder.")
-@click.option("--trajectory", default=0, show_default=True, type=click.IntRange(0),
+@click.option("--trajectory", default=0, show_default=True, type=click.IntRange(0, 100_000),
               help="Frames of a robot's LED path (h = 0.15 m) to render instead of test points.")
 @click.option("--free-sets", default=0, show_default=True, type=click.IntRange(0, 100_000),
               help="Also a free survey (OUT/free-survey/): this many moments of an LED carried "

@@ -372,6 +372,15 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
         raise UserError(f"--free-height {free_height:g}: expected a height from the floor to "
                         f"below the ceiling ({dep.ceiling_height:g} m)")
     uv_free, free_notes = free_spots(dep, bundle)
+    for k, cam in enumerate(dep.cameras):  # a spot outside its image is no spot of this camera
+        u, v = uv_free[k, :, 0], uv_free[k, :, 1]
+        off = np.isfinite(u) & ((u < -0.5) | (u > cam.width - 0.5) | (v < -0.5)
+                                | (v > cam.height - 0.5))
+        if off.any():
+            i = int(np.flatnonzero(off)[0])
+            raise UserError(f"{survey_path}: free set {bundle.free_ids[i]}, camera {cam.id}: "
+                            f"spot ({u[i]:g}, {v[i]:g}) is outside its {cam.width}×{cam.height}"
+                            " image (expected pixels within it)")
     for note in free_notes:
         click.echo(note, err=True)
     n_ref = len(bundle.point_ids)
@@ -384,6 +393,10 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                 sources={"deployment": str(deployment_path), "survey": str(survey_path)})
     except SurveyError as e:
         raise UserError(f"{survey_path}: {e}") from None
+    except np.linalg.LinAlgError:
+        raise UserError(f"{survey_path}: the free survey's joint fit did not converge (spots "
+                        "far from any consistent camera; check free/ and the deployment)") \
+            from None
     cal = result.calibration
     click.echo(f"free survey: {result.free_sets} sets (moments a camera saw the LED), "
                f"{cal.used_sets} used (seen by "
