@@ -17,7 +17,7 @@ kept) against its measured position, the free spots' reprojection spread per cam
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,7 +50,6 @@ class FreeCalibration:
     leave_one_out: np.ndarray  #: per reference: m from its record, fitted without it (NaN)
     datum_floor: float  #: m, predicted RMS error of the frame the references fix
     dropped_sets: int = 0  #: free sets of two views that disagree (which is wrong: unknown)
-    notes: list = field(default_factory=list)
 
 
 def datum_floor(references, sigma: float, where, free_height: bool = False) -> float:
