@@ -36,17 +36,16 @@ from vlpcal.locator import Locator
 from vlpcal.sim.profiles import PROFILES, get_profile
 from vlpcal.sim.scene import make_scene, render_scene
 from vlpcal.sim.writers import grid_points, simulate_survey, write_deployments
-from vlpcal.survey import LENS_MODELS
+from vlpcal.survey import LENS_MODELS, plan_survey
 
 import real
-
-STEP = {"paper-2024": 0.2, "cheap-wide": 0.4, "qvga": 0.2}
-
 
 def run_profile(name: str, seed: int, tmp: Path) -> dict:
     scene = make_scene(get_profile(name), seed)
     write_deployments(scene, tmp)
-    survey = grid_points(scene, STEP[name], (0.0, 0.35, 0.7))
+    # the survey `vlpcal survey plan` asks for, told the profile's tape precision
+    plan = plan_survey(deployment.load(tmp / "nominal.yaml"), tape=scene.profile.tape)
+    survey = plan.xyz
     simulate_survey(scene, tmp / "survey", survey, seed=seed)
     secs = {}
     for lens in ("auto",) + LENS_MODELS:
@@ -77,7 +76,9 @@ def run_profile(name: str, seed: int, tmp: Path) -> dict:
     uv = np.stack([detect_spots(frames[c.id], "nip").uv for c in scene.nominal])
     paper = min((np.linalg.norm(fuse(list(scene.nominal), uv, m).X - test, axis=1)
                  for m in ("mean", "nearest")), key=np.nanmean)
-    row = {"profile": name, "survey_points": len(survey), "test_points": len(test),
+    row = {"profile": name, "survey_points": len(survey), "survey_step_m": plan.step,
+           "planned_ratio": plan.predicted[0], "planned_ratio_p95": plan.predicted[1],
+           "test_points": len(test),
            "min_gap_cm": float(gap.min() * 100), "calibrate_s": secs["auto"],
            "lens": ",".join(sorted(set(chosen.extra["provenance"]["lens"].values()))),
            "point_sigma_mm": chosen.extra["provenance"]["point_sigma_m"] * 1000,

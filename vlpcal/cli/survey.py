@@ -31,14 +31,22 @@ def survey():
               type=click.Path(dir_okay=False), help="The deployment (room, cameras).")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="points.csv to write; a printable map (.png) goes beside it.")
-@click.option("--step", default=0.3, show_default=True, type=Finite(0.05, 2.0),
-              help="Grid spacing, m (made finer where a camera or pair needs more points).")
+@click.option("--step", default=None, type=Finite(0.0005, 2000.0),
+              help="Grid spacing, m.  [default: as fine as the cameras' precision needs "
+                   "(given --tape and --spot-noise)]")
 @click.option("--heights", default="0,0.35,0.7", show_default=True,
               help="LED heights to survey, m, comma-separated (two or more).")
-@click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6),
+@click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6, 1000),
               help="Points each camera must see (more let the calibration fit more of its lens).")
-def survey_plan(deployment_path, out, step, heights, min_per_camera):
+@click.option("--tape", default=0.003, show_default=True, type=Finite(1e-7, 100.0),
+              help="How precisely the positions will be measured, m per axis (a tape: 0.003).")
+@click.option("--spot-noise", default=0.03, show_default=True, type=Finite(1e-4, 10.0),
+              help="The spots' precision, px (0.03: the default detector at its best).")
+def survey_plan(deployment_path, out, step, heights, min_per_camera, tape, spot_noise):
     """Plan the survey: where to put the LED, with ids, and a map to print.
+
+    The grid is made finer until the survey's own measurement errors add at most 10 % to the
+    cameras' error (20 % for an unlucky tape), predicted from --tape and --spot-noise.
 
     Example: vlpcal survey plan -d planned.yaml --out survey-plan.csv
     """
@@ -47,6 +55,8 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
     from ..datasets import POINTS_COLUMNS, write_truth_csv
     from ..reports import survey_plan_figure
     from ..survey import SurveyError, plan_survey
+    from ..survey.calibration import format_length
+    from ..survey.plan import budget_sentence
 
     dep = _load_deployment(deployment_path)
     hs = _floats(heights, "--heights")
@@ -55,7 +65,7 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
                                  f"{dep.ceiling_height - 0.3:g} m, got {heights!r}",
                                  param_hint="--heights")
     try:
-        plan = plan_survey(dep, step, hs, min_per_camera)
+        plan = plan_survey(dep, step, hs, min_per_camera, tape=tape, spot_noise=spot_noise)
     except SurveyError as e:
         raise UserError(f"{deployment_path}: {e}") from None
     out = Path(out)
@@ -75,7 +85,8 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera):
         write_truth_csv(csv_file, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
         survey_plan_figure(png, dep, plan)
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
-               f"→ {out}, map {out.with_suffix('.png')}")
+               f"(grid {format_length(plan.step)}) → {out}, map {out.with_suffix('.png')}")
+    click.echo(budget_sentence(plan, chosen=step is None))
     ids = plan.camera_ids
     for k, cid in enumerate(ids):
         shared = [(ids[j], int((plan.seen[k] & plan.seen[j]).sum())) for j in range(len(ids))

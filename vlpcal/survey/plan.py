@@ -6,12 +6,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .budget import calibration_ratio
 from .errors import SurveyError
 from .lens import MIN_POINTS_POSE
 
 #: points a survey plan gives each camera by default: twice what its pose needs, so that a
 #: k-fold check can judge a lens fit (more points let it fit more of the lens)
 MIN_POINTS_PLANNED = 12
+#: spots as precise as the default detector gets them (``blob``, 0.03 px RMS on saturated
+#: spots, README's detector table): a survey sized for the best spots is enough for worse ones
+SPOT_NOISE_PX = 0.03
+#: a tape measure, per axis
+TAPE_M = 0.003
+#: the grid is made finer until the calibration it allows adds at most this share to the
+#: cameras' own mean error, for a typical tape (the median of the predicted draws) …
+TYPICAL_SHARE = 0.10
+#: … and at most this share for an unlucky one (their 95th percentile)
+UNLUCKY_SHARE = 0.20
+#: the finest grid stops before this many points (days of work with a tape; beyond it a free
+#: survey, or a more precise measurement, is the way)
+MAX_PLANNED_POINTS = 1500
 
 
 @dataclass
@@ -22,18 +36,63 @@ class SurveyPlan:
     xyz: np.ndarray
     seen: np.ndarray  # C×N: each camera sees the point (nominal cameras, 5 px margin)
     camera_ids: list[str]
+    step: float = float("nan")  #: the grid's spacing, m
+    #: predicted mean fix error with cameras calibrated from these points ÷ with exact
+    #: cameras: (typical, unlucky) — :func:`.budget.calibration_ratio`
+    predicted: tuple[float, float] = (float("nan"), float("nan"))
+    tape: float = TAPE_M
+    spot_noise: float = SPOT_NOISE_PX
+
+    @property
+    def meets_budget(self) -> bool:
+        """The calibration these points allow stays within the planned shares (or nothing
+        could be predicted: no place seen by two cameras)."""
+        typical, unlucky = self.predicted
+        return not (typical > 1 + TYPICAL_SHARE or unlucky > 1 + UNLUCKY_SHARE)
 
 
-def plan_survey(deployment, step: float = 0.3, heights=(0.0, 0.35, 0.7),
+def plan_survey(deployment, step: float | None = None, heights=(0.0, 0.35, 0.7),
                 min_per_camera: int = MIN_POINTS_PLANNED, min_per_pair: int = 6,
-                margin_px: float = 5.0) -> SurveyPlan:
+                margin_px: float = 5.0, tape: float = TAPE_M,
+                spot_noise: float = SPOT_NOISE_PX) -> SurveyPlan:
     """The points to measure: a grid over the room (minus keep-out areas) at each height, kept
     where a camera sees them, made finer where a camera or an overlapping pair of cameras would
     otherwise get fewer than ``min_per_camera`` / ``min_per_pair`` points. Two heights or more:
     a floor-only survey cannot separate a camera's height from its focal length.
 
+    ``step`` None: as fine as the cameras' precision asks. Each point's tape error (``tape`` m)
+    stays in the calibrated cameras, averaged over the points; precise cameras (``spot_noise``
+    px, many px per metre) need many points before that average falls below their own noise.
+    The grid starts at an eighth of a camera's floor footprint and is made finer by √2 until
+    the predicted calibration adds at most :data:`TYPICAL_SHARE` to the fixes' mean error
+    (:data:`UNLUCKY_SHARE` for an unlucky tape), or until :data:`MAX_PLANNED_POINTS`.
+    Relative throughout: the same scene at any scale, its tape scaled alike, gets the same plan.
+
     Ids follow the order an installer walks: height by height, rows in a serpentine.
     """
+    if step is not None:
+        return _plan_grid(deployment, step, heights, min_per_camera, min_per_pair,
+                          margin_px, tape, spot_noise)
+    cams = deployment.cameras
+    reach = float(np.median([max(c.width / c.fx, c.height / c.fy)
+                             * (c.position[2] - min(heights)) for c in cams]))
+    if not reach > 0:
+        raise SurveyError("the cameras are not above the survey's heights")
+    step = reach / 8
+    plan = _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_px,
+                      tape, spot_noise)
+    while not plan.meets_budget:
+        finer = _plan_grid(deployment, step / np.sqrt(2), heights, min_per_camera,
+                           min_per_pair, margin_px, tape, spot_noise)
+        if len(finer.ids) > MAX_PLANNED_POINTS:
+            break
+        step, plan = step / np.sqrt(2), finer
+    return plan
+
+
+def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_px, tape,
+               spot_noise) -> SurveyPlan:
+    """:func:`plan_survey` at a stated grid spacing, with its predicted calibration."""
     from shapely import contains_xy
     from shapely.geometry import Polygon
 
@@ -85,7 +144,32 @@ def plan_survey(deployment, step: float = 0.3, heights=(0.0, 0.35, 0.7),
     order = _walking_order(pts)
     pts, seen = pts[order], seen[:, order]
     ids = [f"S{i + 1:04d}" for i in range(len(pts))]
-    return SurveyPlan(ids, pts, seen, [c.id for c in cams])
+    predicted = calibration_ratio(cams, pts, _fix_places(room, heights, step), tape,
+                                  spot_noise, margin_px=margin_px)
+    return SurveyPlan(ids, pts, seen, [c.id for c in cams], float(step), predicted,
+                      float(tape), float(spot_noise))
+
+
+#: at most this many places judge a survey's predicted calibration
+FIX_PLACES = 1500
+
+
+def _fix_places(room, heights, step) -> np.ndarray:
+    """Where fixes are judged: a grid offset from the survey's, at its heights and halfway
+    between them, thinned evenly to :data:`FIX_PLACES`."""
+    from shapely import contains_xy
+
+    x0, y0, x1, y1 = room.bounds
+    s = step / 1.7
+    gx, gy = np.meshgrid(np.arange(x0 + s / 3, x1, s), np.arange(y0 + s / 3, y1, s))
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = xy[contains_xy(room, xy[:, 0], xy[:, 1])]
+    hs = sorted(set(heights))
+    levels = hs + [(a + b) / 2 for a, b in zip(hs, hs[1:])]
+    pts = np.concatenate([np.c_[xy, np.full(len(xy), h)] for h in levels])
+    if len(pts) > FIX_PLACES:
+        pts = pts[np.linspace(0, len(pts) - 1, FIX_PLACES).round().astype(int)]
+    return pts
 
 
 def _walking_order(pts: np.ndarray) -> np.ndarray:
@@ -164,3 +248,26 @@ def plan_references(deployment, count: int | None = None, heights=None,
     seen = np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
     return SurveyPlan([f"R{i + 1:02d}" for i in range(len(pts))], pts, seen,
                       [c.id for c in cams])
+
+
+def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
+    """What the plan's predicted calibration costs the fixes, in a surveyor's words (``chosen``:
+    the grid was sized to the budget, not stated)."""
+    from .calibration import format_length
+
+    typical, unlucky = plan.predicted
+    given = f"at ±{format_length(plan.tape)} per axis and {plan.spot_noise:g} px spots"
+    if not np.isfinite(typical):
+        return (f"{given}: no place is seen by two cameras, so what the survey costs the fixes "
+                "cannot be predicted")
+    said = (f"{given}, calibrating from these points is predicted to add "
+            f"{100 * (typical - 1):.0f} % to the fixes' mean error "
+            f"({100 * (unlucky - 1):.0f} % for an unlucky tape)")
+    if plan.meets_budget:
+        return said
+    if chosen:
+        return (f"{said}, even at {len(plan.ids)} points: measure them more precisely, or "
+                "calibrate from a free survey")
+    return (f"{said}; without --step the grid is made finer until that is at most "
+            f"{100 * TYPICAL_SHARE:.0f} % ({100 * UNLUCKY_SHARE:.0f} %)")
+
