@@ -173,3 +173,56 @@ def test_survey_calibrate_on_a_simulated_free_survey_end_to_end(tmp_path):
     nominal, calibrated = mean_error(tmp_path / "sim/nominal.yaml"), mean_error(
         tmp_path / "cal.yaml")
     assert calibrated < nominal / 2, (nominal, calibrated)
+
+
+def test_free_plan_route_shows_every_pair_and_every_image_quarter(tmp_path):
+    """`survey plan --free`: the references to measure, and a route whose stops let every
+    overlapping pair see the LED at two heights or more and fill every camera's image
+    quarters; on the map and in words."""
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main as cli
+    from vlpcal.deployment import Deployment, save
+    from vlpcal.survey import free_route
+
+    cams = [paper_camera(f"C{i + 1}", (0.6 + 1.2 * (i % 3), 0.5 + 0.9 * (i // 3), 2.3))
+            for i in range(6)]
+    dep = Deployment("two-rows", 2.3, [[0, 0], [3.6, 0], [3.6, 1.9], [0, 1.9]], cams)
+    route = free_route(dep)
+    levels = np.linspace(route.low, route.high, 5)
+    stops3 = [np.c_[route.stops, np.full(len(route.stops), h)]
+              for h in levels]
+    seen = np.stack([np.stack([c.project(p, margin=5.0)[2] for c in cams]) for p in stops3])
+    grid = np.stack(np.meshgrid(np.linspace(0, 3.6, 60), np.linspace(0, 1.9, 40)), -1)
+    grid = grid.reshape(-1, 2)
+    for k in range(6):
+        for j in range(k + 1, 6):
+            overlap = [(c_k & c_j).any() for c_k, c_j in (
+                (cams[k].project(np.c_[grid, np.full(len(grid), h)], margin=5.0)[2],
+                 cams[j].project(np.c_[grid, np.full(len(grid), h)], margin=5.0)[2])
+                for h in levels)]
+            if sum(overlap) >= 2:  # the pair can share a sweep: some stop shows it one
+                assert ((seen[:, k] & seen[:, j]).sum(axis=0) >= 2).any(), (k, j)
+    for c in cams:
+        uv = c.project(stops3[0], margin=5.0)
+        inside = uv[2]
+        quarters = {(int(u >= c.width / 2), int(v >= c.height / 2))
+                    for (u, v) in uv[0][inside]}
+        assert quarters == {(0, 0), (0, 1), (1, 0), (1, 1)}, c.id
+    save(dep, tmp_path / "d.yaml")
+    res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--free",
+                                   "--out", str(tmp_path / "refs.csv")])
+    assert res.exit_code == 0, res.output
+    assert "reference points" in res.output and f"{len(route.stops)} stops" in res.output
+    assert (tmp_path / "refs.png").stat().st_size > 10_000
+    rows = (tmp_path / "refs.csv").read_text().splitlines()
+    assert rows[0] == "point_id,x,y,z" and 6 <= len(rows) - 1 <= 12
+    # cameras that never overlap: one line, nothing written
+    apart = Deployment("apart", 2.3, [[0, 0], [20, 0], [20, 3], [0, 3]],
+                       [paper_camera("A", (2, 1.5, 2.3)), paper_camera("B", (15, 1.5, 2.3))])
+    save(apart, tmp_path / "apart.yaml")
+    res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "apart.yaml"),
+                                   "--free", "--out", str(tmp_path / "a.csv")])
+    assert res.exit_code == 2 and "two cameras" in res.output
+    assert len(res.output.strip().splitlines()) == 1
+    assert not (tmp_path / "a.csv").exists()

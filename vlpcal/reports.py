@@ -29,8 +29,10 @@ def save_figure(fig, path, dpi: int = 110) -> None:
         plt.close(fig)
 
 
-def survey_plan_figure(path, dep, plan) -> None:
-    """One panel per height: room, keep-out areas, cameras, points with their ids."""
+def survey_plan_figure(path, dep, plan, route=None) -> None:
+    """One panel per height: room, keep-out areas, cameras, points with their ids; with a free
+    survey's ``route`` (:class:`vlpcal.survey.FreeRoute`) its stops, numbered, on every
+    panel."""
     plt = _pyplot()
     heights = sorted(set(plan.xyz[:, 2].round(6)))
     room = np.array(dep.room + dep.room[:1])
@@ -50,13 +52,25 @@ def survey_plan_figure(path, dep, plan) -> None:
         for i in sel:
             ax.annotate(plan.ids[i][1:].lstrip("0"), plan.xyz[i, :2], fontsize=5,
                         xytext=(2, 2), textcoords="offset points")
-        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points (S{plan.ids[sel[0]][1:]}…)",
+        if route is not None:
+            ax.plot(route.stops[:, 0], route.stops[:, 1], "-", color="#d08020", lw=1.2,
+                    alpha=0.8, label=f"free LED: sweep {route.low:g}–{route.high:g} m at each "
+                                     "stop")
+            for n, (x, y) in enumerate(route.stops, start=1):
+                ax.annotate(str(n), (x, y), color="#d08020", fontsize=8, weight="bold",
+                            ha="center", va="center",
+                            bbox={"boxstyle": "circle,pad=0.2", "fc": "w", "ec": "#d08020"})
+        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points ({plan.ids[sel[0]]}…)",
                      fontsize=9)
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")
     axes[0][0].set_ylabel("y (m)")
-    fig.suptitle(f"Survey plan for {dep.name}: place the LED at each point, measure, record",
-                 fontsize=10)
+    if route is not None:
+        fig.legend(*axes[0][0].get_legend_handles_labels(), loc="outside lower center",
+                   fontsize=8, frameon=False)
+    what = ("measure each reference point, then carry the LED along the route"
+            if route is not None else "place the LED at each point, measure, record")
+    fig.suptitle(f"Survey plan for {dep.name}: {what}", fontsize=10)
     save_figure(fig, path, dpi=130)
 
 

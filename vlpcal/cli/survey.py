@@ -34,19 +34,29 @@ def survey():
 @click.option("--step", default=None, type=Finite(0.0005, 2000.0),
               help="Grid spacing, m.  [default: as fine as the cameras' precision needs "
                    "(given --tape and --spot-noise)]")
-@click.option("--heights", default="0,0.35,0.7", show_default=True,
-              help="LED heights to survey, m, comma-separated (two or more).")
+@click.option("--heights", default=None,
+              help="LED heights to survey, m, comma-separated (two or more).  [default: "
+                   "0,0.35,0.7; with --free 0 and 15 % of the ceiling for the references, "
+                   "the sweep up to 40 %]")
+@click.option("--free", is_flag=True,
+              help="Plan a free survey: a few reference points to measure, and a route to "
+                   "carry the LED along while the cameras record.")
+@click.option("--references", type=click.IntRange(3, 200), default=None,
+              help="With --free: how many reference points.  [default: 6 where cameras "
+                   "overlap in threes, up to 12 on a line of cameras]")
 @click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6, 1000),
               help="Points each camera must see (more let the calibration fit more of its lens).")
 @click.option("--tape", default=0.003, show_default=True, type=Finite(1e-7, 100.0),
               help="How precisely the positions will be measured, m per axis (a tape: 0.003).")
 @click.option("--spot-noise", default=0.03, show_default=True, type=Finite(1e-4, 10.0),
               help="The spots' precision, px (0.03: the default detector at its best).")
-def survey_plan(deployment_path, out, step, heights, min_per_camera, tape, spot_noise):
+def survey_plan(deployment_path, out, step, heights, free, references, min_per_camera, tape,
+                spot_noise):
     """Plan the survey: where to put the LED, with ids, and a map to print.
 
     The grid is made finer until the survey's own measurement errors add at most 10 % to the
     cameras' error (20 % for an unlucky tape), predicted from --tape and --spot-noise.
+    With --free: the reference points of a free survey, and the route to carry the LED.
 
     Example: vlpcal survey plan -d planned.yaml --out survey-plan.csv
     """
@@ -59,13 +69,22 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera, tape, spot_
     from ..survey.plan import budget_sentence
 
     dep = _load_deployment(deployment_path)
-    hs = _floats(heights, "--heights")
+    if references is not None and not free:
+        raise click.BadParameter("is for a free survey (--free)", param_hint="--references")
+    hs = _floats(heights or "0,0.35,0.7", "--heights")
     if len(hs) < 2 or any(not 0 <= h < dep.ceiling_height - 0.3 for h in hs):
         raise click.BadParameter(f"expected two or more heights from 0 to "
                                  f"{dep.ceiling_height - 0.3:g} m, got {heights!r}",
                                  param_hint="--heights")
+    route = None
     try:
-        plan = plan_survey(dep, step, hs, min_per_camera, tape=tape, spot_noise=spot_noise)
+        if free:
+            from ..survey import free_route, plan_references
+
+            plan = plan_references(dep, references, hs if heights else None)
+            route = free_route(dep, hs if heights else None)
+        else:
+            plan = plan_survey(dep, step, hs, min_per_camera, tape=tape, spot_noise=spot_noise)
     except SurveyError as e:
         raise UserError(f"{deployment_path}: {e}") from None
     out = Path(out)
@@ -83,7 +102,10 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera, tape, spot_
 
     with OutputSet(out.with_suffix(".png"), out) as (png, csv_file):  # both, or neither
         write_truth_csv(csv_file, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
-        survey_plan_figure(png, dep, plan)
+        survey_plan_figure(png, dep, plan, route)
+    if route is not None:
+        _echo_free_plan(plan, route, out)
+        return
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
                f"(grid {format_length(plan.step)}) → {out}, map {out.with_suffix('.png')}")
     click.echo(budget_sentence(plan, chosen=step is None))
@@ -93,6 +115,25 @@ def survey_plan(deployment_path, out, step, heights, min_per_camera, tape, spot_
                   if j != k]
         pairs = ", ".join(f"{cj} {n}" for cj, n in shared if n)
         click.echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
+
+
+def _echo_free_plan(plan, route, out) -> None:
+    """A free survey's plan in words: the references to measure, then the route."""
+    hs = sorted(set(plan.xyz[:, 2].round(6)))
+    click.echo(f"{len(plan.ids)} reference points at h = {', '.join(f'{h:g}' for h in hs)} m "
+               f"→ {out}, map {out.with_suffix('.png')}: measure each, and let the cameras "
+               "see the LED there")
+    for pid, (x, y, z), seen in zip(plan.ids, plan.xyz, plan.seen.T):
+        who = "+".join(c for c, s in zip(plan.camera_ids, seen) if s)
+        click.echo(f"  {pid}: ({x:.2f}, {y:.2f}, {z:.2f}) m, seen by {who}")
+    click.echo(f"then, while the cameras record, carry the LED along {len(route.stops)} "
+               f"stop{'s' if len(route.stops) > 1 else ''}, sweeping it from {route.low:g} to "
+               f"{route.high:g} m and back at each (the map shows the route):")
+    for n, ((x, y), pairs, quarters) in enumerate(zip(route.stops, route.pairs, route.quarters),
+                                                  start=1):
+        what = [f"pairs {', '.join(f'{a}+{b}' for a, b in pairs)}"] if pairs else []
+        what += [", ".join(quarters)] if quarters else []
+        click.echo(f"  {n:2d}. ({x:.2f}, {y:.2f}) m: {'; '.join(what)}")
 
 
 @survey.command("capture")

@@ -31,7 +31,14 @@ from .pipeline import (
     calibrate_free_survey,
     calibrate_survey,
 )
-from .plan import MIN_POINTS_PLANNED, SurveyPlan, plan_references, plan_survey
+from .plan import (
+    MIN_POINTS_PLANNED,
+    FreeRoute,
+    SurveyPlan,
+    free_route,
+    plan_references,
+    plan_survey,
+)
 from .regions import learn_region_map, region_cell
 from .spots import free_spots, survey_spots
 
@@ -40,7 +47,8 @@ __all__ = [
     "Calibration", "CameraFit", "LensChoice", "SurveyError", "SurveyPlan", "SurveyResult",
     "calibrate", "calibrate_survey", "choose_lens", "error_stats", "estimate_precision",
     "fit_camera", "fold_of", "held_out", "learn_region_map", "lens_params", "lens_support",
-    "plan_survey", "plan_references", "refine_jointly", "region_cell", "survey_spots",
+    "plan_survey", "plan_references", "free_route", "FreeRoute", "refine_jointly", "region_cell",
+    "survey_spots",
     "free_spots",
     "calibrate_free_survey", "FreeSurveyResult",
 ]

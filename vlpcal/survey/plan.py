@@ -271,3 +271,94 @@ def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
     return (f"{said}; without --step the grid is made finer until that is at most "
             f"{100 * TYPICAL_SHARE:.0f} % ({100 * UNLUCKY_SHARE:.0f} %)")
 
+
+
+@dataclass
+class FreeRoute:
+    """Where to carry the LED in a free survey: stops in walking order (``N×2`` floor
+    positions), at each a sweep from ``low`` to ``high`` m; per stop the camera pairs it shows
+    the LED to together at two heights or more, and the cameras whose image quarter it fills."""
+
+    stops: np.ndarray
+    pairs: list[list[tuple[str, str]]]
+    quarters: list[list[str]]
+    low: float
+    high: float
+
+
+#: image quarters, in words, by (column, row) of the quarter
+QUARTER_WORDS = {(0, 0): "top-left", (1, 0): "top-right", (0, 1): "bottom-left",
+                 (1, 1): "bottom-right"}
+
+
+def free_route(deployment, heights=None, margin_px: float = 5.0) -> FreeRoute:
+    """A short walk for a free survey (issue 15) that shows the LED to every overlapping camera
+    pair at two heights or more and passes through every quarter of every camera's image: a
+    stop in the shared view of each pair not yet served, where the pair sees the most of a
+    sweep from the floor to the top height, then one under the middle of each image quarter no
+    stop falls in, visited in nearest-neighbour order from the stop nearest a corner of the
+    room. At each stop the LED is swept up and down: depth is what
+    separates a camera's height from its focal length."""
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    cams = deployment.cameras
+    room = Polygon(deployment.room)
+    for poly in deployment.keep_out:
+        room = room.difference(Polygon(poly))
+    if heights is None:
+        heights = (0.0, round(0.4 * deployment.ceiling_height, 2))
+    low, high = float(min(heights)), float(max(heights))
+    x0, y0, x1, y1 = room.bounds
+    step = min(x1 - x0, y1 - y0) / 40
+    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = xy[contains_xy(room, xy[:, 0], xy[:, 1])]
+    levels = np.linspace(low, high, 5)
+    seen = np.stack([np.stack([c.project(np.c_[xy, np.full(len(xy), h)], margin=margin_px)[2]
+                               for c in cams]) for h in levels])  # L×C×P
+    def pairs_seeing(at):  # the pairs that see a sweep at place ``at`` at two levels or more
+        return {(k, j) for k in range(len(cams)) for j in range(k + 1, len(cams))
+                if (seen[:, k, at] & seen[:, j, at]).sum() >= 2}
+
+    depth = {(k, j): (seen[:, k] & seen[:, j]).sum(axis=0) for k in range(len(cams))
+             for j in range(k + 1, len(cams))}
+    todo = {p for p, d in depth.items() if d.max() >= 2}
+    if not todo:
+        raise SurveyError("no place in the room is seen by two cameras at two heights: a "
+                          "free survey needs cameras that overlap")
+    served: list = []
+    while todo:  # the pair with the least shared air first: its stop is the least free
+        p = min(todo, key=lambda p: ((depth[p] >= 2).sum(), p))
+        best = np.flatnonzero(depth[p] == depth[p].max())
+        at = int(best[np.argmin(np.linalg.norm(xy[best] - xy[best].mean(axis=0), axis=1))])
+        served.append(at)
+        todo -= pairs_seeing(at)
+
+    def quarter(c, at):
+        uv, _, ok = c.project(np.array([[*xy[at], low]]), margin=margin_px)
+        return (int(uv[0, 0] >= c.width / 2), int(uv[0, 1] >= c.height / 2)) if ok[0] else None
+
+    for c in cams:  # every image quarter gets a stop under it, at the sweep's foot
+        for qc, qr in QUARTER_WORDS:
+            if any(quarter(c, at) == (qc, qr) for at in served):
+                continue
+            ray = c.rays(np.array([[(0.25 + 0.5 * qc) * c.width, (0.25 + 0.5 * qr) * c.height]]))
+            if ray[0, 2] >= 0:
+                continue
+            target = np.add(c.position, (low - c.position[2]) / ray[0, 2] * ray[0])[:2]
+            mine = np.flatnonzero(seen[0, cams.index(c)])
+            if len(mine):
+                served.append(int(mine[np.argmin(np.linalg.norm(xy[mine] - target, axis=1))]))
+    stops = xy[served]
+    pairs_at = [[(cams[k].id, cams[j].id) for k, j in sorted(pairs_seeing(at))] for at in served]
+    quarters_at = [[f"{c.id} {QUARTER_WORDS[q]}" for c in cams if (q := quarter(c, at))]
+                   for at in served]
+    corners = np.array(room.envelope.exterior.coords[:4])
+    order = [int(np.argmin(np.min(np.linalg.norm(stops[:, None] - corners[None], axis=2),
+                                  axis=1)))]
+    while len(order) < len(stops):
+        rest = [i for i in range(len(stops)) if i not in order]
+        order.append(min(rest, key=lambda i: np.linalg.norm(stops[i] - stops[order[-1]])))
+    return FreeRoute(stops[order], [pairs_at[i] for i in order],
+                     [quarters_at[i] for i in order], low, high)
