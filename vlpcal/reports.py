@@ -29,6 +29,10 @@ def save_figure(fig, path, dpi: int = 110) -> None:
         plt.close(fig)
 
 
+#: a survey map's panel numbers its points up to this many
+LABELLED_POINTS = 150
+
+
 def survey_plan_figure(path, dep, plan, route=None) -> None:
     """One panel per height: room, keep-out areas, cameras, points with their ids; with a free
     survey's ``route`` (:class:`vlpcal.survey.FreeRoute`) its stops, numbered, on every
@@ -36,7 +40,9 @@ def survey_plan_figure(path, dep, plan, route=None) -> None:
     plt = _pyplot()
     heights = sorted(set(plan.xyz[:, 2].round(6)))
     room = np.array(dep.room + dep.room[:1])
-    fig, axes = plt.subplots(1, len(heights), figsize=(5.5 * len(heights), 5.0),
+    span = np.ptp(room, axis=0)
+    aspect = float(np.clip(span[1] / max(span[0], 1e-12), 0.3, 2.0))
+    fig, axes = plt.subplots(1, len(heights), figsize=(5.5 * len(heights), 5.5 * aspect + 1.6),
                              squeeze=False, constrained_layout=True)
     for ax, h in zip(axes[0], heights):
         ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
@@ -49,9 +55,10 @@ def survey_plan_figure(path, dep, plan, route=None) -> None:
         sel = np.flatnonzero(np.isclose(plan.xyz[:, 2], h))
         ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "-", color="0.8", lw=0.6)  # walking order
         ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "o", color="#2a7ab0", ms=4)
-        for i in sel:
-            ax.annotate(plan.ids[i][1:].lstrip("0"), plan.xyz[i, :2], fontsize=5,
-                        xytext=(2, 2), textcoords="offset points")
+        if len(sel) <= LABELLED_POINTS:  # beyond, numbers would smear: the CSV has them
+            for i in sel:
+                ax.annotate(plan.ids[i][1:].lstrip("0"), plan.xyz[i, :2], fontsize=5,
+                            xytext=(2, 2), textcoords="offset points")
         if route is not None:
             ax.plot(route.stops[:, 0], route.stops[:, 1], "-", color="#d08020", lw=1.2,
                     alpha=0.8, label=f"free LED: sweep {route.low:g}–{route.high:g} m at each "
@@ -60,8 +67,9 @@ def survey_plan_figure(path, dep, plan, route=None) -> None:
                 ax.annotate(str(n), (x, y), color="#d08020", fontsize=8, weight="bold",
                             ha="center", va="center",
                             bbox={"boxstyle": "circle,pad=0.2", "fc": "w", "ec": "#d08020"})
-        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points ({plan.ids[sel[0]]}…)",
-                     fontsize=9)
+        ids = (f"{plan.ids[sel[0]]}…" if len(sel) <= LABELLED_POINTS else
+               f"{plan.ids[sel[0]]}–{plan.ids[sel[-1]]}, in walking order: ids in the CSV")
+        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points ({ids})", fontsize=9)
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")
     axes[0][0].set_ylabel("y (m)")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -42,6 +42,9 @@ class SurveyPlan:
     predicted: tuple[float, float] = (float("nan"), float("nan"))
     tape: float = TAPE_M
     spot_noise: float = SPOT_NOISE_PX
+    #: the coarser grids tried first: (step m, points, typical, unlucky)
+    coarser: list = field(default_factory=list)
+    capped: bool = False  #: a finer grid would have passed :data:`MAX_PLANNED_POINTS`
 
     @property
     def meets_budget(self) -> bool:
@@ -81,12 +84,16 @@ def plan_survey(deployment, step: float | None = None, heights=(0.0, 0.35, 0.7),
     step = reach / 8
     plan = _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_px,
                       tape, spot_noise)
+    tried: list = []
     while not plan.meets_budget:
         finer = _plan_grid(deployment, step / np.sqrt(2), heights, min_per_camera,
                            min_per_pair, margin_px, tape, spot_noise)
         if len(finer.ids) > MAX_PLANNED_POINTS:
+            plan.capped = True
             break
+        tried.append((plan.step, len(plan.ids), *plan.predicted))
         step, plan = step / np.sqrt(2), finer
+    plan.coarser = tried
     return plan
 
 
@@ -263,11 +270,15 @@ def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
     said = (f"{given}, calibrating from these points is predicted to add "
             f"{100 * (typical - 1):.0f} % to the fixes' mean error "
             f"({100 * (unlucky - 1):.0f} % for an unlucky tape)")
+    if plan.coarser:
+        said += "; coarser grids: " + "; ".join(
+            f"{format_length(st)}: {n} points, +{100 * (a - 1):.0f} % ({100 * (b - 1):.0f} %)"
+            for st, n, a, b in plan.coarser)
     if plan.meets_budget:
         return said
     if chosen:
-        return (f"{said}, even at {len(plan.ids)} points: measure them more precisely, or "
-                "calibrate from a free survey")
+        return (f"{said}. A finer grid would pass {MAX_PLANNED_POINTS} points: measure the "
+                "positions more precisely (--tape; the cost falls with the square of it)")
     return (f"{said}; without --step the grid is made finer until that is at most "
             f"{100 * TYPICAL_SHARE:.0f} % ({100 * UNLUCKY_SHARE:.0f} %)")
 
