@@ -411,3 +411,68 @@ def test_device_frames_are_stored_as_jpeg(site):
     assert jpegs[0][:2] == b"\xff\xd8" and jpegs[0] == jpegs[1]
     view = summarise(dep.cameras[0], jpegs, dep)
     assert view.verdict == "ok" and view.frames == 1 and view.frame == jpegs[0]
+
+
+class MovingRig(Rig):
+    """A rig whose LED, until capture's --on-point places it, moves along a free path: it
+    holds each place for ``hold`` s (the cameras are not synchronised; a set spanning a jump
+    is what a real free survey also sees, and the calibration rejects it)."""
+
+    def __init__(self, scene, root: Path, path: np.ndarray, hold: float = 0.2, **kw):
+        super().__init__(scene, root, **kw)
+        self.path, self.hold, self.t0 = path, hold, time.monotonic()
+        frames, _ = render_scene(scene, path, seed=11)
+        self.moving = frames
+
+    def frame(self, cid: str, variant: int) -> bytes:
+        if self.current.exists():
+            return super().frame(cid, variant)
+        i = int((time.monotonic() - self.t0) / self.hold) % len(self.path)
+        return self.moving[cid][i]
+
+
+def test_free_capture_then_references_calibrates_end_to_end(site, tmp_path):
+    """`survey capture --free` against simulated MJPEG cameras: the free part records sets
+    while the LED moves and reports each camera's coverage and the pairs; then the reference
+    points; `survey calibrate` on the bundle succeeds and finds the cameras."""
+    from vlpcal.sim.writers import free_path
+    from vlpcal.survey import plan_references
+
+    scene, root = site
+    dep = deployment.load(root / "dep.yaml")
+    refs = plan_references(dep)
+    write_truth_csv(tmp_path / "refs.csv", refs.ids, refs.xyz, id_column="point_id")
+    rig = MovingRig(scene, tmp_path, free_path(scene, 400), fps=30.0)
+    survey = tmp_path / "survey"
+    try:
+        cmd = capture_cmd(root, rig, survey, "--yes", "--delay", "0.1", "--free",
+                          "--duration", "25", "--rate", "8")
+        cmd[cmd.index("--points") + 1] = str(tmp_path / "refs.csv")
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    finally:
+        rig.close()
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "free survey:" in res.stdout and "sightings" in res.stdout
+    assert "pairs:" in res.stdout and "linked" in res.stdout
+    bundle = read_survey_bundle(survey)
+    assert len(bundle.free_ids) >= 100 and len(bundle.point_ids) == len(refs.ids)
+    out = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(root / "dep.yaml"),
+                                    "--survey", str(survey), "--out", str(tmp_path / "cal.yaml"),
+                                    "-q"])
+    assert out.exit_code == 0, out.output
+    assert "where the free LED went" in out.output
+    cal = deployment.load(tmp_path / "cal.yaml")
+    for c, t in zip(cal.cameras, scene.true):
+        assert np.linalg.norm(np.subtract(c.position, t.position)) < 0.02
+    # run again: the free survey is resumed, not recorded twice over
+    rig = MovingRig(scene, tmp_path, free_path(scene, 400), fps=30.0)
+    try:
+        cmd = capture_cmd(root, rig, survey, "--yes", "--free", "--free-sets",
+                          str(len(bundle.free_ids)))
+        cmd[cmd.index("--points") + 1] = str(tmp_path / "refs.csv")
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    finally:
+        rig.close()
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert f"{len(bundle.free_ids)} sets already in" in res.stdout
+    assert len(read_survey_bundle(survey).free_ids) == len(bundle.free_ids)

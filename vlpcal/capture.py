@@ -246,7 +246,8 @@ class CaptureSession:
 
     def __init__(self, dep: Deployment, plan_ids: list, plan_xyz, appender, burst: Burst,
                  ask: Callable, say: Callable, on_point: Callable | None = None,
-                 delay: float = 0.0, check_every: int = 5, unattended: bool = False):
+                 delay: float = 0.0, check_every: int = 5, unattended: bool = False,
+                 final_check: bool = True):
         self.dep = dep
         self.plan = list(zip(plan_ids, np.asarray(plan_xyz, float)))
         self.appender = appender
@@ -255,6 +256,7 @@ class CaptureSession:
         self.on_point = on_point
         self.delay = delay
         self.check_every = check_every
+        self.final_check = final_check  # off for a free survey's references: too few to pose
         self.camera_ids = [c.id for c in dep.cameras]
         self.planned = {p for p, _ in self.plan}
         self.spots: dict = {}  # point id → C×2 spots of the accepted points
@@ -328,7 +330,8 @@ class CaptureSession:
                 n_new += 1
                 i += 1
                 self._maybe_check()
-        self._check(final=True)
+        if self.final_check:
+            self._check(final=True)
         return n_new
 
     def _burst_until_decided(self, pid, xyz) -> Step:
@@ -409,3 +412,77 @@ class CaptureSession:
                  f"{len(checks)} cameras good enough to calibrate")
         for line in check_lines(checks):
             self.say(line)
+
+
+class FreeRecorder:
+    """Records a free survey live (issue 15): while a person carries the LED through the room,
+    one frame set every ``1 / rate`` s is searched for the LED and its spots are committed
+    (:class:`~vlpcal.datasets.FreeAppender`) when a camera saw one clear spot; every
+    ``report_every`` s ``say`` hears how much of each camera's image the LED has crossed and
+    which overlapping pairs have seen it together — the wanding feedback of motion-capture
+    tools ("C3: 412 sightings, bottom-left quarter empty")."""
+
+    def __init__(self, dep: Deployment, grouper, appender, rate: float, say: Callable,
+                 report_every: float = 5.0, overlapping: set | None = None):
+        self.dep, self.grouper, self.appender = dep, grouper, appender
+        self.rate, self.say, self.report_every = rate, say, report_every
+        self.overlapping = overlapping
+
+    def spots(self) -> np.ndarray:
+        """Every committed set's spots so far, ``C×M×2`` (NaN: not seen)."""
+        ids = self.appender.set_ids
+        uv = np.full((len(self.dep.cameras), len(ids), 2), np.nan)
+        col = {s: i for i, s in enumerate(ids)}
+        row = {c.id: k for k, c in enumerate(self.dep.cameras)}
+        for (sid, cid), p in self.appender.spots.items():
+            if cid in row:
+                uv[row[cid], col[sid]] = p
+        return uv
+
+    def report(self, final: bool = False) -> None:
+        from .survey.coverage import camera_words, pair_words
+
+        uv = self.spots()
+        head = "free survey" if final else "so far"
+        pairs = pair_words(self.dep.cameras, uv, self.overlapping)
+        self.say(f"{head}: {uv.shape[1]} sets; {pairs}")
+        for k, cam in enumerate(self.dep.cameras):
+            self.say(f"  {camera_words(cam, uv[k])}")
+
+    def _spots_in(self, frames: dict) -> dict:
+        """camera id → (u, v) of the one clear spot in its frame (none: not in the dict)."""
+        out = {}
+        for cam in self.dep.cameras:
+            frame = frames.get(cam.id)
+            if frame is None:
+                continue
+            found = detect_spots([frame], self.dep.detector, self.dep.detector_settings,
+                                 shape=(cam.height, cam.width))
+            uv = found.uv[0]
+            blobs = int(found.blobs[0]) if len(found.blobs) else 0
+            if np.isfinite(uv).all() and found.reasons[0] is None and blobs <= 1:
+                out[cam.id] = (float(uv[0]), float(uv[1]))
+        return out
+
+    def run(self, duration: float, max_sets: int, stop: Callable = lambda: False) -> int:
+        """Record until ``duration`` s have passed, the bundle holds ``max_sets`` sets, every
+        camera stopped, or ``stop()`` says so; returns the sets recorded now."""
+        start = time.monotonic()
+        last_report = start
+        next_t = -math.inf
+        n = 0
+        for fs in self.grouper:
+            now = time.monotonic()
+            if now - start >= duration or len(self.appender.set_ids) >= max_sets or stop():
+                break
+            if now - last_report >= self.report_every:
+                self.report()
+                last_report = now
+            if fs.t < next_t:
+                continue
+            next_t = fs.t + 1.0 / self.rate
+            spots = self._spots_in(fs.frames)
+            if spots:
+                self.appender.add(spots)
+                n += 1
+        return n

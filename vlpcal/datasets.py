@@ -502,3 +502,47 @@ class SurveyAppender:
             f.write(f"{event},{pid}\n")
             f.flush()
             os.fsync(f.fileno())
+
+
+class FreeAppender:
+    """A free survey's spots written moment by moment (issue 15): ``free/observations.csv``
+    (``set_id,camera_id,u,v``), append-only, each set's lines flushed to disk before the next;
+    resumable: a line cut by a crash is dropped on opening and numbering goes on (``F000001``
+    …). A bundle whose ``free/`` holds frames from elsewhere is refused."""
+
+    COLUMNS = ("set_id", *OBSERVATION_COLUMNS)
+
+    def __init__(self, root):
+        self.free = Path(root) / "free"
+        self.path = self.free / "observations.csv"
+        if (self.free / "frames").exists():
+            raise DatasetError(f"{self.free}: holds frames/ already (a free survey from "
+                               "elsewhere): choose a new folder for the survey")
+        self.free.mkdir(parents=True, exist_ok=True)
+        if not self.path.exists():
+            with open(self.path, "w", newline="", encoding="utf-8") as f:
+                f.write(",".join(self.COLUMNS) + "\n")
+                f.flush()
+                os.fsync(f.fileno())
+        data = self.path.read_bytes()
+        if data and not data.endswith(b"\n"):  # a line cut by a crash: drop it
+            with open(self.path, "r+b") as f:
+                f.truncate(data.rfind(b"\n") + 1)
+                os.fsync(f.fileno())
+        self.spots, self.set_ids = read_observations(self.path, "set_id")
+        numbers = [int(s[1:]) for s in self.set_ids if re.fullmatch(r"F\d+", s)]
+        self._next = max(numbers, default=0) + 1
+
+    def add(self, spots: dict) -> str:
+        """Commit one moment: ``spots`` camera id → (u, v) px. Returns its set id."""
+        sid = f"F{self._next:06d}"
+        rows = [[sid, _check_id(str(cid), "camera id"), _fmt(u), _fmt(v)]
+                for cid, (u, v) in spots.items()]
+        with open(self.path, "a", newline="", encoding="utf-8") as f:
+            csv.writer(f).writerows(rows)
+            f.flush()
+            os.fsync(f.fileno())
+        self._next += 1
+        self.set_ids.append(sid)
+        self.spots.update({(sid, r[1]): tuple(spots[r[1]]) for r in rows})
+        return sid

@@ -157,8 +157,18 @@ def _echo_free_plan(plan, route, out) -> None:
               help="Frame sets grabbed per point.")
 @click.option("--check-every", default=5, show_default=True, type=click.IntRange(0),
               help="Show the per-camera calibration check every N points (0: at the end).")
+@click.option("--free", is_flag=True,
+              help="First record a free survey: the LED carried through the room while the "
+                   "cameras stream (free/observations.csv), then the --points as references.")
+@click.option("--rate", default=10.0, show_default=True, type=Finite(0.1, 100.0),
+              help="With --free: moments recorded per second.")
+@click.option("--duration", default=180.0, show_default=True, type=Finite(1.0, 86400.0),
+              help="With --free: seconds to record at most (Enter stops sooner).")
+@click.option("--free-sets", default=1800, show_default=True, type=click.IntRange(10, 100000),
+              help="With --free: moments to record in all (a resumed survey counts those it "
+                   "has).")
 def survey_capture(deployment_path, points_path, survey_path, cameras, yes, delay, on_point,
-                   burst, check_every):
+                   burst, check_every, free, rate, duration, free_sets):
     """Capture a survey live: walk through the points while the cameras stream.
 
     At each point: place the LED, press Enter; a short burst is grabbed from every camera and
@@ -167,6 +177,12 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     Each accepted point is on disk (frames, then its line in points.csv) before the next
     prompt: an interrupted session resumes where it stopped when run again. Every few points
     a quick fit per camera says whether the survey is good enough yet.
+
+    \b
+    With --free, first the free survey: carry the LED through the room (the route of `survey
+    plan --free`) while every camera streams; every few seconds each camera says how much of
+    its image the LED has crossed ("C3: bottom-left quarter empty") and which pairs have seen
+    it together. Then the --points are captured as reference points.
 
     \b
     Example:
@@ -270,9 +286,21 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
                             "the survey so far is kept: fix the rig and run again to resume")
 
     grouper.on_event = lambda m: say(f"! {m}")
+    free_app = None
+    if free:
+        try:
+            free_app = _capture_free(dep, grouper, survey_path, rate, duration, free_sets, yes,
+                                     say)
+        except KeyboardInterrupt:
+            grouper.stop()
+            click.echo(f"\ninterrupted: the free sets so far are safe in {survey_path}; run the "
+                       "same command to resume", err=True)
+            sys.exit(130)
+        frames = Burst(grouper, burst)  # the reference points' bursts start afresh
     session = CaptureSession(dep, ids, xyz, appender, frames, ask, say,
                              on_point=move if on_point else None, delay=delay,
-                             check_every=check_every, unattended=yes)
+                             check_every=0 if free else check_every, unattended=yes,
+                             final_check=not free)
     try:
         n = session.run()
     except KeyboardInterrupt:
@@ -280,7 +308,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     finally:
         grouper.stop()
         done_ids, skipped = appender.accepted()[0], appender.skipped()
-        if created and not done_ids and not skipped:
+        if created and not done_ids and not skipped and not (free_app and free_app.set_ids):
             import shutil
 
             shutil.rmtree(bundle, ignore_errors=True)  # nothing captured: leave nothing
@@ -299,6 +327,55 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     if not left:
         say(f"next: vlpcal survey calibrate -d {deployment_path} --survey {survey_path} "
             "--out calibrated.yaml")
+
+
+def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattended, say):
+    """The free part of ``survey capture --free``: record until done, Enter, or the time is
+    up; the sets are on disk as they come. Returns the appender."""
+    import select
+    import sys
+    import time
+
+    from ..capture import FreeRecorder
+    from ..datasets import DatasetError, FreeAppender
+    from ..survey import SurveyError, free_route
+
+    try:
+        app = FreeAppender(survey_path)
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    try:
+        overlapping = {p for stop in free_route(dep).pairs for p in stop}
+    except SurveyError:
+        overlapping = None
+    recorder = FreeRecorder(dep, grouper, app, rate, say, overlapping=overlapping)
+    have = len(app.set_ids)
+    if have >= max_sets:
+        say(f"free survey: {have} sets already in {survey_path} (--free-sets {max_sets})")
+        recorder.report(final=True)
+        return app
+    if have:
+        say(f"resuming the free survey: {have} sets already in {survey_path}")
+    interactive = not unattended and sys.stdin.isatty()
+    say(f"free survey: carry the LED through the room, sweeping it up and down (the route of "
+        f"`vlpcal survey plan --free`); recording {rate:g} sets/s for up to {duration:g} s"
+        + (", Enter stops sooner" if interactive else ""))
+
+    def enter_pressed() -> bool:
+        if not interactive:
+            return False
+        ready, _, _ = select.select([sys.stdin], [], [], 0)
+        if ready:
+            sys.stdin.readline()
+        return bool(ready)
+
+    grouper.deadline = time.monotonic() + duration + 1.0
+    n = recorder.run(duration, max_sets, stop=enter_pressed)
+    grouper.deadline = None
+    recorder.report(final=True)
+    say(f"{n} free sets recorded now, {len(app.set_ids)} in {survey_path}; next: the "
+        "reference points")
+    return app
 
 
 class PointSigma(click.ParamType):
@@ -467,6 +544,9 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
         click.echo(f"{r['camera'][:8]:8s} {r['spread_px']:9.3f} {r['free_sets_seen']:9d} "
                    f"{r['rejected_spots']:8d} {r['moved_m'] * 1000:6.1f} mm "
                    f"{r['turned_deg']:8.2f}  {r['lens_model']}")
+    click.echo("\nwhere the free LED went, in each camera's image:")
+    for r in result.cameras:
+        click.echo(f"  {r['coverage']}")
     loo = cal.leave_one_out[np.isfinite(cal.leave_one_out)]
     if len(loo):
         tape = cal.point_sigma * 1000 * math.sqrt(3)

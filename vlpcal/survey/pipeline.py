@@ -158,6 +158,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
     from ..deployment import Deployment, provenance
     from ..geometry import rodrigues
     from .calibration import lens_sentence
+    from .coverage import camera_words, quarter_counts
     from .free import calibrate_free
 
     cams = dep.cameras
@@ -182,8 +183,11 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
         angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
         sentence = lens_sentence(choice, c, nom)
         words.append(sentence)
-        seen = int(np.isfinite(np.asarray(uv_free)[cams.index(nom)]).all(axis=1).sum())
+        mine = np.asarray(uv_free)[cams.index(nom)]
+        seen = int(np.isfinite(mine).all(axis=1).sum())
         rows.append({"camera": c.id, "spread_px": cal.spread_px[c.id], "free_sets_seen": seen,
+                     "coverage": camera_words(nom, mine),
+                     "quarter_sightings": quarter_counts(nom, mine).tolist(),
                      "rejected_spots": cal.rejected[c.id],
                      "moved_m": float(np.linalg.norm(np.subtract(c.position, nom.position))),
                      "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
