@@ -155,12 +155,18 @@ def test_survey_calibrate_on_a_simulated_free_survey_end_to_end(tmp_path):
     assert res.returncode == 0, res.stderr
     res = subprocess.run(run + ["survey", "calibrate", "-d", str(tmp_path / "sim/nominal.yaml"),
                                 "--survey", str(tmp_path / "sim/free-survey"), "--out",
-                                str(tmp_path / "cal.yaml"), "-q"],
+                                str(tmp_path / "cal.yaml"), "-q", "--test-points",
+                                str(tmp_path / "sim/survey")],
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "fix the room to about" in res.stdout and "Traceback" not in res.stderr
+    assert "test points (never used by the calibration)" in res.stdout
     report = json.loads((tmp_path / "cal.report.json").read_text())
     assert report["datum_floor_m"] > 0 and len(report["references"]) >= 4
+    # the tape survey's points as test points: fixed, and as close as their tape allows
+    tp = report["test_points"]
+    assert tp["points"] > 50 and tp["fixed"] > 0.5
+    assert tp["mean"] < 0.02 and len(tp["per_point"]) == tp["points"]
     folder = read_frames_folder(tmp_path / "sim/frames")
     truth = np.loadtxt(tmp_path / "sim/frames.truth.csv", delimiter=",", skiprows=1,
                        usecols=(1, 2, 3))

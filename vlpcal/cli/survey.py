@@ -421,9 +421,12 @@ class PointSigma(click.ParamType):
 @click.option("--free-height", type=Finite(0, 1e4), default=None,
               help="A free survey's LED was always at this height, m (on a robot or a cart): "
                    "then two reference points suffice.")
+@click.option("--test-points", "test_path", default=None, type=click.Path(file_okay=False),
+              help="Test points the calibration never sees: a bundle folder (points.csv with "
+                   "frames/ or observations.csv); their error is reported.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds, point_sigma,
-                     free_height, quiet):
+                     free_height, test_path, quiet):
     """Calibrate the cameras from a survey and report held-out accuracy.
 
     Each camera's pose and as much of its lens as the survey supports and needs (--lens auto:
@@ -456,8 +459,10 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     if Path(out).suffix.lower() not in (".yaml", ".yml"):
         raise UserError(f"{out}: the calibrated deployment is a YAML file (.yaml); its report "
                         "(.report.json) and figure (.png) go beside it")
-    out = _output_file(out, inputs=(deployment_path, survey_path),
+    out = _output_file(out, inputs=(deployment_path, survey_path)
+                       + ((test_path,) if test_path else ()),
                        beside=(".report.json", ".png"))
+    test = _read_test_points(dep, test_path, survey_path) if test_path else None
     uv, notes = survey_spots(dep, bundle)
     for note in notes:
         click.echo(note, err=True)
@@ -465,7 +470,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     _check_survey_positions(survey_path, dep, X, ids)
     if bundle.free_ids:
         return _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
-                               quiet, deployment_path, survey_path)
+                               quiet, deployment_path, survey_path, test)
     if free_height is not None:
         raise UserError(f"{survey_path}: --free-height is for a free survey (a free/ folder); "
                         "this bundle has none")
@@ -479,6 +484,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     except SurveyError as e:
         raise UserError(f"{survey_path}: {e}") from None
     _print_calibration(result, folds)
+    _report_test_points(result, test)
     paths = write_calibration(out, result, notes,
                               header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
     label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
@@ -486,8 +492,51 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
                f"best held out), {paths[1]}, {paths[2]}")
 
 
+def _read_test_points(dep, test_path, survey_path):
+    """``--test-points``: a bundle of measured points the calibration never sees; (ids, X,
+    spots)."""
+    from pathlib import Path
+
+    from ..datasets import DatasetError, read_survey_bundle
+    from ..survey import survey_spots
+
+    if Path(test_path).resolve() == Path(survey_path).resolve():
+        raise UserError(f"--test-points {test_path}: is the survey itself (test points must be "
+                        "points the calibration never sees)")
+    try:
+        tb = read_survey_bundle(test_path)
+    except DatasetError as e:
+        raise UserError(str(e)) from None
+    if tb.free_ids:
+        raise UserError(f"{test_path}: test points are measured points (points.csv with "
+                        "frames/ or observations.csv), not a free survey")
+    uv, notes = survey_spots(dep, tb)
+    for note in notes:
+        click.echo(f"test points: {note}", err=True)
+    return tb.point_ids, tb.xyz, uv
+
+
+def _report_test_points(result, test) -> None:
+    """Fix the test points with the calibrated cameras: print and keep for the report."""
+    if test is None:
+        return
+    from ..survey import test_point_errors
+    from ..survey.calibration import format_length
+
+    ids, X, uv = test
+    result.test_points = tp = test_point_errors(result.deployment, X, uv, ids)
+    fixed = round(tp["fixed"] * tp["points"])
+    if not fixed:
+        click.echo(f"\ntest points: none of {tp['points']} was fixed (seen by two cameras)")
+        return
+    click.echo(f"\ntest points (never used by the calibration): {fixed} of {tp['points']} "
+               f"fixed, mean {format_length(tp['mean'])}, p95 {format_length(tp['p95'])}, max "
+               f"{format_length(tp['max'])} from their measured positions (whose own "
+               "measurement error is in these figures)")
+
+
 def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes, quiet,
-                    deployment_path, survey_path) -> None:
+                    deployment_path, survey_path, test=None) -> None:
     """``survey calibrate`` on a bundle with a free survey (issue 15)."""
     import math
     import sys
@@ -558,6 +607,7 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     click.echo(f"your {n_ref} reference points fix the room to about "
                f"{cal.datum_floor * 1000:.1f} mm (the datum floor: no calibration does "
                "better); measure more points, or more precisely, to do better")
+    _report_test_points(result, test)
     paths = write_calibration(out, result, notes + free_notes,
                               header=f"Calibrated by vlpcal survey calibrate from {survey_path} "
                                      "(free survey).")

@@ -44,13 +44,17 @@ class SurveyResult:
     precision: dict = field(default_factory=dict)  #: point_sigma_m, estimated, pixel_sigma_px
     lens: list = field(default_factory=list)  #: per camera, the lens decision in words
     folds: int = 5  #: of the held-out check
+    test_points: dict | None = None  #: :func:`test_point_errors`, when test points were given
 
     def report(self, notes=()) -> dict:
-        return {"held_out_m": self.stats, "folds": self.folds, "cameras": self.cameras,
-                "fusion": self.fusion,
-                "lens": self.lens, "precision": self.precision,
-                "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
-                "notes": list(notes)}
+        out = {"held_out_m": self.stats, "folds": self.folds, "cameras": self.cameras,
+               "fusion": self.fusion,
+               "lens": self.lens, "precision": self.precision,
+               "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
+               "notes": list(notes)}
+        if self.test_points is not None:
+            out["test_points"] = self.test_points
+        return out
 
 
 def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
@@ -131,10 +135,11 @@ class FreeSurveyResult:
     free_sets: int  #: in the bundle
     free_height: float | None = None
     fusion: str = "robust"
+    test_points: dict | None = None  #: :func:`test_point_errors`, when test points were given
 
     def report(self, notes=()) -> dict:
         cal = self.calibration
-        return {"free_survey": {"sets": self.free_sets, "used": cal.used_sets,
+        out = {"free_survey": {"sets": self.free_sets, "used": cal.used_sets,
                                 "dropped_sets": cal.dropped_sets,
                                 "free_height_m": self.free_height},
                 "references": [{"point_id": p, "left_out_error_m": None if not np.isfinite(e)
@@ -146,6 +151,9 @@ class FreeSurveyResult:
                               "estimated": cal.point_sigma_estimated,
                               "pixel_sigma_px": cal.pixel_sigma},
                 "notes": list(notes)}
+        if self.test_points is not None:
+            out["test_points"] = self.test_points
+        return out
 
 
 def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
@@ -196,3 +204,20 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                             extra)
     return FreeSurveyResult(calibrated, cal, rows, words, list(ids), np.asarray(X, float),
                             int(np.shape(uv_free)[1]), free_height)
+
+
+def test_point_errors(dep, X, uv, ids) -> dict:
+    """Held-out evidence a calibration never saw (issue 15): measured test points ``X`` (N×3)
+    and their spots ``uv`` (C×N×2) fixed with the calibrated deployment ``dep`` as its
+    locator would (its fusion and residual limit); the errors against the measured positions,
+    whose own tape is in them. Returns the report's ``test_points`` entry."""
+    from ..fusion import fuse
+    from .held_out import error_stats
+
+    X = np.asarray(X, float)
+    fused = fuse(dep.cameras, uv, dep.fusion if dep.fusion in ("all", "robust") else "robust",
+                 max_residual=dep.max_residual)
+    err = np.linalg.norm(fused.X - X, axis=1)
+    return {"points": len(X), **error_stats(err),
+            "per_point": [{"point_id": p, "error_m": float(e) if np.isfinite(e) else None}
+                          for p, e in zip(ids, err)]}
