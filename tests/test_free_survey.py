@@ -232,3 +232,32 @@ def test_free_plan_route_shows_every_pair_and_every_image_quarter(tmp_path):
     assert res.exit_code == 2 and "two cameras" in res.output
     assert len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "a.csv").exists()
+
+
+def test_coverage_words_name_empty_quarters_but_not_walls():
+    """What a surveyor waving the LED hears: an image quarter the LED never crossed is named;
+    one that looks past the room's walls is not asked for; thin quarters are relative to the
+    camera's own sightings; pairs not yet linked are named."""
+    from vlpcal.survey.coverage import camera_words, pair_words, quarters_in_room
+
+    cam = paper_camera("C1", (1.2, 0.9, 2.3))
+    room = [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]
+    rng = np.random.default_rng(3)
+    uv = np.c_[rng.uniform(0, 160, 400), rng.uniform(0, 120, 400)]
+    assert camera_words(cam, uv, room) == "C1: 400 sightings, every quarter covered"
+    left_empty = uv[(uv[:, 0] >= 80) | (uv[:, 1] >= 60)]  # top-left quarter never crossed
+    said = camera_words(cam, left_empty, room)
+    assert "top-left quarter empty" in said and "top-right" not in said
+    thin = np.vstack([left_empty, uv[(uv[:, 0] < 80) & (uv[:, 1] < 60)][:5]])
+    assert "top-left quarter thin (5)" in camera_words(cam, thin, room)
+    # the same camera over a room that ends under its image's middle: half looks at walls
+    half = [[0, 0], [1.2, 0], [1.2, 1.8], [0, 1.8]]
+    share = quarters_in_room(cam, half)
+    assert (share[:, 1] < 0.25).all() or (share[:, 0] < 0.25).all()
+    lit = uv[uv[:, 0] < 80] if (share[:, 1] < 0.25).all() else uv[uv[:, 0] >= 80]
+    said = camera_words(cam, lit, half)
+    assert "empty" not in said and "beyond the room" in said
+    cams = [cam, paper_camera("C2", (1.8, 0.9, 2.3))]
+    both = np.full((2, 20, 2), np.nan)
+    both[0], both[1, :5] = 50.0, 60.0
+    assert pair_words(cams, both) == "pairs: 0 of 1 linked; not yet: C1+C2 5"

@@ -447,7 +447,7 @@ class FreeRecorder:
         pairs = pair_words(self.dep.cameras, uv, self.overlapping)
         self.say(f"{head}: {uv.shape[1]} sets; {pairs}")
         for k, cam in enumerate(self.dep.cameras):
-            self.say(f"  {camera_words(cam, uv[k])}")
+            self.say(f"  {camera_words(cam, uv[k], self.dep.room)}")
 
     def _spots_in(self, frames: dict) -> dict:
         """camera id → (u, v) of the one clear spot in its frame (none: not in the dict)."""

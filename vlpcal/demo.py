@@ -6,8 +6,10 @@
 2. the cameras go up — not quite where planned: each is drawn around its planned pose with the
    errors of a careful install by hand (:data:`DEMO_ERRORS`: a centimetre, a fraction of a
    degree, an uncalibrated lens), and the simulator renders what they see;
-3. the surveyor plans the survey points, the LED is put on each (positions tape-measured, ±3 mm)
-   and the cameras' frames are kept as a survey bundle; the survey calibrates the cameras;
+3. the surveyor measures a dozen reference points and carries the LED through the room for
+   three minutes while the cameras record (a free survey): the cameras calibrate from it; for
+   comparison, the classic survey too — the LED put on each of a few hundred tape-measured
+   points (±3 mm);
 4. a robot carries the LED around the room and the locator turns its frames into fixes — with
    the paper's pipeline (NI-P spots, pair method, fusions (a), (b), (c)) and vlpcal's, on the
    same frames, with the cameras as planned and as calibrated.
@@ -33,8 +35,24 @@ from .planning import plan_site, planned_deployment, site_from_dict
 from .reports import demo_figure, plan_maps, survey_plan_figure, write_calibration
 from .sim.profiles import get_profile
 from .sim.scene import InstallErrors, make_scene
-from .sim.writers import deployment_of, simulate_frames, simulate_survey, trajectory
-from .survey import calibrate_survey, learn_region_map, plan_survey, survey_spots
+from .sim.writers import (
+    deployment_of,
+    simulate_frames,
+    simulate_free_survey,
+    simulate_survey,
+    trajectory,
+)
+from .survey import (
+    calibrate_free_survey,
+    calibrate_survey,
+    free_route,
+    free_spots,
+    learn_region_map,
+    plan_references,
+    plan_survey,
+    survey_spots,
+    test_point_errors,
+)
 from .writing import OutputSet, write_text
 
 DEG = math.pi / 180.0
@@ -61,6 +79,8 @@ DEMO_ERRORS = InstallErrors(position=0.005, height=0.005, tilt=0.2 * DEG, yaw=0.
 
 #: the robot's LED: frames along its path and its height above the floor, m
 ROBOT_FRAMES, ROBOT_HEIGHT = 400, 0.15
+#: the free survey: moments recorded (three minutes at 10 per second)
+FREE_SETS, FREE_RATE = 1800, 10.0
 
 #: (label, which deployment, detector, fusion): every pipeline runs on the same frames
 PIPELINES = (
@@ -68,7 +88,8 @@ PIPELINES = (
     ("paper: NI-P + (b) nearest pair", "planned", "nip", "nearest"),
     ("paper: NI-P + (c) region map", "planned", "nip", "region"),
     ("vlpcal: planned cameras", "planned", None, None),
-    ("vlpcal: calibrated by the survey", "calibrated", None, None),
+    ("vlpcal: calibrated, free survey", "calibrated", None, None),
+    ("vlpcal: calibrated, tape survey", "calibrated-tape", None, None),
     ("vlpcal: cameras as really hung", "truth", None, None),
 )
 
@@ -78,14 +99,20 @@ REDO = {
     "planned.yaml": ("the planned cameras (deployment) + planned.png maps",
                      "vlpcal plan --site site.yaml --out planned.yaml"),
     "installed-truth.yaml": ("the cameras as really hung (simulation only)", ""),
-    "survey-plan.csv": ("the survey points to measure + survey-plan.png",
-                        "vlpcal survey plan -d planned.yaml --out survey-plan.csv"),
-    "survey/": ("the survey bundle: points.csv as measured, frames/", ""),
-    "calibrated.yaml": ("calibrated deployment + .report.json, .png",
+    "references.csv": ("the free survey's reference points and route + references.png",
+                       "vlpcal survey plan -d planned.yaml --free --out references.csv"),
+    "survey/": ("the free survey: points.csv (the references as measured), frames/, free/", ""),
+    "calibrated.yaml": ("calibrated from the free survey + .report.json, .png",
                         "vlpcal survey calibrate -d planned.yaml --survey survey --out "
-                        "calibrated.yaml"),
+                        "calibrated.yaml --test-points tape-survey"),
+    "survey-plan.csv": ("the tape survey's points to measure + survey-plan.png",
+                        "vlpcal survey plan -d planned.yaml --step 0.3 --out survey-plan.csv"),
+    "tape-survey/": ("the tape survey: points.csv as measured, frames/", ""),
+    "calibrated-tape.yaml": ("calibrated from the tape survey + .report.json, .png",
+                             "vlpcal survey calibrate -d planned.yaml --survey tape-survey "
+                             "--out calibrated-tape.yaml"),
     "robot/": ("the robot's frames; robot.truth.csv: where it was", ""),
-    "fixes.csv": ("the calibrated locator's fixes of the robot",
+    "fixes.csv": ("the locator's fixes of the robot (free survey's calibration)",
                   "vlpcal locate -d calibrated.yaml --frames robot --out fixes.csv"),
     "demo.png": ("the robot's path, the fixes, every pipeline's CDF", ""),
     "summary.json": ("the summary table's figures", ""),
@@ -111,7 +138,8 @@ class DemoResult:
     folder: Path
     rows: list[Row]
     planned: dict  #: family, cameras, predicted coverage, mean and p95 (cm)
-    survey: dict  #: points, held-out mean nominal / calibrated (cm), worst camera RMS px
+    survey: dict  #: the tape survey: points, held-out mean nominal / calibrated (cm), worst RMS
+    free: dict  #: the free survey: references, sets, minutes, datum floor, test points (cm)
     frames: int
     seconds: float
 
@@ -197,30 +225,53 @@ def _run(root: Path, seed: int, say) -> DemoResult:
     step(2, f"{cand.count} cameras ({cand.family}, {cand.nx}×{cand.ny}) hung with half a "
             "centimetre and a fraction of a degree of error; surveying…")
 
-    # 3. the survey: plan, measure, calibrate
+    # 3. the surveys: a free one (references + three minutes of motion), and a tape one
+    refs = plan_references(planned)
+    route = free_route(planned)
+    write_truth_csv(root / "references.csv", refs.ids, refs.xyz, id_column="point_id")
+    survey_plan_figure(root / "references.png", planned, refs, route)
+    simulate_free_survey(scene, root / "survey", refs.xyz, FREE_SETS, seed=seed)
+    free_bundle = read_survey_bundle(root / "survey")  # from here on, as a user has it
     sp = plan_survey(planned, 0.3, (0.0, 0.35, 0.7))
     write_truth_csv(root / "survey-plan.csv", sp.ids, sp.xyz, id_column="point_id")
     survey_plan_figure(root / "survey-plan.png", planned, sp)
-    simulate_survey(scene, root / "survey", sp.xyz, seed=seed)
-    bundle = read_survey_bundle(root / "survey")  # from here on, as a user would have it
+    simulate_survey(scene, root / "tape-survey", sp.xyz, seed=seed)
+    bundle = read_survey_bundle(root / "tape-survey")
     measured = bundle.xyz
     uv, notes = survey_spots(planned, bundle)
-    step(3, f"{len(sp.ids)} survey points measured at h = 0, 0.35, 0.7 m; calibrating…")
+    minutes = FREE_SETS / FREE_RATE / 60
+    step(3, f"free survey: {len(refs.ids)} reference points measured, the LED carried for "
+            f"{minutes:g} min ({FREE_SETS} moments); calibrating from it, and from a "
+            f"{len(sp.ids)}-point tape survey for comparison…")
+    uv_ref, free_notes = survey_spots(planned, free_bundle)
+    uv_free, more = free_spots(planned, free_bundle)
+    free = calibrate_free_survey(planned, free_bundle.xyz, uv_ref, free_bundle.point_ids,
+                                 uv_free, sources={"deployment": "planned.yaml",
+                                                   "survey": "survey"})
+    free.test_points = test_point_errors(free.deployment, measured, uv, bundle.point_ids)
+    write_calibration(root / "calibrated.yaml", free, free_notes + more,
+                      header="Calibrated by vlpcal demo (vlpcal survey calibrate, free "
+                             "survey).")
     result = calibrate_survey(planned, measured, uv, bundle.point_ids,
-                              sources={"deployment": "planned.yaml", "survey": "survey"})
-    write_calibration(root / "calibrated.yaml", result, notes,
-                      header="Calibrated by vlpcal demo (vlpcal survey calibrate).")
+                              sources={"deployment": "planned.yaml", "survey": "tape-survey"})
+    write_calibration(root / "calibrated-tape.yaml", result, notes,
+                      header="Calibrated by vlpcal demo (vlpcal survey calibrate, tape "
+                             "survey).")
     st = result.stats
     survey_fig = {"points": len(sp.ids),
                   "held_out_nominal_cm": st["nominal, all-camera LS"]["mean"] * 100,
                   "held_out_calibrated_cm": st["calibrated, all-camera LS"]["mean"] * 100,
                   "worst_camera_rms_px": max(r["rms_px"] for r in result.cameras),
                   "fusion": result.fusion}
+    free_fig = {"references": len(refs.ids), "sets": FREE_SETS, "minutes": minutes,
+                "datum_floor_cm": free.calibration.datum_floor * 100,
+                "test_points_cm": free.test_points["mean"] * 100,
+                "test_points": free.test_points["points"]}
 
     # 4. the robot
     path = trajectory(scene, ROBOT_FRAMES, ROBOT_HEIGHT, seed=seed)
-    step(4, f"calibrated (held-out {survey_fig['held_out_nominal_cm']:.2f} → "
-            f"{survey_fig['held_out_calibrated_cm']:.2f} cm); the robot drives "
+    step(4, f"calibrated (the tape survey's points, never used by the free survey: "
+            f"{free_fig['test_points_cm']:.2f} cm, their own tape included); the robot drives "
             f"{ROBOT_FRAMES} frames…")
     simulate_frames(scene, root / "robot", path, seed=seed + 1)
     folder = read_frames_folder(root / "robot")
@@ -229,7 +280,8 @@ def _run(root: Path, seed: int, say) -> DemoResult:
     # the paper's (c): pair per region learned on the survey, NI-P spots, planned cameras
     nip_uv, _ = survey_spots(_with(planned, detector="nip"), bundle)
     paper_map = learn_region_map(planned.cameras, nip_uv, measured, planned.room)
-    deployments = {"planned": planned, "calibrated": result.deployment, "truth": truth}
+    deployments = {"planned": planned, "calibrated": free.deployment,
+                   "calibrated-tape": result.deployment, "truth": truth}
     rows, fixes_of = [], {}
     for label, which, detector, fusion in PIPELINES:
         dep = deployments[which]
@@ -244,13 +296,14 @@ def _run(root: Path, seed: int, say) -> DemoResult:
         rows.append(Row(label, *_stats(err[ok]), float(ok.mean()), len(sets) / dt))
         fixes_of[label] = fixes
     writer = FixWriter(str(root / "fixes.csv"))
-    writer.write(fixes_of["vlpcal: calibrated by the survey"])
+    writer.write(fixes_of["vlpcal: calibrated, free survey"])
     writer.close()
     demo_figure(root / "demo.png", site, path, fixes_of, planned.cameras,
-                ("paper: NI-P + (b) nearest pair", "vlpcal: calibrated by the survey"))
-    res = DemoResult(root, rows, planned_fig, survey_fig, len(sets), 0.0)
+                ("paper: NI-P + (b) nearest pair", "vlpcal: calibrated, free survey"))
+    res = DemoResult(root, rows, planned_fig, survey_fig, free_fig, len(sets), 0.0)
     summary = {"written_by": "vlpcal demo", "seed": seed, "site": site.name,
-               "planned": planned_fig, "survey": survey_fig, "robot_frames": len(sets),
+               "planned": planned_fig, "survey": survey_fig, "free_survey": free_fig,
+               "robot_frames": len(sets),
                "robot_height_m": ROBOT_HEIGHT,
                "pipelines": [vars(r) for r in rows], "files": {k: v[0] for k, v in REDO.items()},
                "redo": {k: v[1] for k, v in REDO.items() if v[1]}}

@@ -35,21 +35,53 @@ def quarter_counts(camera, uv) -> np.ndarray:
     return counts
 
 
-def camera_words(camera, uv) -> str:
-    """One camera's coverage in a few words: ``C3: 412 sightings, bottom-left quarter empty``."""
+#: a quarter of which less than this share sees the room's floor looks at walls: the LED
+#: cannot go there, and its emptiness is not the surveyor's to fix
+IN_ROOM_SHARE = 0.25
+
+
+def quarters_in_room(camera, room, height: float = 0.0) -> np.ndarray:
+    """``2×2`` [row, column]: the share of each image quarter that sees the room's floor
+    polygon ``room`` at ``height`` (an 8 × 8 grid of pixels per quarter)."""
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    poly = Polygon(room)
+    share = np.zeros((2, 2))
+    g = (np.arange(8) + 0.5) / 16  # within a half of the image
+    for (c, r) in QUARTERS:
+        u, v = np.meshgrid((c / 2 + g) * camera.width, (r / 2 + g) * camera.height)
+        d = camera.rays(np.c_[u.ravel(), v.ravel()])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (height - camera.position[2]) / d[:, 2]
+        ok = np.isfinite(t) & (t > 0)
+        xy = camera.center[:2] + t[:, None] * d[:, :2]
+        share[r, c] = float((ok & contains_xy(poly, xy[:, 0], xy[:, 1])).mean())
+    return share
+
+
+def camera_words(camera, uv, room=None) -> str:
+    """One camera's coverage in a few words: ``C3: 412 sightings, bottom-left quarter empty``;
+    with the floor polygon ``room``, quarters that look mostly outside it are not asked for."""
     counts = quarter_counts(camera, uv)
     total = int(counts.sum())
     if not total:
         return f"{camera.id}: never saw the LED"
-    mean = total / 4
+    inside = np.ones((2, 2)) if room is None else quarters_in_room(camera, room)
+    mean = total / max(int((inside >= IN_ROOM_SHARE).sum()), 1)
     gaps = []
     for (c, r), name in QUARTERS.items():
+        if inside[r, c] < IN_ROOM_SHARE:
+            continue
         if counts[r, c] == 0:
             gaps.append(f"{name} quarter empty")
         elif counts[r, c] < THIN_SHARE * mean:
             gaps.append(f"{name} quarter thin ({counts[r, c]})")
-    return f"{camera.id}: {total} sightings, " + (", ".join(gaps) if gaps else "every quarter "
-                                                  "covered")
+    walls = [name for (c, r), name in QUARTERS.items() if inside[r, c] < IN_ROOM_SHARE]
+    said = ", ".join(gaps) if gaps else "every quarter covered" if not walls else \
+        "every quarter over the room covered"
+    return (f"{camera.id}: {total} sightings, {said}"
+            + (f" ({', '.join(walls)} beyond the room)" if walls else ""))
 
 
 def pair_counts(cameras, uv) -> dict:

@@ -194,7 +194,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
         mine = np.asarray(uv_free)[cams.index(nom)]
         seen = int(np.isfinite(mine).all(axis=1).sum())
         rows.append({"camera": c.id, "spread_px": cal.spread_px[c.id], "free_sets_seen": seen,
-                     "coverage": camera_words(nom, mine),
+                     "coverage": camera_words(nom, mine, dep.room),
                      "quarter_sightings": quarter_counts(nom, mine).tolist(),
                      "rejected_spots": cal.rejected[c.id],
                      "moved_m": float(np.linalg.norm(np.subtract(c.position, nom.position))),
