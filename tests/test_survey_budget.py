@@ -94,3 +94,66 @@ def test_a_budget_out_of_reach_stops_at_the_cap_and_says_so(tmp_path):
                                    str(tmp_path / "q.csv"), "--step", "0.5"])
     assert res.exit_code == 0, res.output
     assert "without --step the grid is made finer" in res.output
+
+
+def test_survey_plan_bounded_and_one_line_on_degenerate_rigs(tmp_path):
+    """From a hostile probe: cameras at one spot (a singular triangulation), a step that would
+    lay a billion points, a step larger than the room, a huge sparse site — each one line or
+    a sentence, quickly, never a traceback or gigabytes."""
+    import time
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main as cli
+    from vlpcal.deployment import save
+
+    def plan(dep, *args):
+        save(dep, tmp_path / "d.yaml")
+        t0 = time.perf_counter()
+        res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "d.yaml"),
+                                       "--out", str(tmp_path / "p.csv"), *args])
+        assert time.perf_counter() - t0 < 60
+        assert res.exception is None or isinstance(res.exception, SystemExit), res.output
+        return res
+
+    one_spot = Deployment("same", 2.3, ROOM, [replace_id(c, f"C{i}") for i, c in
+                                              enumerate([rig()[1]] * 3)])
+    res = plan(one_spot)
+    assert res.exit_code == 0 and "no place is triangulated by two cameras" in res.output
+    res = plan(deployment(), "--step", "0.0005")
+    assert res.exit_code == 2 and "would lay about" in res.output
+    assert len(res.output.strip().splitlines()) == 1
+    res = plan(deployment(), "--step", "2000")
+    assert res.exit_code == 2 and "smaller than one grid cell" in res.output
+    # a kilometre of floor with a hundred cameras 100 m apart: only where they look is gridded
+    cams = [Camera(f"C{i}", 160, 120, 153.3, 153.3, 79.5, 59.5, (0, 0, 0, 0, 0),
+                   (50 + 100 * (i % 10), 50 + 100 * (i // 10), 30.0), (np.pi, 0, 0))
+            for i in range(100)]
+    res = plan(Deployment("km", 30.0, [[0, 0], [1000, 0], [1000, 1000], [0, 1000]], cams))
+    assert res.exit_code == 0, res.output
+
+
+def replace_id(cam, cid):
+    from dataclasses import replace
+
+    return replace(cam, id=cid)
+
+
+def test_heights_are_judged_relative_to_the_cameras(tmp_path):
+    import re
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main as cli
+    from vlpcal.deployment import save
+
+    said = set()
+    for s in (0.01, 1.0, 100.0):
+        save(deployment(s), tmp_path / "d.yaml")
+        res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "d.yaml"),
+                                       "--out", str(tmp_path / "p.csv"), "--heights",
+                                       f"0,{0.35 * s:g},{0.7 * s:g}", "--tape", f"{0.003 * s:g}"])
+        assert res.exit_code == 0, res.output
+        said.add((res.output.split()[0],  # the point count, and the predicted shares
+                  tuple(re.findall(r"(\d+) %", res.output))))
+    assert len(said) == 1, said

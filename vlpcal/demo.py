@@ -214,11 +214,7 @@ def _run(root: Path, seed: int, say) -> DemoResult:
                    "coverage": ev.coverage, "mean_cm": ev.mean * 100, "p95_cm": ev.p95 * 100}
 
     # 2. the install, as it really is
-    profile = replace(get_profile("paper-2024"), name=site.name,
-                      description="the demo's planned cameras, hung by hand",
-                      nominal=tuple(cand.cameras), room=tuple(map(tuple, site.room)),
-                      ceiling_height=site.ceiling_height, errors=DEMO_ERRORS)
-    scene = make_scene(profile, seed)
+    scene = hung(site, cand.cameras, seed)
     truth = deployment_of(scene, "true")
     save(truth, root / "installed-truth.yaml",
          header="The cameras as really hung (simulated; for evaluation only).")
@@ -309,6 +305,16 @@ def _run(root: Path, seed: int, say) -> DemoResult:
                "redo": {k: v[1] for k, v in REDO.items() if v[1]}}
     write_text(root / "summary.json", json.dumps(summary, indent=2))
     return res
+
+
+def hung(site, cameras, seed: int = 0):
+    """The demo's install as a simulated scene: ``cameras`` planned for ``site``, hung with
+    :data:`DEMO_ERRORS` (the free-survey benchmark times its calibration on the same)."""
+    profile = replace(get_profile("paper-2024"), name=site.name,
+                      description="the demo's planned cameras, hung by hand",
+                      nominal=tuple(cameras), room=tuple(map(tuple, site.room)),
+                      ceiling_height=site.ceiling_height, errors=DEMO_ERRORS)
+    return make_scene(profile, seed)
 
 
 def _with(dep: Deployment, detector: str, fusion: str | None = None, region_map=None

@@ -72,9 +72,10 @@ def survey_plan(deployment_path, out, step, heights, free, references, min_per_c
     if references is not None and not free:
         raise click.BadParameter("is for a free survey (--free)", param_hint="--references")
     hs = _floats(heights or "0,0.35,0.7", "--heights")
-    if len(hs) < 2 or any(not 0 <= h < dep.ceiling_height - 0.3 for h in hs):
-        raise click.BadParameter(f"expected two or more heights from 0 to "
-                                 f"{dep.ceiling_height - 0.3:g} m, got {heights!r}",
+    top = 0.9 * min(c.position[2] for c in dep.cameras)  # below the cameras, in their view
+    if len(hs) < 2 or any(not 0 <= h < top for h in hs):
+        raise click.BadParameter(f"expected two or more heights from 0 to below {top:g} m "
+                                 f"(nine tenths of the lowest camera's), got {heights!r}",
                                  param_hint="--heights")
     route = None
     try:
@@ -109,6 +110,11 @@ def survey_plan(deployment_path, out, step, heights, free, references, min_per_c
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
                f"(grid {format_length(plan.step)}) → {out}, map {out.with_suffix('.png')}")
     click.echo(budget_sentence(plan, chosen=step is None))
+    few = [f"{cid} {int(n)}" for cid, n in zip(plan.camera_ids, plan.seen.sum(axis=1))
+           if n < min_per_camera]
+    if few:
+        click.echo(f"note: fewer points than --min-per-camera {min_per_camera} (the finest grid "
+                   f"gives no more): {', '.join(few)}")
     ids = plan.camera_ids
     for k, cid in enumerate(ids):
         shared = [(ids[j], int((plan.seen[k] & plan.seen[j]).sum())) for j in range(len(ids))

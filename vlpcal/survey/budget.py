@@ -24,6 +24,11 @@ from .lens import lens_params, project_with_jacobian
 BUDGET_MODEL = "k1"
 
 
+#: a site of more cameras is judged on the block of this many around its middle camera: the
+#: cost of a survey is local (each camera's points), and the prediction stays bounded
+LOCAL_CAMERAS = 9
+
+
 def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
                       model: str = BUDGET_MODEL, margin_px: float = 5.0,
                       draws: int = 400) -> tuple[float, float]:
@@ -32,25 +37,46 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
     with exact cameras: (median, 95th percentile) over ``draws`` surveys. A survey's tape
     errors are one draw: the cameras it leaves are off in one direction for every fix, so the
     ratio varies from survey to survey and both figures matter. (NaN, NaN) when no test
-    point is seen by two cameras. Deterministic (a fixed seed)."""
-    cams = list(cameras)
+    point is seen by two cameras that triangulate it. Deterministic (a fixed seed)."""
+    nan = (float("nan"), float("nan"))
+    cams = _local_block(list(cameras))
     survey_xyz = np.asarray(survey_xyz, float).reshape(-1, 3)
     test_xyz = np.asarray(test_xyz, float).reshape(-1, 3)
     npar = 6 + len(lens_params(model))
     P = len(cams) * npar
     n = len(survey_xyz)
+    # the joint normal matrix: cameras (P × P) and the points' 3 × 3 blocks; each camera's
+    # coupling to the points it sees, kept per camera (a point is seen by few cameras)
     A_cc = np.zeros((P, P))
-    A_cp = np.zeros((P, n, 3))
     A_pp = np.broadcast_to(np.eye(3) / tape ** 2, (n, 3, 3)).copy()
+    seen_by, couple = [], []
     for k, cam in enumerate(cams):
         idx = np.flatnonzero(cam.project(survey_xyz, margin=margin_px)[2])
         _, Jc, Jp = project_with_jacobian(cam, survey_xyz[idx], model)
         Jc, Jp = Jc / spot, Jp / spot
         s = slice(k * npar, (k + 1) * npar)
         A_cc[s, s] += np.einsum("nai,naj->ij", Jc, Jc)
-        A_cp[s, idx, :] += np.einsum("nai,naj->inj", Jc, Jp)
         A_pp[idx] += np.einsum("nai,naj->nij", Jp, Jp)
-    schur = A_cc - np.einsum("inj,njk,lnk->il", A_cp, np.linalg.inv(A_pp), A_cp)
+        seen_by.append(idx)
+        couple.append(np.einsum("nai,naj->nij", Jc, Jp))  # n_k × npar × 3
+    P_inv = _inverse(A_pp)
+    if P_inv is None:
+        return nan
+    # Schur complement, pair by pair over the points both cameras see
+    schur = A_cc
+    for k in range(len(cams)):
+        mine = {p: i for i, p in enumerate(seen_by[k])}
+        W = np.einsum("nij,njk->nik", couple[k], P_inv[seen_by[k]])  # n_k × npar × 3
+        for j in range(k, len(cams)):
+            both = np.intersect1d(seen_by[k], seen_by[j], assume_unique=True)
+            if not len(both):
+                continue
+            a = np.array([mine[p] for p in both])
+            b = np.searchsorted(seen_by[j], both)
+            block = np.einsum("nik,njk->ij", W[a], couple[j][b])
+            schur[k * npar:(k + 1) * npar, j * npar:(j + 1) * npar] -= block
+            if j != k:
+                schur[j * npar:(j + 1) * npar, k * npar:(k + 1) * npar] -= block.T
 
     info = np.zeros((len(test_xyz), 3, 3))
     mix = np.zeros((len(test_xyz), 3, P))
@@ -63,15 +89,21 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
         mix[:, :, k * npar:(k + 1) * npar] += np.einsum("nai,naj->nij", Jp, Jc)
         views += seen
     ok = views >= 2
+    if ok.any():  # two cameras that see a place from one spot do not triangulate it
+        w = np.linalg.eigvalsh(info[ok])
+        ok[ok] = w[:, 0] > 1e-9 * w[:, -1]
     if not ok.any():
-        return float("nan"), float("nan")
+        return nan
     F_inv = np.linalg.inv(info[ok])
     D = -np.einsum("nij,njp->nip", F_inv, mix[ok])  # how a fix moves with the cameras
     # draws of the cameras' error (covariance schur⁻¹; its parameters scaled to unit
     # information first, so that metres, radians and pixels weigh alike at any scale) and of
     # the fixes' own spot noise
     d = 1.0 / np.sqrt(np.maximum(np.diag(schur), 1e-300))
-    w, V = np.linalg.eigh(schur * d[:, None] * d[None, :])
+    try:
+        w, V = np.linalg.eigh(schur * d[:, None] * d[None, :])
+    except np.linalg.LinAlgError:
+        return nan
     keep = w > w.max() * 1e-12
     rng = np.random.default_rng(0)
     theta = d[:, None] * ((V[:, keep] / np.sqrt(w[keep]))
@@ -83,3 +115,22 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
     ratio = (np.linalg.norm(noise + shift, axis=2).mean(axis=1)
              / np.linalg.norm(noise, axis=2).mean(axis=1))
     return float(np.median(ratio)), float(np.quantile(ratio, 0.95))
+
+
+def _inverse(blocks):
+    """Inverses of 3 × 3 blocks, or None if one is not invertible."""
+    try:
+        return np.linalg.inv(blocks)
+    except np.linalg.LinAlgError:
+        return None
+
+
+def _local_block(cams: list) -> list:
+    """The :data:`LOCAL_CAMERAS` cameras nearest the site's middle camera (all of them on a
+    small site)."""
+    if len(cams) <= LOCAL_CAMERAS:
+        return cams
+    xy = np.array([c.position[:2] for c in cams])
+    middle = np.argmin(np.linalg.norm(xy - np.median(xy, axis=0), axis=1))
+    near = np.argsort(np.linalg.norm(xy - xy[middle], axis=1), kind="stable")[:LOCAL_CAMERAS]
+    return [cams[i] for i in sorted(near)]

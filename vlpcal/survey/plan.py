@@ -86,19 +86,27 @@ def plan_survey(deployment, step: float | None = None, heights=(0.0, 0.35, 0.7),
                       tape, spot_noise)
     tried: list = []
     while not plan.meets_budget:
+        if len(plan.ids) * 2 > MAX_PLANNED_POINTS:  # the next grid has about twice the points
+            plan.capped = True
+            break
         finer = _plan_grid(deployment, step / np.sqrt(2), heights, min_per_camera,
-                           min_per_pair, margin_px, tape, spot_noise)
+                           min_per_pair, margin_px, tape, spot_noise, predict=False)
         if len(finer.ids) > MAX_PLANNED_POINTS:
             plan.capped = True
             break
+        _predict(finer, deployment, heights, margin_px)
         tried.append((plan.step, len(plan.ids), *plan.predicted))
         step, plan = step / np.sqrt(2), finer
     plan.coarser = tried
     return plan
 
 
+#: a grid of more points than this is refused before it is built (memory and time)
+MAX_GRID_POINTS = 50_000
+
+
 def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_px, tape,
-               spot_noise) -> SurveyPlan:
+               spot_noise, predict: bool = True) -> SurveyPlan:
     """:func:`plan_survey` at a stated grid spacing, with its predicted calibration."""
     from shapely import contains_xy
     from shapely.geometry import Polygon
@@ -110,8 +118,18 @@ def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_p
     room = Polygon(deployment.room)
     for poly in deployment.keep_out:
         room = room.difference(Polygon(poly))
-    if room.is_empty or room.area < (step / 2) ** 2:
+    if room.is_empty:
         raise SurveyError("the keep-out areas leave no floor to survey")
+    room = room.intersection(_views_box(deployment.cameras, min(heights), room))  # in view
+    if room.is_empty:
+        raise SurveyError("no camera looks at the room's floor")
+    if room.area < (step / 2) ** 2:
+        raise SurveyError(f"the floor ({room.area:.3g} m²) is smaller than one grid cell of "
+                          f"{step:g} m: choose a finer step")
+    count = room.area / step ** 2 * len(heights)
+    if count > MAX_GRID_POINTS:
+        raise SurveyError(f"a grid step of {step:g} m would lay about {count:.3g} points "
+                          f"(at most {MAX_GRID_POINTS}): choose a coarser step")
     cams = deployment.cameras
 
     def grid(s, offset=0.0):
@@ -127,34 +145,80 @@ def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_p
     pts = np.concatenate([np.c_[grid(step), np.full(len(grid(step)), h)] for h in heights])
     pts = pts[seen_by(pts).any(axis=0)]
     # where a camera or an overlapping pair has too few points: add a finer grid there
+    quantum = step * 1e-6  # points closer than this are one (relative: any scale alike)
     for level in (2, 4):
-        seen = seen_by(pts)
+        seen = seen_by(pts).astype(np.float32)
+        shared = seen @ seen.T  # points each pair of cameras shares
+        short = np.diag(shared) < min_per_camera
         fine_xy = grid(step / level, step / (2 * level))
         fine = np.concatenate([np.c_[fine_xy, np.full(len(fine_xy), h)] for h in heights])
-        fine_seen = seen_by(fine)
-        want = np.zeros(len(fine), bool)
-        for k in range(len(cams)):
-            if seen[k].sum() < min_per_camera:
-                want |= fine_seen[k]
-            for j in range(k + 1, len(cams)):
-                both = fine_seen[k] & fine_seen[j]
-                if both.any() and (seen[k] & seen[j]).sum() < min_per_pair:
-                    want |= both
+        # only cameras that lack points, alone or with a neighbour, ask for the finer grid
+        near = short | (shared < min_per_pair).any(axis=1)
+        if not near.any():
+            break
+        fine_seen = np.zeros((len(cams), len(fine)), np.float32)
+        fine_seen[near] = np.stack([cams[k].project(fine, margin=margin_px)[2]
+                                    for k in np.flatnonzero(near)])
+        overlap = (fine_seen @ fine_seen.T) > 0
+        lacking = overlap & (shared < min_per_pair)  # overlapping pairs short of shared points
+        np.fill_diagonal(lacking, False)
+        want = (fine_seen[short] > 0).any(axis=0) | \
+            ((fine_seen.T @ lacking.astype(np.float32)) * fine_seen.T > 0).any(axis=1)
         if not want.any():
             break
-        pts = np.unique(np.concatenate([pts, fine[want]]).round(6), axis=0)
+        pts = np.concatenate([pts, fine[want]])
+        _, first = np.unique(np.round(pts / quantum), axis=0, return_index=True)
+        pts = pts[np.sort(first)]
     seen = seen_by(pts)
     for k, cam in enumerate(cams):
         if seen[k].sum() < MIN_POINTS_POSE:
             raise SurveyError(f"camera {cam.id}: sees only {int(seen[k].sum())} points of the "
-                              "room at these heights (is it looking at the floor?)")
-    order = _walking_order(pts)
+                              "room at these heights (is it looking at the floor, or is the "
+                              "grid step too coarse for its view?)")
+    order = _walking_order(pts, quantum)
     pts, seen = pts[order], seen[:, order]
     ids = [f"S{i + 1:04d}" for i in range(len(pts))]
-    predicted = calibration_ratio(cams, pts, _fix_places(room, heights, step), tape,
-                                  spot_noise, margin_px=margin_px)
-    return SurveyPlan(ids, pts, seen, [c.id for c in cams], float(step), predicted,
-                      float(tape), float(spot_noise))
+    plan = SurveyPlan(ids, pts, seen, [c.id for c in cams], float(step), tape=float(tape),
+                      spot_noise=float(spot_noise))
+    if predict:
+        _predict(plan, deployment, heights, margin_px)
+    return plan
+
+
+def _views_box(cams, height: float, room):
+    """Where on the floor (at ``height``) the cameras look: the union of each camera's view's
+    bounding box — a grid beyond it would be points no camera sees."""
+    from shapely import union_all
+    from shapely.geometry import Polygon, box
+
+    boxes = []
+    for c in cams:
+        u = np.array([0.0, c.width - 1.0, c.width - 1.0, 0.0, (c.width - 1) / 2])
+        v = np.array([0.0, 0.0, c.height - 1.0, c.height - 1.0, (c.height - 1) / 2])
+        d = c.rays(np.c_[u, v])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (height - c.position[2]) / d[:, 2]
+        ok = np.isfinite(t) & (t > 0)
+        if ok.sum() < 4:  # a view that does not meet the floor all round: the whole room
+            boxes.append(room.envelope)
+            continue
+        xy = c.center[:2] + t[ok, None] * d[ok, :2]
+        (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+        pad = 0.05 * max(x1 - x0, y1 - y0)
+        boxes.append(box(x0 - pad, y0 - pad, x1 + pad, y1 + pad))
+    return union_all(boxes) if boxes else Polygon()
+
+
+def _predict(plan: SurveyPlan, deployment, heights, margin_px) -> None:
+    """Set ``plan.predicted``: what calibrating from it costs the fixes."""
+    from shapely.geometry import Polygon
+
+    room = Polygon(deployment.room)
+    for poly in deployment.keep_out:
+        room = room.difference(Polygon(poly))
+    plan.predicted = calibration_ratio(deployment.cameras, plan.xyz,
+                                       _fix_places(room, heights, plan.step), plan.tape,
+                                       plan.spot_noise, margin_px=margin_px)
 
 
 #: at most this many places judge a survey's predicted calibration
@@ -179,16 +243,17 @@ def _fix_places(room, heights, step) -> np.ndarray:
     return pts
 
 
-def _walking_order(pts: np.ndarray) -> np.ndarray:
+def _walking_order(pts: np.ndarray, quantum: float) -> np.ndarray:
     """The order an installer walks the points: height by height, row by row (rows of equal
     y), each row entered from the end nearer to where the last one left off — a serpentine
     even where the finer grid makes rows of unequal extent."""
     order: list = []
     x_at = None
-    for z in np.unique(np.round(pts[:, 2], 6)):
-        on = np.flatnonzero(np.isclose(pts[:, 2], z))
-        for y in np.unique(np.round(pts[on, 1], 4)):
-            row = on[np.isclose(np.round(pts[on, 1], 4), y)]
+    key = np.round(pts / quantum).astype(np.int64)  # equal heights and rows, at any scale
+    for z in np.unique(key[:, 2]):
+        on = np.flatnonzero(key[:, 2] == z)
+        for y in np.unique(key[on, 1]):
+            row = on[key[on, 1] == y]
             row = row[np.argsort(pts[row, 0], kind="stable")]
             if x_at is not None and abs(pts[row[-1], 0] - x_at) < abs(pts[row[0], 0] - x_at):
                 row = row[::-1]
@@ -252,7 +317,7 @@ def plan_references(deployment, count: int | None = None, heights=None,
             farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(pairs)))
     farthest(np.arange(len(cand)), max(0, count - len(chosen)))
     pts = cand[chosen[:count]]
-    order = _walking_order(pts)
+    order = _walking_order(pts, step * 1e-6)
     pts = pts[order]
     seen = np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
     return SurveyPlan([f"R{i + 1:02d}" for i in range(len(pts))], pts, seen,
@@ -267,8 +332,8 @@ def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
     typical, unlucky = plan.predicted
     given = f"at ±{format_length(plan.tape)} per axis and {plan.spot_noise:g} px spots"
     if not np.isfinite(typical):
-        return (f"{given}: no place is seen by two cameras, so what the survey costs the fixes "
-                "cannot be predicted")
+        return (f"{given}: no place is triangulated by two cameras (none overlap, or they "
+                "stand at one spot), so what the survey costs the fixes cannot be predicted")
     said = (f"{given}, calibrating from these points is predicted to add "
             f"{100 * (typical - 1):.0f} % to the fixes' mean error "
             f"({100 * (unlucky - 1):.0f} % for an unlucky tape)")
