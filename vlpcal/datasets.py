@@ -381,6 +381,45 @@ def read_frames_folder(root) -> FramesFolder:
     return FramesFolder(root, sorted(ids, key=order), sorted(cams, key=order), files)
 
 
+@dataclass
+class AsyncFrames:
+    """An asynchronous frames folder (issue 16): ``<camera_id>/<frame_no>.jpg`` and
+    ``times.csv`` (``camera_id,frame_no,t``: capture time, s, on one clock). ``events``: (t,
+    camera id, frame number) in time order; frames are read on demand."""
+
+    root: Path
+    events: list
+    camera_ids: list
+
+    def frame(self, camera_id: str, frame_no: str) -> bytes | None:
+        path = self.root / camera_id / f"{frame_no}.jpg"
+        return read_frame(path) if path.is_file() else None
+
+
+def read_async_frames(root) -> AsyncFrames:
+    """Read an asynchronous frames folder's ``times.csv`` (files are read on demand; a listed
+    frame whose file is missing reads as None, a missing camera: that camera sent nothing)."""
+    root = Path(root)
+    times = root / "times.csv"
+    if not times.is_file():
+        raise DatasetError(f"{root}: no times.csv (expected <camera_id>/<frame_no>.jpg and "
+                           "times.csv with camera_id,frame_no,t)")
+    events, seen = [], set()
+    for n, row in enumerate(_read_csv(times, ("camera_id", "frame_no", "t")), start=2):
+        where = f"{times} line {n}"
+        cid = _check_id((row["camera_id"] or "").strip(), f"{where} camera_id")
+        no = _check_id((row["frame_no"] or "").strip(), f"{where} frame_no")
+        if (cid, no) in seen:
+            raise DatasetError(f"{where}: camera {cid!r} frame {no!r} is listed twice")
+        seen.add((cid, no))
+        events.append((_finite(row["t"], f"{where} t"), cid, no))
+    if not events:
+        raise DatasetError(f"{times}: no frames listed")
+    events.sort(key=lambda e: (e[0], e[1]))
+    order = lambda t: (natural_key(t), t)  # noqa: E731
+    return AsyncFrames(root, events, sorted({c for _, c, _ in events}, key=order))
+
+
 def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:
     """Ground truth beside simulated frames: ``<id_column>,x,y,z`` in metres."""
     from .writing import OutputSet

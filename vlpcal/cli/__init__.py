@@ -5,6 +5,7 @@ calls the layers below.
 - :mod:`.plan`: the installer (``plan``, ``check``);
 - :mod:`.survey`: the surveyor (``survey plan | capture | calibrate``);
 - :mod:`.locate`: the integrator (``locate``);
+- :mod:`.track`: a moving LED from unsynchronised cameras (``track``);
 - :mod:`.interchange`: other tools' camera files (``export``, ``import``);
 - :mod:`.demo`: the demo and the simulator (``demo``, ``simulate``);
 - :mod:`.show`: what a deployment holds (``show``).
@@ -13,7 +14,7 @@ Heavy modules (cv2, scipy, matplotlib) are imported inside commands, so ``vlpcal
 starts fast.
 """
 
-from . import demo, interchange, locate, plan, show, survey  # noqa: F401  (registers them)
+from . import demo, interchange, locate, plan, show, survey, track  # noqa: F401  (registers)
 from .common import UserError, main
 
 __all__ = ["UserError", "main"]

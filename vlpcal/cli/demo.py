@@ -30,16 +30,23 @@ from .common import Finite, UserError, _floats, main
               help="The free survey's LED on a robot at this height, m (instead of a pole).")
 @click.option("--references", type=click.IntRange(2, 200), default=None,
               help="Reference points of the free survey (default: as survey plan --free).")
+@click.option("--robot-speed", type=Finite(0.0, 50.0, min_open=True), default=None,
+              help="Also a robot's LED driving at this speed, m/s, seen by unsynchronised "
+                   "cameras (OUT/streams/: <camera_id>/<frame_no>.jpg and times.csv, 30 fps "
+                   "each from a random phase, 2 ms jitter, 5 % dropped) for vlpcal track.")
+@click.option("--seconds", default=10.0, show_default=True, type=Finite(0.1, 600.0),
+              help="With --robot-speed: how long the robot drives.")
 @click.option("--overwrite", is_flag=True, help="Replace what is in --out.")
 @click.option("--describe", is_flag=True, help="Print the profile's parameters and sources.")
 def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, trajectory,
-             free_sets, free_height, references, overwrite, describe):
+             free_sets, free_height, references, robot_speed, seconds, overwrite, describe):
     """Simulate an install: nominal and true deployments, a survey bundle, a frames folder.
 
     Writes OUT/nominal.yaml (the cameras as planned), OUT/truth.yaml (as really installed, for
     evaluation), OUT/survey/ (a survey bundle, tape-measure noise on points.csv),
     OUT/frames/ (a locate frames folder) and OUT/frames.truth.csv; with --free-sets, a free
-    survey OUT/free-survey/ (reference points and free/ sets).
+    survey OUT/free-survey/ (reference points and free/ sets); with --robot-speed, a moving
+    robot's LED seen by unsynchronised cameras, OUT/streams/ (for vlpcal track).
 
     Example: vlpcal simulate --profile cheap-wide --seed 3 --out sim-cheap
     """
@@ -94,11 +101,19 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
         stage.chmod(0o755)
         _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
                        references, trajectory, test_points)
+        if robot_speed:
+            from ..sim.streams import robot_path, simulate_streams
+
+            simulate_streams(scene, stage / "streams", robot_path(scene, robot_speed, seed=seed),
+                             seconds, seed=seed)
+            click.echo(f"streams: a robot at {robot_speed:g} m/s for {seconds:g} s, cameras "
+                       f"not synchronised → {out / 'streams'} (truth in "
+                       f"{out / 'streams.truth.csv'})")
 
 
 #: what vlpcal simulate writes in its --out folder
 SIMULATED = {"nominal.yaml", "truth.yaml", "survey", "frames", "frames.truth.csv",
-             "free-survey"}
+             "free-survey", "streams", "streams.truth.csv"}
 
 
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,

@@ -1,0 +1,101 @@
+"""Cameras that are not synchronised, watching a moving LED (issue 16): each camera captures at
+its own rate and phase, with jitter and dropped frames, and its clock runs with its own offset
+and drift. Written as DESIGN.md's asynchronous frames folder:
+
+    DIR/<camera_id>/<frame_no>.jpg
+    DIR/times.csv            camera_id,frame_no,t   (capture time, s, on one clock)
+
+and ``DIR.truth.csv`` beside it (``camera_id,frame_no,t,x,y,z``: where the LED was)."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .scene import CHUNK_PIXELS, STREAM_FRAMES, Scene, render_camera
+from .writers import trajectory
+
+
+@dataclass(frozen=True)
+class Timing:
+    """How one camera's frames fall in time."""
+
+    fps: float = 30.0
+    jitter: float = 0.002  #: s, 1 sigma, of each capture time about the camera's schedule
+    drop: float = 0.05  #: share of frames lost
+    offset: float = 0.0  #: s, the camera's clock minus the host's
+    drift: float = 0.0  #: s per s, the camera's clock rate error
+
+
+def robot_path(scene: Scene, speed: float, height: float = 0.15, seed: int = 0):
+    """A robot's LED driving the closed loop of :func:`~.writers.trajectory` at ``speed`` m/s:
+    a function of time (s, any array) → positions ``N×3``."""
+    loop = trajectory(scene, 4000, height, seed)
+    seg = np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1)
+    s = np.r_[0.0, np.cumsum(seg)]
+    closed = np.vstack([loop, loop[:1]])
+    length = s[-1]
+
+    def at(t):
+        d = np.mod(speed * np.asarray(t, float), length)
+        return np.stack([np.interp(d, s, closed[:, i]) for i in range(3)], axis=-1)
+
+    return at
+
+
+def capture_times(timing: Timing, duration: float, rng) -> np.ndarray:
+    """One camera's capture times (s, the true clock) over ``duration``: its schedule at
+    ``fps`` from a random phase, jittered, with ``drop`` of the frames lost."""
+    period = 1.0 / timing.fps
+    n = int(duration / period) + 1
+    t = rng.uniform(0, period) + period * np.arange(n) + rng.normal(0, timing.jitter, n)
+    keep = (rng.random(n) >= timing.drop) & (t >= 0) & (t < duration)
+    return np.sort(t[keep])
+
+
+def simulate_streams(scene: Scene, root, path, duration: float, timings: dict | None = None,
+                     seed: int = 0) -> dict:
+    """Render every true camera's frames of the LED at ``path(t)`` for ``duration`` s, each
+    camera on its own :class:`Timing` (``timings``: camera id → Timing; default 30 fps, 2 ms
+    jitter, 5 % dropped), and write the asynchronous frames folder ``root``. Returns camera id
+    → (frame numbers, capture times, true positions)."""
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng([scene.seed, seed, STREAM_FRAMES, 16])
+    out = {}
+    rows = []
+    truth = []
+    for k, cam in enumerate(scene.true):
+        timing = (timings or {}).get(cam.id, Timing())
+        t = capture_times(timing, duration, rng)
+        X = path(t)
+        rngs = [np.random.default_rng([scene.seed, seed, STREAM_FRAMES, 16, k + 1, i + 1])
+                for i in range(len(t))]
+        from .render import encode_jpeg
+
+        folder = root / cam.id
+        folder.mkdir(exist_ok=True)
+        step = max(1, CHUNK_PIXELS // (cam.width * cam.height))
+        for s in range(0, len(t), step):
+            imgs, _ = render_camera(cam, X[s:s + step], scene.profile.look, rngs[s:s + step])
+            for i, img in enumerate(imgs, start=s):
+                (folder / f"{i:06d}.jpg").write_bytes(encode_jpeg(img, scene.profile.look
+                                                                  .jpeg_quality))
+        clock = timing.offset + (1 + timing.drift) * t  # as the camera's clock says
+        nos = [f"{i:06d}" for i in range(len(t))]
+        rows += [(cam.id, n, f"{c:.6f}") for n, c in zip(nos, clock)]
+        truth += [(cam.id, n, f"{tt:.6f}", *(f"{v:.6f}" for v in x))
+                  for n, tt, x in zip(nos, t, X)]
+        out[cam.id] = (nos, t, X)
+    with open(root / "times.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(("camera_id", "frame_no", "t"))
+        w.writerows(rows)
+    with open(root.with_name(root.name + ".truth.csv"), "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(("camera_id", "frame_no", "t", "x", "y", "z"))
+        w.writerows(truth)
+    return out
