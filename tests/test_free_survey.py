@@ -261,3 +261,22 @@ def test_coverage_words_name_empty_quarters_but_not_walls():
     both = np.full((2, 20, 2), np.nan)
     both[0], both[1, :5] = 50.0, 60.0
     assert pair_words(cams, both) == "pairs: 0 of 1 linked; not yet: C1+C2 5"
+
+
+def test_two_references_on_a_robot_assume_a_tape_and_keep_the_lens(free_case):
+    """From a new user's walk: a robot's free survey with two references used to fit the lens
+    and report ±0.06 mm references and a 0.1 mm datum floor, with the cameras 25 cm off. Two
+    references cannot show their own scatter (a tape's ±3 mm is assumed, and said), and cannot
+    fix a lens the robot's one plane leaves open (kept as in the deployment, and said)."""
+    true, refs, measured, free, uv_r, uv_f = free_case
+    rng = np.random.default_rng(5)
+    robot = np.c_[free[:, :2], np.full(len(free), 0.15)]
+    uv_robot = _spots(true, robot, rng)
+    nominal = [_off(c, rng, 0.03, 2.0) for c in true]
+    cal = calibrate_free(nominal, measured[:2], uv_r[:, :2], ["R0", "R1"], uv_robot,
+                         free_height=0.15)
+    assert cal.point_sigma_assumed and cal.point_sigma == pytest.approx(0.003)
+    assert set(cal.models) == {"pose"}
+    assert any("assumed" in n for n in cal.notes) and any("pose only" in n for n in cal.notes)
+    assert cal.datum_floor > 0.001  # two taped points cannot fix the room to a tenth of a mm
+    assert _error(cal.cameras, true, np.random.default_rng(2)) < 0.01

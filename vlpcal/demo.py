@@ -237,7 +237,8 @@ def _run(root: Path, seed: int, say) -> DemoResult:
     uv, notes = survey_spots(planned, bundle)
     minutes = FREE_SETS / FREE_RATE / 60
     step(3, f"free survey: {len(refs.ids)} reference points measured, the LED carried for "
-            f"{minutes:g} min ({FREE_SETS} moments); calibrating from it, and from a "
+            f"{minutes:g} min ({FREE_SETS} moments, {len(free_bundle.free_ids)} with the LED "
+            f"in a camera's view); calibrating from it, and from a "
             f"{len(sp.ids)}-point tape survey for comparison…")
     uv_ref, free_notes = survey_spots(planned, free_bundle)
     uv_free, more = free_spots(planned, free_bundle)

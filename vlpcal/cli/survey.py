@@ -408,7 +408,8 @@ class PointSigma(click.ParamType):
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The nominal deployment (as installed).")
 @click.option("--survey", "survey_path", required=True, type=click.Path(file_okay=False),
-              help="Survey bundle: points.csv and frames/ (or observations.csv).")
+              help="Survey bundle: points.csv and frames/ (or observations.csv); with free/, a "
+                   "free survey (the LED moved freely, points.csv its reference points).")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="Calibrated deployment to write; a report (.report.json, .png) goes beside.")
 @click.option("--lens", default="auto", show_default=True,
@@ -589,8 +590,11 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                + f"); {sum(cal.rejected.values())} spots rejected, {cal.dropped_sets} sets of "
                "two views that disagree dropped; references ±"
                f"{cal.point_sigma * 1000:.2g} mm per axis ("
-               + ("estimated" if cal.point_sigma_estimated else "as stated")
+               + ("estimated" if cal.point_sigma_estimated else
+                  "assumed" if cal.point_sigma_assumed else "as stated")
                + f"), spots ±{cal.pixel_sigma:.3g} px")
+    for note in cal.notes:
+        click.echo(f"note: {note}")
     for words in result.lens:
         click.echo(f"  {words}")
     click.echo(f"\n{'camera':8s} {'spread px':>9s} {'free sets':>9s} {'rejected':>8s} "

@@ -17,7 +17,7 @@ kept) against its measured position, the free spots' reprojection spread per cam
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,6 +30,10 @@ from .lens import LENS_MODELS
 MIN_SHARED = 8
 #: a spot farther from its fitted position than this many spot-noise sigmas is rejected
 REJECT_SIGMAS = 5.0
+#: reference coordinates beyond the datum's that a precision estimate needs …
+MIN_REDUNDANT = 6
+#: … else this precision (a tape measure, per axis, m) is assumed and said
+ASSUMED_TAPE = 0.003
 
 
 @dataclass
@@ -50,6 +54,8 @@ class FreeCalibration:
     leave_one_out: np.ndarray  #: per reference: m from its record, fitted without it (NaN)
     datum_floor: float  #: m, predicted RMS error of the frame the references fix
     dropped_sets: int = 0  #: free sets of two views that disagree (which is wrong: unknown)
+    notes: list = field(default_factory=list)  #: what was assumed or limited, in words
+    point_sigma_assumed: bool = False  #: too few references to estimate it: a tape's assumed
 
 
 def datum_floor(references, sigma: float, where, free_height: bool = False) -> float:
@@ -164,6 +170,29 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
     _check_references(X, seen_r, free_height)
     estimated = isinstance(point_sigma, str)
     stated = None if estimated else float(point_sigma)
+    notes: list = []
+    assumed = False
+    n_ref = int(seen_r.any(axis=0).sum())
+    datum = 4 if free_height is not None else 7  # what the references must fix first
+    if estimated and 3 * n_ref - datum < MIN_REDUNDANT:
+        # too few references to show their own scatter: a tape's precision is assumed
+        stated, estimated, assumed = ASSUMED_TAPE, False, True
+        notes.append(f"{n_ref} reference points cannot show how precisely they were measured "
+                     f"(they have {max(3 * n_ref - datum, 0)} coordinates beyond what fixes the "
+                     f"room): ±{ASSUMED_TAPE * 1000:g} mm (a tape) assumed; state --point-sigma, "
+                     "or measure more points")
+    if lens == "auto" and free_height is not None:
+        # a robot's LED shows each camera one plane: the references must fix the rest of its
+        # lens, which needs three or more of them in its view at two heights or more
+        weak = [ids_c[k] for k in range(C)
+                if seen_r[k].sum() < 3 or np.ptp(X[seen_r[k], 2]) <= 0]
+        if weak:
+            lens = "pose"
+            notes.append(f"lens kept as in the deployment (pose only): camera"
+                         f"{'s' if len(weak) > 1 else ''} {', '.join(weak)} "
+                         f"{'see' if len(weak) > 1 else 'sees'} fewer than three reference "
+                         "points at two heights, and a robot's LED at one height cannot fix a "
+                         "lens alone")
     step = 0
     total = 5 + N
 
@@ -276,7 +305,8 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
             choices.append(_lens_choice(fit, cam.id, True, {}, adj[idx]))
     return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
                            estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum()),
-                           rejected, spread, loo, floor, dropped)
+                           rejected, spread, loo, floor, dropped, notes,
+                           assumed)
 
 
 def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 1200,

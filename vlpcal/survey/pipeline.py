@@ -150,7 +150,7 @@ class FreeSurveyResult:
                 "precision": {"point_sigma_m": cal.point_sigma,
                               "estimated": cal.point_sigma_estimated,
                               "pixel_sigma_px": cal.pixel_sigma},
-                "notes": list(notes)}
+                "notes": list(notes) + list(cal.notes)}
         if self.test_points is not None:
             out["test_points"] = self.test_points
         return out

@@ -312,9 +312,18 @@ def plan_references(deployment, count: int | None = None, heights=None,
                 centre = cand[pool, :2].mean(axis=0)
                 chosen.append(int(free[np.argmax(np.linalg.norm(cand[free, :2] - centre, axis=1))]))
 
-    if not triples:  # every overlap gets its share (two at least, at both heights)
-        for k, j in pairs:
-            farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(pairs)))
+    if not triples:  # every overlap gets its share (two at least, at both heights) — or, with
+        # more overlaps than the count allows, overlaps spread over the room do
+        served = pairs
+        if 2 * len(pairs) > count:
+            centre = np.array([cand[seen[k] & seen[j], :2].mean(axis=0) for k, j in pairs])
+            pick = [int(np.argmin(np.linalg.norm(centre - centre.mean(axis=0), axis=1)))]
+            while len(pick) < max(1, count // 2):
+                d = np.min(np.linalg.norm(centre[:, None] - centre[None, pick], axis=2), axis=1)
+                pick.append(int(np.argmax(d)))
+            served = [pairs[i] for i in sorted(set(pick))]
+        for k, j in served:
+            farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(served)))
     farthest(np.arange(len(cand)), max(0, count - len(chosen)))
     pts = cand[chosen[:count]]
     order = _walking_order(pts, step * 1e-6)
