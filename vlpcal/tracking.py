@@ -48,6 +48,9 @@ TOP_SPEED = 4.0
 #: px: a moving LED's spot noise (blur, the detector), 1 sigma
 PIXEL_SIGMA = 0.15
 
+#: a row whose predicted error passes this share of the room's size is ``degenerate``
+DEGENERATE_SHARE = 0.1
+
 TRACK_COLUMNS = ("t", "led", "x", "y", "z", "vx", "vy", "vz", "sigma_m", "cameras", "status")
 
 
@@ -61,7 +64,7 @@ class TrackUpdate:
     velocity: np.ndarray  #: m/s
     sigma_m: float  #: predicted RMS position error of the fit (at the spot noise)
     cameras: str  #: the cameras whose rays the window held, e.g. "C1+C2+C4"
-    status: str  #: ok; one_camera (the window had one camera: the motion carried it)
+    status: str  #: ok; one_camera (one camera's rays: the motion carried it); degenerate
 
     def row(self) -> list:
         return [f"{self.t:.6f}", self.led, *(f"{v:.6f}" for v in self.position),
@@ -104,6 +107,9 @@ class Tracker:
         self._index = {c.id: k for k, c in enumerate(self.cameras)}
         offsets = deployment.pixel_offsets
         self._offset = np.array([offsets.get(c.id, (0.0, 0.0)) for c in self.cameras], float)
+        #: m: the room's larger side or its height — a row as uncertain is no position
+        self._size = max(float(np.ptp(np.asarray(deployment.room, float), axis=0).max()),
+                         float(deployment.ceiling_height))
         self._R = np.stack([c.R for c in self.cameras])
         self._C = np.stack([c.center for c in self.cameras])
         self._f = np.array([0.5 * (c.fx + c.fy) for c in self.cameras])
@@ -190,7 +196,10 @@ class Tracker:
         rays = [r for r in tr.rays if r.t >= t - WINDOW * self.period]
         if len({r.camera for r in rays}) < 2:
             return  # one camera cannot place it: the state from two carries on (coasting)
-        fit, _ = self._solve(rays, t)
+        # the state before anchors a window whose rays barely cross (loosened threefold: it
+        # holds these rays already, and counted twice they would make the track overconfident)
+        pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
+        fit, _ = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel))
         if fit is not None:
             tr.last_two = t
         if fit is not None:
@@ -258,9 +267,11 @@ class Tracker:
                 pos = cam.center + d * float((pos - cam.center) @ d)
             fit, cov = np.r_[pos, vel, np.zeros(3)], np.eye(9) * s_pos ** 2
         sigma = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0)))
+        status = "ok" if len(cams) >= 2 else "one_camera"
+        if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name
+            status = "degenerate"
         return TrackUpdate(t, tr.led, fit[:3].copy(), fit[3:6].copy(), sigma,
-                           "+".join(self.cameras[k].id for k in cams),
-                           "ok" if len(cams) >= 2 else "one_camera")
+                           "+".join(self.cameras[k].id for k in cams), status)
 
     def _metres_per_px(self, X, cams) -> float:
         if not cams:
