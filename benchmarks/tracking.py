@@ -89,7 +89,7 @@ def run_speed(scene, speed, seconds, seed, tmp: Path) -> dict:
     # rows where two cameras or more placed the LED (a one-camera row, like the locator's
     # one_camera, is the motion's guess: counted apart)
     two = [u for u in rows if u.status == "ok"]
-    one = [u for u in rows if u.status != "ok"]
+    one = [u for u in rows if u.status == "one_camera"]
     e_track = np.linalg.norm(np.array([u.position for u in two])
                              - path(np.array([u.t for u in two])), axis=1)
     e_one = np.linalg.norm(np.array([u.position for u in one]).reshape(-1, 3)
@@ -112,6 +112,7 @@ def run_speed(scene, speed, seconds, seed, tmp: Path) -> dict:
             "track_p95_mm": float(np.percentile(e_track, 95) * 1000),
             "track_ok": float(np.mean([u.status == "ok" for u in rows])),
             "one_camera_rows": len(one),
+            "degenerate_rows": sum(u.status == "degenerate" for u in rows),
             "one_camera_mean_mm": float(np.mean(e_one) * 1000) if len(one) else float("nan"),
             "track_updates": len(rows), "tracks": len(leds),
             "cpu_us": cpu * 1e6, "decode_us": decode * 1e6}
@@ -171,6 +172,7 @@ def main(argv=None) -> int:
                        ("track_vs_static", "÷ static", ".2f"),
                        ("one_camera_rows", "1-cam rows", "d"),
                        ("one_camera_mean_mm", "1-cam mean", ".0f"),
+                       ("degenerate_rows", "degenerate", "d"),
                        ("group_vs_track", "grouped ÷ tracker", ".1f"),
                        ("tracks", "tracks", "d"), ("cpu_us", "µs/frame", ".0f"),
                        ("decode_us", "decode µs", ".0f")]))

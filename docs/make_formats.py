@@ -122,7 +122,10 @@ Written by `vlpcal simulate` (and by a survey capture), read by `vlpcal survey c
 `vlpcal survey plan --out points.csv` writes the planned `point_id,x,y,z` to measure.
 With `free/`, `points.csv` holds the reference points (at least 3, not on one line; 2 with
 `--free-height`) and the free LED calibrates the cameras with them (a bundle adjustment);
-without it the bundle is calibrated from its points alone.
+without it the bundle is calibrated from its points alone. `vlpcal survey capture --free`
+writes `free/observations.csv`; `vlpcal survey plan --free --out refs.csv` the references.
+`vlpcal survey calibrate --test-points DIR` reads a second bundle (`points.csv` with `frames/`
+or `observations.csv`) of measured points the calibration never sees.
 Example: `surveys/paper-2024/survey/`.
 
 ## Locate input and output
@@ -140,6 +143,18 @@ Example: `surveys/paper-2024/survey/`.
   fix would lie under the floor, over the ceiling or beyond the walls by more than five times
   its own predicted error: e.g. a floor reflection taken for the LED).
 
+## Track input and output (cameras that are not synchronised)
+
+- Asynchronous frames: `DIR/<camera_id>/<frame_no>.jpg` and `DIR/times.csv` with
+  `camera_id,frame_no,t` (each frame's capture time, s, on one clock) — `vlpcal track --frames
+  DIR`; `vlpcal simulate --robot-speed V` writes one (`streams/`, with `streams.truth.csv`:
+  `camera_id,frame_no,t,x,y,z`, where the LED was).
+- Tracks (`vlpcal track --out tracks.csv`): one row per camera frame that saw the LED, at that
+  frame's capture time: `t,led,x,y,z,vx,vy,vz,sigma_m,cameras,status` — m, m/s; `led` a track
+  id (`T1`, …); `cameras` the cameras whose rays the fit's window held (`C1+C3`); `status` `ok`
+  (two cameras or more), `one_camera` (one camera's rays, the track's motion placing the LED
+  along them) or `degenerate` (a predicted error past a tenth of the room's size).
+
 ## Calibration report (`<calibrated>.report.json`)
 
 Beside the calibrated deployment: `held_out_m` (per comparison — nominal or calibrated cameras
@@ -153,7 +168,13 @@ above the best model's — with its standard error `se_px2`: the simplest model 
 within one standard error is chosen) and `lens`, the decision in words), `lens` (those
 sentences), `precision` (`point_sigma_m`, whether it was `estimated`, `pixel_sigma_px`),
 `fusion` (the one chosen; its region map and residual limit are in the deployment's `fusion`
-block), `mismeasured` (`point_id`, `moved_m`) and `notes`.
+block), `mismeasured` (`point_id`, `moved_m`) and `notes`; with `--test-points`,
+`test_points` (`points`, `mean`, `median`, `p90`, `p95`, `max` in m, `fixed`, and `per_point`
+errors). A free survey's report holds `free_survey` (`sets`, `used`, `dropped_sets`,
+`free_height_m`), `references` (each one's `left_out_error_m`), `datum_floor_m`, `cameras`
+(per camera `spread_px`, `free_sets_seen`, `rejected_spots`, `coverage` in words and
+`quarter_sightings`, 2 × 2 [row][column], moved, turned and the lens), `lens`, `precision`
+and `notes`.
 
 ## Interchange
 
