@@ -280,3 +280,74 @@ def test_two_references_on_a_robot_assume_a_tape_and_keep_the_lens(free_case):
     assert any("assumed" in n for n in cal.notes) and any("pose only" in n for n in cal.notes)
     assert cal.datum_floor > 0.001  # two taped points cannot fix the room to a tenth of a mm
     assert _error(cal.cameras, true, np.random.default_rng(2)) < 0.01
+
+
+def test_hostile_free_inputs_are_one_line(tmp_path):
+    """From a hostile probe: a damaged free/ when capture resumes (a file, a folder as its
+    observations, a FIFO, an empty file cut before its header), a keep-out covering the room
+    for plan --free, and test points in millimetres or of other cameras."""
+    import os
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main as cli
+    from vlpcal.datasets import DatasetError, FreeAppender
+    from vlpcal.deployment import Deployment, save
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "free").write_text("x")
+    with pytest.raises(DatasetError, match="not a folder"):
+        FreeAppender(tmp_path / "a")
+    (tmp_path / "b" / "free" / "observations.csv").mkdir(parents=True)
+    with pytest.raises(DatasetError, match="not a regular file"):
+        FreeAppender(tmp_path / "b")
+    (tmp_path / "c" / "free").mkdir(parents=True)
+    os.mkfifo(tmp_path / "c" / "free" / "observations.csv")
+    with pytest.raises(DatasetError, match="not a regular file"):
+        FreeAppender(tmp_path / "c")  # and does not hang
+    (tmp_path / "d" / "free").mkdir(parents=True)
+    (tmp_path / "d" / "free" / "observations.csv").write_text("")
+    app = FreeAppender(tmp_path / "d")  # cut before its header: started again
+    app.add({"C1": (10.0, 20.0)})
+    assert FreeAppender(tmp_path / "d").set_ids == ["F000001"]
+
+    room = [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]
+    cams = [paper_camera(f"C{k + 1}", (x, 0.9, 2.3)) for k, x in enumerate((1.2, 1.8, 2.4))]
+    save(Deployment("covered", 2.3, room, cams, keep_out=[[[-1, -1], [5, -1], [5, 3], [-1, 3]]]),
+         tmp_path / "k.yaml")
+    res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "k.yaml"), "--free",
+                                   "--out", str(tmp_path / "r.csv")])
+    assert res.exit_code == 2 and "leave no floor" in res.output
+    assert len(res.output.strip().splitlines()) == 1
+
+
+def test_test_points_in_millimetres_or_of_other_cameras_are_refused(tmp_path):
+    import subprocess
+
+    run = [sys.executable, "-m", "vlpcal"]
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--out",
+                                str(tmp_path / "sim"), "--free-sets", "300", "--test-points",
+                                "0"], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    mm = tmp_path / "mm"
+    import shutil
+
+    shutil.copytree(tmp_path / "sim/survey", mm)
+    lines = (mm / "points.csv").read_text().splitlines()
+    rows = [lines[0]] + [",".join([c[0]] + [str(float(v) * 1000) for v in c[1:]])
+                         for c in (line.split(",") for line in lines[1:])]
+    (mm / "points.csv").write_text("\n".join(rows) + "\n")
+    cal = run + ["survey", "calibrate", "-d", str(tmp_path / "sim/nominal.yaml"), "--survey",
+                 str(tmp_path / "sim/free-survey"), "--out", str(tmp_path / "cal.yaml"), "-q"]
+    res = subprocess.run(cal + ["--test-points", str(mm)], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 2 and "metres expected" in res.stderr
+    assert not (tmp_path / "cal.yaml").exists()
+    other = tmp_path / "other"
+    shutil.copytree(tmp_path / "sim/survey", other)
+    for d in (other / "frames").iterdir():
+        for f in d.iterdir():
+            f.rename(f.with_name("X" + f.name))
+    res = subprocess.run(cal + ["--test-points", str(other)], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 2 and "none of its cameras" in res.stderr

@@ -543,6 +543,10 @@ class SurveyAppender:
             os.fsync(f.fileno())
 
 
+#: a free survey's observations file is at most this large (a million sets of four cameras)
+MAX_FREE_BYTES = 256 << 20
+
+
 class FreeAppender:
     """A free survey's spots written moment by moment (issue 15): ``free/observations.csv``
     (``set_id,camera_id,u,v``), append-only, each set's lines flushed to disk before the next;
@@ -552,12 +556,25 @@ class FreeAppender:
     COLUMNS = ("set_id", *OBSERVATION_COLUMNS)
 
     def __init__(self, root):
+        import stat
+
         self.free = Path(root) / "free"
         self.path = self.free / "observations.csv"
+        if self.free.exists() and not self.free.is_dir():
+            raise DatasetError(f"{self.free}: is not a folder (expected the free survey's "
+                               "folder): choose a new folder for the survey")
         if (self.free / "frames").exists():
             raise DatasetError(f"{self.free}: holds frames/ already (a free survey from "
                                "elsewhere): choose a new folder for the survey")
         self.free.mkdir(parents=True, exist_ok=True)
+        if self.path.exists() or self.path.is_symlink():
+            st = os.stat(self.path) if self.path.exists() else None
+            if st is None or not stat.S_ISREG(st.st_mode) or st.st_size > MAX_FREE_BYTES:
+                raise DatasetError(f"{self.path}: not a regular file of at most "
+                                   f"{MAX_FREE_BYTES >> 20} MB (expected the free survey's "
+                                   "spots, set_id,camera_id,u,v)")
+            if st.st_size == 0:  # cut before its header: start it again
+                self.path.unlink()
         if not self.path.exists():
             with open(self.path, "w", newline="", encoding="utf-8") as f:
                 f.write(",".join(self.COLUMNS) + "\n")

@@ -135,6 +135,12 @@ def _echo_free_plan(plan, route, out) -> None:
     click.echo(f"then, while the cameras record, carry the LED along {len(route.stops)} "
                f"stop{'s' if len(route.stops) > 1 else ''}, sweeping it from {route.low:g} to "
                f"{route.high:g} m and back at each (the map shows the route):")
+    linked = {c for stop in route.pairs for pair in stop for c in pair}
+    alone = [c for c in plan.camera_ids if c not in linked]
+    if alone:
+        click.echo(f"note: {', '.join(alone)} overlap{'s' if len(alone) == 1 else ''} no other "
+                   "camera at two heights: a free survey cannot calibrate "
+                   f"{'it' if len(alone) == 1 else 'them'} (a tape survey can)")
     for n, ((x, y), pairs, quarters) in enumerate(zip(route.stops, route.pairs, route.quarters),
                                                   start=1):
         what = [f"pairs {', '.join(f'{a}+{b}' for a, b in pairs)}"] if pairs else []
@@ -449,7 +455,6 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     import sys
 
     from ..datasets import DatasetError, read_survey_bundle
-    from ..reports import write_calibration
     from ..survey import FUSION_OF, SurveyError, calibrate_survey, survey_spots
 
     if intrinsics:
@@ -492,11 +497,25 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
         raise UserError(f"{survey_path}: {e}") from None
     _print_calibration(result, folds)
     _report_test_points(result, test)
-    paths = write_calibration(out, result, notes,
-                              header=f"Calibrated by vlpcal survey calibrate from {survey_path}.")
+    paths = _write_or_refuse(out, result, notes, survey_path,
+                             f"Calibrated by vlpcal survey calibrate from {survey_path}.")
     label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
     click.echo(f"\nwrote {paths[0]} (fusion {result.fusion}: the table's row '{label}', the "
                f"best held out), {paths[1]}, {paths[2]}")
+
+
+def _write_or_refuse(out, result, notes, survey_path, header):
+    """The calibration's files — or one line when the fit is not a camera (a lens or pose no
+    deployment may hold: spots that fit nothing, the wrong cameras); nothing written."""
+    from ..deployment import DeploymentError
+    from ..reports import write_calibration
+
+    try:
+        return write_calibration(out, result, notes, header=header)
+    except DeploymentError as e:
+        raise UserError(f"{survey_path}: the fit is not a camera one could hang ({e}); check "
+                        "the spots and the camera ids against the deployment: nothing was "
+                        "written") from None
 
 
 def _read_test_points(dep, test_path, survey_path):
@@ -517,6 +536,10 @@ def _read_test_points(dep, test_path, survey_path):
     if tb.free_ids:
         raise UserError(f"{test_path}: test points are measured points (points.csv with "
                         "frames/ or observations.csv), not a free survey")
+    if not set(tb.camera_ids()) & {c.id for c in dep.cameras}:
+        raise UserError(f"{test_path}: none of its cameras ({', '.join(tb.camera_ids()[:6])}) "
+                        "is in the deployment (expected its camera ids)")
+    _check_survey_positions(test_path, dep, tb.xyz, tb.point_ids)
     uv, notes = survey_spots(dep, tb)
     for note in notes:
         click.echo(f"test points: {note}", err=True)
@@ -550,8 +573,8 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
 
     import numpy as np
 
-    from ..reports import write_calibration
     from ..survey import SurveyError, calibrate_free_survey, free_spots
+    from ..survey.calibration import format_length
 
     if free_height is not None and not (0 <= free_height < dep.ceiling_height):
         raise UserError(f"--free-height {free_height:g}: expected a height from the floor to "
@@ -617,10 +640,16 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     click.echo(f"your {n_ref} reference points fix the room to about "
                f"{cal.datum_floor * 1000:.1f} mm (the datum floor: no calibration does "
                "better); measure more points, or more precisely, to do better")
+    for r in result.cameras:
+        if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
+            click.echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
+                       f"({r['moved_share']:.0%} of its distance to the free LED) and turned "
+                       f"{r['turned_deg']:.1f}° from the deployment: is this survey from this "
+                       "site, and are its camera ids right?")
     _report_test_points(result, test)
-    paths = write_calibration(out, result, notes + free_notes,
-                              header=f"Calibrated by vlpcal survey calibrate from {survey_path} "
-                                     "(free survey).")
+    paths = _write_or_refuse(out, result, notes + free_notes, survey_path,
+                             f"Calibrated by vlpcal survey calibrate from {survey_path} (free "
+                             "survey).")
     click.echo(f"\nwrote {paths[0]} (fusion robust: all cameras by least squares), {paths[1]}, "
                f"{paths[2]}")
 

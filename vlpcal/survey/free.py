@@ -30,6 +30,9 @@ from .lens import LENS_MODELS
 MIN_SHARED = 8
 #: a spot farther from its fitted position than this many spot-noise sigmas is rejected
 REJECT_SIGMAS = 5.0
+#: the free sets one calibration uses at most (an even sample beyond: 1800 × 6 cameras take
+#: ~25 s on one core, 33 000 sets exhausted the sparse solver's memory)
+MAX_FREE_SETS = 5000
 #: reference coordinates beyond the datum's that a precision estimate needs …
 MIN_REDUNDANT = 6
 #: … else this precision (a tape measure, per axis, m) is assumed and said
@@ -207,6 +210,11 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
     if free_height is None:
         usable &= seen_f.sum(axis=0) >= 2
     free_idx = np.flatnonzero(usable)
+    if len(free_idx) > MAX_FREE_SETS:  # time and memory bounded: an even sample of them
+        notes.append(f"{len(free_idx)} free sets usable: {MAX_FREE_SETS} of them, evenly "
+                     "spread in time, calibrate the cameras (more add little and cost much)")
+        free_idx = free_idx[np.linspace(0, len(free_idx) - 1, MAX_FREE_SETS).round()
+                            .astype(int)]
     P0 = np.vstack([X, F0[free_idx]])
     free = np.r_[np.zeros(N, bool), np.ones(len(free_idx), bool)]
     uv_all = np.concatenate([uv, uv_free[:, free_idx]], axis=1)

@@ -193,11 +193,15 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
         words.append(sentence)
         mine = np.asarray(uv_free)[cams.index(nom)]
         seen = int(np.isfinite(mine).all(axis=1).sum())
+        moved = float(np.linalg.norm(np.subtract(c.position, nom.position)))
+        there = np.isfinite(cal.free_xyz).all(axis=1) & np.isfinite(mine).all(axis=1)
+        where = cal.free_xyz[there] if there.any() else np.asarray(X, float)
+        distance = float(np.median(np.linalg.norm(where - np.asarray(c.position), axis=1)))
         rows.append({"camera": c.id, "spread_px": cal.spread_px[c.id], "free_sets_seen": seen,
                      "coverage": camera_words(nom, mine, dep.room),
                      "quarter_sightings": quarter_counts(nom, mine).tolist(),
                      "rejected_spots": cal.rejected[c.id],
-                     "moved_m": float(np.linalg.norm(np.subtract(c.position, nom.position))),
+                     "moved_m": moved, "moved_share": moved / max(distance, 1e-300),
                      "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
                      "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
     calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,

@@ -278,10 +278,12 @@ def plan_references(deployment, count: int | None = None, heights=None,
     room = Polygon(deployment.room)
     for poly in deployment.keep_out:
         room = room.difference(Polygon(poly))
+    if room.is_empty:
+        raise SurveyError("the keep-out areas leave no floor to survey")
     if heights is None:
         heights = tuple(round(f * deployment.ceiling_height, 2) for f in REFERENCE_HEIGHTS)
     x0, y0, x1, y1 = room.bounds
-    step = min(x1 - x0, y1 - y0) / 24
+    step = max(min(x1 - x0, y1 - y0) / 24, np.sqrt(room.area / 5000))  # ≤ ~5000 places
     gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
     xy = np.c_[gx.ravel(), gy.ravel()]
     xy = xy[contains_xy(room, xy[:, 0], xy[:, 1])]
@@ -312,18 +314,9 @@ def plan_references(deployment, count: int | None = None, heights=None,
                 centre = cand[pool, :2].mean(axis=0)
                 chosen.append(int(free[np.argmax(np.linalg.norm(cand[free, :2] - centre, axis=1))]))
 
-    if not triples:  # every overlap gets its share (two at least, at both heights) — or, with
-        # more overlaps than the count allows, overlaps spread over the room do
-        served = pairs
-        if 2 * len(pairs) > count:
-            centre = np.array([cand[seen[k] & seen[j], :2].mean(axis=0) for k, j in pairs])
-            pick = [int(np.argmin(np.linalg.norm(centre - centre.mean(axis=0), axis=1)))]
-            while len(pick) < max(1, count // 2):
-                d = np.min(np.linalg.norm(centre[:, None] - centre[None, pick], axis=2), axis=1)
-                pick.append(int(np.argmax(d)))
-            served = [pairs[i] for i in sorted(set(pick))]
-        for k, j in served:
-            farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(served)))
+    if not triples:  # every overlap gets its share (two at least, at both heights)
+        for k, j in pairs:
+            farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(pairs)))
     farthest(np.arange(len(cand)), max(0, count - len(chosen)))
     pts = cand[chosen[:count]]
     order = _walking_order(pts, step * 1e-6)
@@ -401,9 +394,11 @@ def free_route(deployment, heights=None, margin_px: float = 5.0) -> FreeRoute:
         room = room.difference(Polygon(poly))
     if heights is None:
         heights = (0.0, round(0.4 * deployment.ceiling_height, 2))
+    if room.is_empty:
+        raise SurveyError("the keep-out areas leave no floor to survey")
     low, high = float(min(heights)), float(max(heights))
     x0, y0, x1, y1 = room.bounds
-    step = min(x1 - x0, y1 - y0) / 40
+    step = max(min(x1 - x0, y1 - y0) / 40, np.sqrt(room.area / 10000))  # ≤ ~10 000 places
     gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
     xy = np.c_[gx.ravel(), gy.ravel()]
     xy = xy[contains_xy(room, xy[:, 0], xy[:, 1])]
