@@ -297,7 +297,6 @@ class Tracker:
         C = np.concatenate([self._C[k], self._C[k]])
         ff = np.concatenate([self._f[k], self._f[k]])
         tt = np.concatenate([tau, tau])
-        n = 3 * (order + 1)
         basis = [np.ones_like(tt), tt, 0.5 * tt * tt][:order + 1]
         A = np.concatenate([rows * b[:, None] for b in basis], axis=1)
         y = np.einsum("ij,ij->i", rows, C)
@@ -317,7 +316,7 @@ class Tracker:
                 Aw = np.vstack([Aw, P])
                 yw = np.r_[yw, pos / s_pos, vel / s_vel]
             N = Aw.T @ Aw
-            if np.linalg.matrix_rank(N) < n:
+            if not _well_posed(N):
                 return None, np.inf
             fit = np.linalg.solve(N, Aw.T @ yw)
             X = fit[:3] + (fit[3:6] * tt[:, None] + 0.5 * fit[6:9] * (tt * tt)[:, None]
@@ -329,3 +328,18 @@ class Tracker:
         resid = (A @ fit - y) * w * self.pixel_sigma
         self._cov = np.linalg.inv(N)
         return fit, float(np.sqrt(np.mean(resid ** 2)))
+
+
+def _well_posed(N) -> bool:
+    """Whether the normal matrix ``N`` determines every unknown: its Cholesky factor, with the
+    unknowns scaled to unit information, has no pivot below 1e-6 of the largest (a relative
+    test: metres, seconds and pixels alike)."""
+    d = np.sqrt(np.diag(N))
+    if not (d > 0).all():
+        return False
+    try:
+        L = np.linalg.cholesky(N / d[:, None] / d[None, :])
+    except np.linalg.LinAlgError:
+        return False
+    piv = np.abs(np.diag(L))
+    return bool(piv.min() > 1e-6 * piv.max())

@@ -7,6 +7,9 @@ import click
 
 from .common import Finite, UserError, _load_deployment, _output_file, main
 
+#: camera frames read and detected at once
+BLOCK = 2048
+
 
 @main.command()
 @click.option("--deployment", "-d", "deployment_path", required=True,
@@ -55,14 +58,28 @@ def track(deployment_path, frames_dir, out, fps, quiet):
                 gaps.append(float(np.median(np.diff(t))))
         fps = 1.0 / max(gaps) if gaps and max(gaps) > 0 else 30.0
     out = _output_file(out, inputs=(deployment_path, frames_dir), what="the tracks")
+    from ..detection import detect_spots
+
     tracker = Tracker(dep, period=1.0 / fps)
+    cams = {c.id: c for c in dep.cameras}
     rows = []
-    with click.progressbar(folder.events, label="tracking", hidden=quiet,
-                           file=sys.stderr) as events:
-        for t, cid, no in events:
-            frame = folder.frame(cid, no)
-            if frame is not None:
-                rows += tracker.update(cid, t, frame)
+    with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
+                           file=sys.stderr) as bar:
+        # a block of frames at a time: each camera's frames of the block detected as one
+        # batch (a tenth of the cost of one by one), then fed to the tracker in time order
+        for s in range(0, len(folder.events), BLOCK):
+            block = folder.events[s:s + BLOCK]
+            spots: dict = {}
+            for cid in {c for _, c, _ in block}:
+                mine = [(no, folder.frame(cid, no)) for _, c, no in block if c == cid]
+                found = detect_spots([f for _, f in mine], dep.detector,
+                                     dep.detector_settings,
+                                     shape=(cams[cid].height, cams[cid].width))
+                for (no, _), u, v in zip(mine, found.u, found.v):
+                    spots[(cid, no)] = (u, v) if np.isfinite(u) and np.isfinite(v) else None
+            for t, cid, no in block:
+                rows += tracker.update_spot(cid, t, spots[(cid, no)])
+            bar.update(len(block))
     rows += tracker.finish()
     with OutputSet(out) as (tmp,):
         with open(tmp, "w", newline="") as f:
