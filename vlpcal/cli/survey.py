@@ -74,7 +74,7 @@ def survey_plan(deployment_path, out, step, heights, free, references, min_per_c
     hs = _floats(heights or "0,0.35,0.7", "--heights")
     top = 0.9 * min(c.position[2] for c in dep.cameras)  # below the cameras, in their view
     if len(set(hs)) < 2 or any(not 0 <= h < top for h in hs):
-        raise click.BadParameter(f"expected two or more different heights from 0 to below "
+        raise click.BadParameter(f"expected two or more heights, all different, from 0 to below "
                                  f"{top:g} m (nine tenths of the lowest camera's), got "
                                  f"{heights!r}",
                                  param_hint="--heights")
