@@ -72,6 +72,14 @@ class Deployment:
         return self.extra.get("fusion", {}).get("pair_method", "paper")
 
     @property
+    def size(self) -> float:
+        """m: the scene's size — the room's larger side or its ceiling height, whichever is
+        larger — against which a position's uncertainty or a survey point's place is judged."""
+        xs = [p[0] for p in self.room]
+        ys = [p[1] for p in self.room]
+        return max(max(xs) - min(xs), max(ys) - min(ys), float(self.ceiling_height))
+
+    @property
     def max_residual(self) -> float:
         """px: the robust fusion's limit on an observation's reprojection error; unless the
         file states it (a survey calibration does, from its held-out residuals), 1 % of the

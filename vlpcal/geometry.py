@@ -274,6 +274,16 @@ class Camera:
         d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1) @ self.R
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
+    def ground(self, uv, height: float = 0.0) -> np.ndarray:
+        """Where the rays of pixels ``uv`` (N×2) meet the level plane z = ``height``: N×2
+        floor positions, NaN where a ray does not reach it (it points away)."""
+        d = self.rays(uv)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (height - self.position[2]) / d[..., 2]
+        xy = self.center[:2] + t[..., None] * d[..., :2]
+        xy[~(np.isfinite(t) & (t > 0))] = np.nan
+        return xy
+
     def jacobian(self, X) -> np.ndarray:
         """``N×2×3`` derivative of pixels with respect to world position (distortion included).
 

@@ -121,8 +121,7 @@ class Locator:
         self._room = shapely.Polygon(deployment.room)
         #: m: the room's size (its larger side or the ceiling height), against which a fix's
         #: predicted error says whether it is a position at all
-        self._size = max(float(np.ptp(np.asarray(deployment.room, float), axis=0).max()),
-                         float(deployment.ceiling_height))
+        self._size = deployment.size
         offsets = deployment.pixel_offsets
         self._offset = np.array([offsets.get(c, (0.0, 0.0)) for c in self.camera_ids])
 

@@ -730,8 +730,7 @@ def _check_survey_positions(survey_path, dep, X, ids) -> None:
     from shapely import contains_xy
     from shapely.geometry import Polygon
 
-    size = max(float(np.ptp(np.asarray(dep.room, float), axis=0).max()), dep.ceiling_height)
-    margin = 0.2 * size
+    margin = 0.2 * dep.size
     room = Polygon(dep.room).buffer(margin)
     inside = contains_xy(room, X[:, 0], X[:, 1]) & (X[:, 2] > -margin) \
         & (X[:, 2] < dep.ceiling_height)

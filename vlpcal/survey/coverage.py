@@ -51,12 +51,10 @@ def quarters_in_room(camera, room, height: float = 0.0) -> np.ndarray:
     g = (np.arange(8) + 0.5) / 16  # within a half of the image
     for (c, r) in QUARTERS:
         u, v = np.meshgrid((c / 2 + g) * camera.width, (r / 2 + g) * camera.height)
-        d = camera.rays(np.c_[u.ravel(), v.ravel()])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (height - camera.position[2]) / d[:, 2]
-        ok = np.isfinite(t) & (t > 0)
-        xy = camera.center[:2] + t[:, None] * d[:, :2]
-        share[r, c] = float((ok & contains_xy(poly, xy[:, 0], xy[:, 1])).mean())
+        xy = camera.ground(np.c_[u.ravel(), v.ravel()], height)
+        ok = np.isfinite(xy).all(axis=1)
+        share[r, c] = float((ok & contains_xy(poly, np.nan_to_num(xy[:, 0]),
+                                              np.nan_to_num(xy[:, 1]))).mean())
     return share
 
 

@@ -109,15 +109,12 @@ def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_p
                spot_noise, predict: bool = True) -> SurveyPlan:
     """:func:`plan_survey` at a stated grid spacing, with its predicted calibration."""
     from shapely import contains_xy
-    from shapely.geometry import Polygon
 
     heights = sorted(set(float(h) for h in heights))
     if len(heights) < 2:
         raise SurveyError("a survey needs points at two or more heights (a floor-only survey "
                           "cannot separate height from scale)")
-    room = Polygon(deployment.room)
-    for poly in deployment.keep_out:
-        room = room.difference(Polygon(poly))
+    room = _floor(deployment)
     if room.is_empty:
         raise SurveyError("the keep-out areas leave no floor to survey")
     room = room.intersection(_views_box(deployment.cameras, min(heights), room))  # in view
@@ -142,7 +139,8 @@ def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_p
     def seen_by(pts):
         return np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
 
-    pts = np.concatenate([np.c_[grid(step), np.full(len(grid(step)), h)] for h in heights])
+    base = grid(step)
+    pts = np.concatenate([np.c_[base, np.full(len(base), h)] for h in heights])
     pts = pts[seen_by(pts).any(axis=0)]
     # where a camera or an overlapping pair has too few points: add a finer grid there
     quantum = step * 1e-6  # points closer than this are one (relative: any scale alike)
@@ -185,6 +183,16 @@ def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_p
     return plan
 
 
+def _floor(deployment):
+    """The room's floor less its keep-out areas (a shapely geometry)."""
+    from shapely.geometry import Polygon
+
+    room = Polygon(deployment.room)
+    for poly in deployment.keep_out:
+        room = room.difference(Polygon(poly))
+    return room
+
+
 def _views_box(cams, height: float, room):
     """Where on the floor (at ``height``) the cameras look: the union of each camera's view's
     bounding box — a grid beyond it would be points no camera sees."""
@@ -195,14 +203,12 @@ def _views_box(cams, height: float, room):
     for c in cams:
         u = np.array([0.0, c.width - 1.0, c.width - 1.0, 0.0, (c.width - 1) / 2])
         v = np.array([0.0, 0.0, c.height - 1.0, c.height - 1.0, (c.height - 1) / 2])
-        d = c.rays(np.c_[u, v])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (height - c.position[2]) / d[:, 2]
-        ok = np.isfinite(t) & (t > 0)
+        xy = c.ground(np.c_[u, v], height)
+        ok = np.isfinite(xy).all(axis=1)
         if ok.sum() < 4:  # a view that does not meet the floor all round: the whole room
             boxes.append(room.envelope)
             continue
-        xy = c.center[:2] + t[ok, None] * d[ok, :2]
+        xy = xy[ok]
         (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
         pad = 0.05 * max(x1 - x0, y1 - y0)
         boxes.append(box(x0 - pad, y0 - pad, x1 + pad, y1 + pad))
@@ -211,11 +217,7 @@ def _views_box(cams, height: float, room):
 
 def _predict(plan: SurveyPlan, deployment, heights, margin_px) -> None:
     """Set ``plan.predicted``: what calibrating from it costs the fixes."""
-    from shapely.geometry import Polygon
-
-    room = Polygon(deployment.room)
-    for poly in deployment.keep_out:
-        room = room.difference(Polygon(poly))
+    room = _floor(deployment)
     plan.predicted = calibration_ratio(deployment.cameras, plan.xyz,
                                        _fix_places(room, heights, plan.step), plan.tape,
                                        plan.spot_noise, margin_px=margin_px)
@@ -272,12 +274,9 @@ def plan_references(deployment, count: int | None = None, heights=None,
     overlap. ``count``: 6 where some point is seen by three cameras or more, else four per
     overlapping pair, at most 12 — or as given. Ids ``R01``… in walking order."""
     from shapely import contains_xy
-    from shapely.geometry import Polygon
 
     cams = deployment.cameras
-    room = Polygon(deployment.room)
-    for poly in deployment.keep_out:
-        room = room.difference(Polygon(poly))
+    room = _floor(deployment)
     if room.is_empty:
         raise SurveyError("the keep-out areas leave no floor to survey")
     if heights is None:
@@ -386,12 +385,9 @@ def free_route(deployment, heights=None, margin_px: float = 5.0) -> FreeRoute:
     room. At each stop the LED is swept up and down: depth is what
     separates a camera's height from its focal length."""
     from shapely import contains_xy
-    from shapely.geometry import Polygon
 
     cams = deployment.cameras
-    room = Polygon(deployment.room)
-    for poly in deployment.keep_out:
-        room = room.difference(Polygon(poly))
+    room = _floor(deployment)
     if heights is None:
         heights = (0.0, round(0.4 * deployment.ceiling_height, 2))
     if room.is_empty:
@@ -431,10 +427,10 @@ def free_route(deployment, heights=None, margin_px: float = 5.0) -> FreeRoute:
         for qc, qr in QUARTER_WORDS:
             if any(quarter(c, at) == (qc, qr) for at in served):
                 continue
-            ray = c.rays(np.array([[(0.25 + 0.5 * qc) * c.width, (0.25 + 0.5 * qr) * c.height]]))
-            if ray[0, 2] >= 0:
+            target = c.ground(np.array([[(0.25 + 0.5 * qc) * c.width,
+                                         (0.25 + 0.5 * qr) * c.height]]), low)[0]
+            if not np.isfinite(target).all():
                 continue
-            target = np.add(c.position, (low - c.position[2]) / ray[0, 2] * ray[0])[:2]
             mine = np.flatnonzero(seen[0, cams.index(c)])
             if len(mine):
                 served.append(int(mine[np.argmin(np.linalg.norm(xy[mine] - target, axis=1))]))
