@@ -107,9 +107,7 @@ class Tracker:
         self._index = {c.id: k for k, c in enumerate(self.cameras)}
         offsets = deployment.pixel_offsets
         self._offset = np.array([offsets.get(c.id, (0.0, 0.0)) for c in self.cameras], float)
-        #: m: the room's larger side or its height — a row as uncertain is no position
-        self._size = max(float(np.ptp(np.asarray(deployment.room, float), axis=0).max()),
-                         float(deployment.ceiling_height))
+        self._size = deployment.size  #: m: a row as uncertain as this is no position
         self._R = np.stack([c.R for c in self.cameras])
         self._C = np.stack([c.center for c in self.cameras])
         self._f = np.array([0.5 * (c.fx + c.fy) for c in self.cameras])
@@ -199,12 +197,10 @@ class Tracker:
         # the state before anchors a window whose rays barely cross (loosened threefold: it
         # holds these rays already, and counted twice they would make the track overconfident)
         pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
-        fit, _ = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel))
+        fit, _, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel))
         if fit is not None:
             tr.last_two = t
-        if fit is not None:
             tr.fit, tr.fit_t = fit, t
-            cov = self._cov
             tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
             tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
 
@@ -232,7 +228,7 @@ class Tracker:
         self._pending = [p for p in self._pending
                          if ray.t - p.t <= window and p.camera != ray.camera]
         for p in reversed(self._pending):
-            fit, resid = self._solve([p, ray], ray.t, order=0)
+            fit, resid, _ = self._solve([p, ray], ray.t, order=0)
             if fit is None:
                 continue
             X = fit[:3]
@@ -255,8 +251,7 @@ class Tracker:
     def _row(self, tr: _Track, t: float) -> TrackUpdate:
         rays = [r for r in tr.rays if abs(r.t - t) <= self.half]
         cams = sorted({r.camera for r in rays})
-        fit = self._solve(rays, t)[0] if len(cams) >= 2 else None
-        cov = self._cov
+        fit, _, cov = self._solve(rays, t) if len(cams) >= 2 else (None, None, None)
         if fit is None:  # one camera: the track's motion places the LED along that ray
             pos, vel, s_pos, _ = self._extrapolated(tr, t)
             if rays:
@@ -285,10 +280,10 @@ class Tracker:
         and ``(R₁ − y R₂)·(X − C) = 0``, weighted by pixels per metre at the point (``f /
         depth``, from a first solve) over the spot noise; the acceleration is held to
         :data:`ACCELERATION` and ``prior`` (position, velocity, their sigmas per axis) joins
-        as equations. Returns (the 9 (or 3) numbers, RMS residual px)."""
-        self._cov = None
+        as equations. Returns (the 9 (or 3) numbers, RMS residual px, their covariance);
+        (None, inf, None) when the rays do not determine them."""
         if not rays:
-            return None, np.inf
+            return None, np.inf, None
         k = np.array([r.camera for r in rays])
         xy = np.array([r.xy for r in rays])
         tau = np.array([r.t for r in rays]) - t0
@@ -317,17 +312,16 @@ class Tracker:
                 yw = np.r_[yw, pos / s_pos, vel / s_vel]
             N = Aw.T @ Aw
             if not _well_posed(N):
-                return None, np.inf
+                return None, np.inf, None
             fit = np.linalg.solve(N, Aw.T @ yw)
             X = fit[:3] + (fit[3:6] * tt[:, None] + 0.5 * fit[6:9] * (tt * tt)[:, None]
                            if order == 2 else 0.0)
             depth = np.einsum("ij,ij->i", np.concatenate([R[:, 2], R[:, 2]]), X - C)
             if (depth <= 0).any():
-                return None, np.inf
+                return None, np.inf, None
             w = ff / depth / self.pixel_sigma  # rows in units of the spot noise
         resid = (A @ fit - y) * w * self.pixel_sigma
-        self._cov = np.linalg.inv(N)
-        return fit, float(np.sqrt(np.mean(resid ** 2)))
+        return fit, float(np.sqrt(np.mean(resid ** 2))), np.linalg.inv(N)
 
 
 def _well_posed(N) -> bool:
