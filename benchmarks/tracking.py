@@ -32,6 +32,7 @@ import numpy as np
 from _common import table, write_json
 
 from vlpcal.datasets import read_async_frames
+from vlpcal.live import group_by_arrival
 from vlpcal.locator import Locator
 from vlpcal.sim.profiles import get_profile
 from vlpcal.sim.scene import make_scene, render_scene
@@ -44,25 +45,6 @@ HEIGHT = 0.15
 TOLERANCE = 0.05  # s: today's live grouping window
 
 
-def group_by_arrival(events, camera_ids, tolerance=TOLERANCE):
-    """Today's live grouping (vlpcal.live.LiveGrouper) on capture times: a set closes when
-    every camera has sent a frame, a camera sends its second, or ``tolerance`` has passed."""
-    sets, pending, started = [], {}, 0.0
-    for t, cid, frame in events:
-        if pending and (cid in pending or t - started > tolerance):
-            sets.append(pending)
-            pending = {}
-        if not pending:
-            started = t
-        pending[cid] = (t, frame)
-        if len(pending) == len(camera_ids):
-            sets.append(pending)
-            pending = {}
-    if pending:
-        sets.append(pending)
-    return sets
-
-
 def run_speed(scene, speed, seconds, seed, tmp: Path) -> dict:
     path = robot_path(scene, speed, HEIGHT, seed)
     simulate_streams(scene, tmp / f"v{speed}", path, seconds, seed=seed)
@@ -71,7 +53,7 @@ def run_speed(scene, speed, seconds, seed, tmp: Path) -> dict:
     dep = deployment_of(scene, "true")
     ids = [c.id for c in dep.cameras]
     # (i) grouping by arrival
-    sets = group_by_arrival(events, ids)
+    sets = group_by_arrival(events, ids, TOLERANCE)
     loc = Locator(dep)
     fixes = loc.locate_batch([{c: f for c, (_, f) in s.items()} for s in sets])
     # today's fix carries its set's first frame's time; at best it would carry their mean

@@ -10,6 +10,7 @@ import pytest
 
 from vlpcal.deployment import Deployment
 from vlpcal.geometry import paper_camera
+from vlpcal.live import group_by_arrival
 from vlpcal.sim.streams import Timing, capture_times
 from vlpcal.tracking import Tracker
 from vlpcal.triangulation import triangulate
@@ -58,16 +59,9 @@ def errors(rows, path, status="ok"):
 
 
 def grouped_errors(dep, events, path, tolerance=0.05):
-    """Today's live grouping by arrival (frames within 50 ms, or until a camera repeats)."""
+    """Today's live grouping by arrival (vlpcal.live's rule), triangulated."""
     ids = [c.id for c in dep.cameras]
-    sets, pending, started = [], {}, 0.0
-    for t, cid, uv in events:
-        if pending and (cid in pending or t - started > tolerance):
-            sets.append(pending)
-            pending = {}
-        if not pending:
-            started = t
-        pending[cid] = (t, uv)
+    sets = group_by_arrival(events, ids, tolerance)
     uv = np.full((len(ids), len(sets), 2), np.nan)
     when = np.zeros(len(sets))
     for j, s in enumerate(sets):

@@ -161,6 +161,30 @@ class LiveStats:
     dropped: Counter = field(default_factory=Counter)  #: frames dropped (the locator lagged)
 
 
+def group_by_arrival(events, camera_ids, tolerance: float = 0.05) -> list[dict]:
+    """:class:`LiveGrouper`'s rule on recorded times: ``events`` (t, camera id, item) in time
+    order become sets, each closed when every camera has sent, when a camera sends its
+    second, or ``tolerance`` s after its first. Returns camera id → (t, item) per set (what
+    ``vlpcal locate`` live triangulates as one moment: the benchmark of issue 16)."""
+    sets: list = []
+    pending: dict = {}
+    started = 0.0
+    everyone = set(camera_ids)
+    for t, cid, item in events:
+        if pending and (cid in pending or t - started > tolerance):
+            sets.append(pending)
+            pending = {}
+        if not pending:
+            started = t
+        pending[cid] = (t, item)
+        if everyone <= set(pending):
+            sets.append(pending)
+            pending = {}
+    if pending:
+        sets.append(pending)
+    return sets
+
+
 class LiveGrouper:
     """Group frames from several live sources into frame sets by arrival time.
 
