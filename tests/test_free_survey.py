@@ -123,12 +123,18 @@ def test_two_groups_of_cameras_not_linked_are_named():
         calibrate_free(cams, refs, _spots(cams, refs, rng), list("abcd"), _spots(cams, free, rng))
 
 
-def test_a_robot_at_a_known_height_needs_two_references(free_case):
+def _robot(free_case):
+    """The free case's LED on a robot at 0.15 m: (true cameras, measured references, their
+    spots, the robot's spots, nominal cameras 3 cm and 2° off)."""
     true, refs, measured, free, uv_r, uv_f = free_case
     rng = np.random.default_rng(5)
     robot = np.c_[free[:, :2], np.full(len(free), 0.15)]
     uv_robot = _spots(true, robot, rng)
-    nominal = [_off(c, rng, 0.03, 2.0) for c in true]
+    return true, measured, uv_r, uv_robot, [_off(c, rng, 0.03, 2.0) for c in true]
+
+
+def test_a_robot_at_a_known_height_needs_two_references(free_case):
+    true, measured, uv_r, uv_robot, nominal = _robot(free_case)
     cal = calibrate_free(nominal, measured[:2], uv_r[:, :2], ["R0", "R1"], uv_robot,
                          lens="pose", free_height=0.15)
     assert _error(cal.cameras, true, np.random.default_rng(2)) < 0.01
@@ -268,11 +274,7 @@ def test_two_references_on_a_robot_assume_a_tape_and_keep_the_lens(free_case):
     and report ±0.06 mm references and a 0.1 mm datum floor, with the cameras 25 cm off. Two
     references cannot show their own scatter (a tape's ±3 mm is assumed, and said), and cannot
     fix a lens the robot's one plane leaves open (kept as in the deployment, and said)."""
-    true, refs, measured, free, uv_r, uv_f = free_case
-    rng = np.random.default_rng(5)
-    robot = np.c_[free[:, :2], np.full(len(free), 0.15)]
-    uv_robot = _spots(true, robot, rng)
-    nominal = [_off(c, rng, 0.03, 2.0) for c in true]
+    true, measured, uv_r, uv_robot, nominal = _robot(free_case)
     cal = calibrate_free(nominal, measured[:2], uv_r[:, :2], ["R0", "R1"], uv_robot,
                          free_height=0.15)
     assert cal.point_sigma_assumed and cal.point_sigma == pytest.approx(0.003)
