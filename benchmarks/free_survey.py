@@ -163,7 +163,7 @@ def references_table(seed: int, tmp: Path, quick: bool) -> list[dict]:
 def timing_six(seed: int, tmp: Path) -> dict:
     """Seconds to calibrate 1800 free sets × 6 cameras (the demo's install: its planned
     cameras, hung with its errors), median of three runs: from the spots, and the JPEG
-    detection of the 10 800 frames before it."""
+    detection of its frames (those of sets some camera saw) before it."""
     from vlpcal.demo import DEMO_SITE, hung
     from vlpcal.planning import plan_site, site_from_dict
 
