@@ -154,3 +154,40 @@ def test_track_command_end_to_end(tmp_path):
 @pytest.fixture
 def rng():
     return np.random.default_rng(16)
+
+
+def test_track_keeps_its_inputs_reached_through_links_and_says_what_is_missing(tmp_path):
+    """From a hostile probe: an --out that is times.csv or a frame through a symlinked folder
+    overwrote it; a folder listing frames none of which is there gave 0 rows and exit 0."""
+    import shutil
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main as cli
+    from vlpcal.deployment import save
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.streams import robot_path, simulate_streams
+    from vlpcal.sim.writers import deployment_of
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    save(deployment_of(scene, "true"), tmp_path / "d.yaml")
+    simulate_streams(scene, tmp_path / "real", robot_path(scene, 1.0), 1.0)
+    (tmp_path / "linked").mkdir()
+    (tmp_path / "linked" / "times.csv").symlink_to(tmp_path / "real" / "times.csv")
+    for cam in scene.true:
+        (tmp_path / "linked" / cam.id).symlink_to(tmp_path / "real" / cam.id)
+    before = (tmp_path / "real" / "times.csv").read_bytes()
+    frame = next((tmp_path / "real" / "C1").iterdir())
+    for out in (tmp_path / "real" / "times.csv", frame):
+        res = CliRunner().invoke(cli, ["track", "-d", str(tmp_path / "d.yaml"), "--frames",
+                                       str(tmp_path / "linked"), "--out", str(out), "-q"])
+        assert res.exit_code == 2 and "own input" in res.output
+    assert (tmp_path / "real" / "times.csv").read_bytes() == before
+    shutil.copy(tmp_path / "real" / "times.csv", tmp_path / "bare.csv")
+    (tmp_path / "bare").mkdir()
+    shutil.copy(tmp_path / "real" / "times.csv", tmp_path / "bare" / "times.csv")
+    res = CliRunner().invoke(cli, ["track", "-d", str(tmp_path / "d.yaml"), "--frames",
+                                   str(tmp_path / "bare"), "--out", str(tmp_path / "t.csv"), "-q"])
+    assert res.exit_code == 2 and "none of the" in res.output
+    assert not (tmp_path / "t.csv").exists()

@@ -381,6 +381,10 @@ def read_frames_folder(root) -> FramesFolder:
     return FramesFolder(root, sorted(ids, key=order), sorted(cams, key=order), files)
 
 
+#: an asynchronous folder's times.csv is read whole: at most this large
+MAX_TIMES_BYTES = 32 << 20
+
+
 @dataclass
 class AsyncFrames:
     """An asynchronous frames folder (issue 16): ``<camera_id>/<frame_no>.jpg`` and
@@ -404,6 +408,9 @@ def read_async_frames(root) -> AsyncFrames:
     if not times.is_file():
         raise DatasetError(f"{root}: no times.csv (expected <camera_id>/<frame_no>.jpg and "
                            "times.csv with camera_id,frame_no,t)")
+    if times.stat().st_size > MAX_TIMES_BYTES:
+        raise DatasetError(f"{times}: larger than {MAX_TIMES_BYTES >> 20} MB (over a million "
+                           "frames: hours of four cameras at 30 fps): split the recording")
     events, seen = [], set()
     for n, row in enumerate(_read_csv(times, ("camera_id", "frame_no", "t")), start=2):
         where = f"{times} line {n}"

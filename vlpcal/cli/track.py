@@ -7,8 +7,8 @@ import click
 
 from .common import Finite, UserError, _load_deployment, _output_file, main
 
-#: camera frames read and detected at once
-BLOCK = 2048
+#: camera frames read and detected at once, at most — and at most this many bytes of them
+BLOCK, BLOCK_BYTES = 2048, 64 << 20
 
 
 @main.command()
@@ -57,29 +57,49 @@ def track(deployment_path, frames_dir, out, fps, quiet):
             if len(t) > 1:
                 gaps.append(float(np.median(np.diff(t))))
         fps = 1.0 / max(gaps) if gaps and max(gaps) > 0 else 30.0
-    out = _output_file(out, inputs=(deployment_path, frames_dir), what="the tracks")
+    # the folder, and what it holds through links (times.csv, each camera's folder)
+    from pathlib import Path
+
+    held = [Path(frames_dir) / "times.csv", *(Path(frames_dir) / c for c in folder.camera_ids)]
+    out = _output_file(out, inputs=(deployment_path, frames_dir, *held), what="the tracks")
     from ..detection import detect_spots
 
     tracker = Tracker(dep, period=1.0 / fps)
     cams = {c.id: c for c in dep.cameras}
     rows = []
+    missing = 0
+
+    def track_block(block):
+        """Each camera's frames of the block detected as one batch (a tenth of the cost of
+        one by one), then fed to the tracker in time order."""
+        spots: dict = {}
+        for cid in {c for _, c, _, _ in block}:
+            mine = [(no, f) for _, c, no, f in block if c == cid]
+            found = detect_spots([f for _, f in mine], dep.detector, dep.detector_settings,
+                                 shape=(cams[cid].height, cams[cid].width))
+            for (no, _), u, v in zip(mine, found.u, found.v):
+                spots[(cid, no)] = (u, v) if np.isfinite(u) and np.isfinite(v) else None
+        for t, cid, no, _ in block:
+            rows.extend(tracker.update_spot(cid, t, spots[(cid, no)]))
+
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
-        # a block of frames at a time: each camera's frames of the block detected as one
-        # batch (a tenth of the cost of one by one), then fed to the tracker in time order
-        for s in range(0, len(folder.events), BLOCK):
-            block = folder.events[s:s + BLOCK]
-            spots: dict = {}
-            for cid in {c for _, c, _ in block}:
-                mine = [(no, folder.frame(cid, no)) for _, c, no in block if c == cid]
-                found = detect_spots([f for _, f in mine], dep.detector,
-                                     dep.detector_settings,
-                                     shape=(cams[cid].height, cams[cid].width))
-                for (no, _), u, v in zip(mine, found.u, found.v):
-                    spots[(cid, no)] = (u, v) if np.isfinite(u) and np.isfinite(v) else None
-            for t, cid, no in block:
-                rows += tracker.update_spot(cid, t, spots[(cid, no)])
+        block, held_bytes = [], 0  # frames held at once: bounded in count and in bytes
+        for t, cid, no in folder.events:
+            frame = folder.frame(cid, no)
+            missing += frame is None
+            block.append((t, cid, no, frame))
+            held_bytes += len(frame or b"")
+            if len(block) >= BLOCK or held_bytes >= BLOCK_BYTES:
+                track_block(block)
+                bar.update(len(block))
+                block, held_bytes = [], 0
+        if block:
+            track_block(block)
             bar.update(len(block))
+    if missing == len(folder.events):
+        raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
+                        "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += tracker.finish()
     with OutputSet(out) as (tmp,):
         with open(tmp, "w", newline="") as f:
@@ -90,5 +110,5 @@ def track(deployment_path, frames_dir, out, fps, quiet):
         ok = sum(r.status == "ok" for r in rows)
         leds = sorted({r.led for r in rows})
         click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {len(rows)} rows, {ok} "
-                   f"placed by two cameras or more, tracks {', '.join(leds) or '–'} → {out}",
-                   err=True)
+                   f"placed by two cameras or more, tracks {', '.join(leds) or '–'} → {out}"
+                   + (f"; {missing} listed frames missing" if missing else ""), err=True)
