@@ -4,12 +4,14 @@ reference points, against the datum floor those points allow and the full tape s
 Per profile: a simulated install; the reference points ``survey plan --free`` asks for
 (:func:`vlpcal.survey.plan_references` on the nominal cameras), taped to the profile's
 precision; 1800 free sets (3 minutes at 10 sets/s) of an LED on a pole — and of a robot at a
-known height with the same references; calibrated with default flags. Test frames never used (the
-survey benchmark's offset grid at four heights) are located with the calibrated cameras, the
-true cameras, the *datum floor* (the true cameras moved by the similarity transform that maps
-the references' true positions onto their measured ones: a perfect calibration in the frame
-those points define) and the full tape survey's calibration (the survey benchmark's grid).
-Then, on paper-2024, the held-out error against the number of references and their precision.
+known height with the same references (and, where the floor mirrors the LED, the same LED
+with no body under it to hide its mirror image: a stress case); calibrated with default
+flags. Test frames never used (the survey benchmark's offset grid at four heights) are located
+with the calibrated cameras, the true cameras, the *datum floor* (the true cameras moved by the
+similarity transform that maps the references' true positions onto their measured ones: a
+perfect calibration in the frame those points define) and the full tape survey's calibration
+(the survey benchmark's grid). Then, on paper-2024, the held-out error against the number of
+references and their precision.
 
     python benchmarks/free_survey.py [--seed 0] [--quick]
 
@@ -93,12 +95,13 @@ class Test:
         return float(np.nanmean(np.linalg.norm(X - self.X, axis=1)))
 
 
-def free_run(scene, tmp: Path, seed: int, refs_xyz, height=None, tape=None) -> dict:
+def free_run(scene, tmp: Path, seed: int, refs_xyz, height=None, tape=None,
+             carrier=None) -> dict:
     if tape is not None:
         scene = replace(scene, profile=replace(scene.profile, tape=tape))
-    root = tmp / f"free-{len(refs_xyz)}-{height}-{tape}"
+    root = tmp / f"free-{len(refs_xyz)}-{height}-{tape}-{carrier}"
     measured, _ = simulate_free_survey(scene, root, refs_xyz, FREE_SETS, seed=seed,
-                                       height=height, overwrite=True)
+                                       height=height, overwrite=True, carrier_radius=carrier)
     dep = deployment_of(scene, "nominal")
     b = read_survey_bundle(root)
     uv, _ = survey_spots(dep, b)
@@ -127,10 +130,12 @@ def run_profile(name: str, seed: int, tmp: Path) -> list[dict]:
     tape_err = test.error(calibrate_survey(dep, b.xyz, uv, b.point_ids).deployment.cameras)
     rows = []
     plan = plan_references(deployment_of(scene, "nominal"))
-    variants = [("pole", plan.xyz, None)]
-    variants.append((f"robot h={ROBOT_HEIGHT:g}", plan.xyz, ROBOT_HEIGHT))
-    for label, refs, height in variants:
-        r = free_run(scene, tmp, seed, refs, height)
+    variants = [("pole", plan.xyz, None, None),
+                (f"robot h={ROBOT_HEIGHT:g}", plan.xyz, ROBOT_HEIGHT, None)]
+    if scene.profile.look.reflection > 0:  # a stress case: no body under the LED
+        variants.append((f"bare h={ROBOT_HEIGHT:g}", plan.xyz, ROBOT_HEIGHT, 0.0))
+    for label, refs, height, carrier in variants:
+        r = free_run(scene, tmp, seed, refs, height, carrier=carrier)
         free_err = test.error(r["result"].deployment.cameras)
         floor = test.error(r["floor_cams"])
         rows.append({"profile": name, "variant": label, "cameras": len(scene.true),
@@ -140,7 +145,8 @@ def run_profile(name: str, seed: int, tmp: Path) -> list[dict]:
                      "predicted_floor_mm": r["result"].calibration.datum_floor * 1000,
                      "vs_floor": free_err / floor, "tape_survey_mm": tape_err * 1000,
                      "tape_points": len(survey), "true_mm": true_err * 1000,
-                     "lens": ",".join(r["result"].calibration.models)})
+                     "lens": ",".join(r["result"].calibration.models),
+                     "stress": carrier is not None})
         print(f"  {name} {label}: {free_err * 1000:.2f} mm (floor {floor * 1000:.2f} mm), "
               f"{r['seconds']:.1f} s", file=sys.stderr)
     return rows
@@ -212,8 +218,12 @@ def main(argv=None) -> int:
     print("\npaper-2024, pole: held-out error against the references' count and precision, mm")
     print(table(refs, [("references", "refs", "d"), ("tape_mm", "tape ± mm", ".0f"),
                        ("free_mm", "free survey", ".2f"), ("floor_mm", "datum floor", ".2f")]))
-    ok = all(r["vs_floor"] <= 1.2 for r in rows)
-    print(f"\nwithin 1.2 × the datum floor on every profile and variant: {'yes' if ok else 'NO'}")
+    ok = all(r["vs_floor"] <= 1.2 for r in rows if not r["stress"])
+    print("\nbare: the LED at the robot's height with nothing under it, so the polished floor's "
+          "mirror image\n(cheap-wide) sits a few pixels from the spot at every free position and "
+          "pulls it towards the\nimage centre the same way each time: a stress case, not "
+          "counted below (a robot's body hides it)")
+    print(f"within 1.2 × the datum floor on every profile and variant: {'yes' if ok else 'NO'}")
     total = six["spots_s"] + six["calibrate_s"]
     fast = total < 60
     print(f"{six['sets']} free sets × {six['cameras']} cameras (the demo's install, "

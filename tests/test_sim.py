@@ -130,3 +130,20 @@ def test_simulate_command_writes_every_file(tmp_path):
 def test_describe_names_the_sources():
     res = CliRunner().invoke(main, ["simulate", "--profile", "paper-2024", "--describe"])
     assert res.exit_code == 0 and "paper 3.1/3.3" in res.output and "measured:" in res.output
+
+
+def test_a_robots_body_hides_the_floors_mirror_image_of_its_led():
+    """cheap-wide's polished floor mirrors the LED; under a robot's LED the floor is its body."""
+    from dataclasses import replace
+
+    scene = make_scene(get_profile("cheap-wide"), seed=0)
+    pts = [[1.5, 1.2, 0.15], [3.0, 2.5, 0.15]]
+    bare, _ = render_scene(scene, pts, seed=3)
+    robot, _ = render_scene(scene, pts, seed=3, carrier_radius=[0.2, 0.0])
+    flat = replace(scene, profile=replace(scene.profile, look=replace(scene.profile.look,
+                                                                      reflection=0.0)))
+    no_mirror, _ = render_scene(flat, pts, seed=3)
+    for cid in bare:
+        assert robot[cid][0] == no_mirror[cid][0]  # hidden by the body
+        assert robot[cid][1] == bare[cid][1]  # no body: the mirror image shows
+    assert any(bare[c][0] != no_mirror[c][0] for c in bare)

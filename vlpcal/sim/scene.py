@@ -151,13 +151,15 @@ def led_brightness(cam: Camera, points: np.ndarray, look: Appearance) -> np.ndar
         * cos_emit ** look.emission_order * cos_cam * vig
 
 
-def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool = True
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool = True,
+                  carrier_radius=0.0) -> tuple[np.ndarray, np.ndarray]:
     """Colour frames (``N×H×W×3`` uint8, BGR) of the LED at each point as ``cam`` sees it.
 
     Returns the frames and whether the LED's centre is in the image. The LED is a pixel-
     integrated Gaussian (so the sub-pixel position shows); an LED outside the view leaves its
-    tail at the edge, as a real one does.
+    tail at the edge, as a real one does. ``carrier_radius`` (m, scalar or one per point): what
+    carries the LED (a robot's body) covers the floor within this radius of the LED's foot, and
+    with it the floor's mirror image of the LED wherever that falls there.
     """
     points = np.atleast_2d(np.asarray(points, float))
     n, h, w = len(points), cam.height, cam.width
@@ -179,7 +181,8 @@ def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool
         # the LED's mirror image in the floor, dimmer and blurred by the floor's roughness
         mirror = points * [1.0, 1.0, -1.0]
         muv, mfront, _ = cam.project(mirror)
-        mamp = np.where(mfront, amp * look.reflection, 0.0)
+        mamp = np.where(mfront & ~_under_carrier(cam, points, carrier_radius),
+                        amp * look.reflection, 0.0)
         extra += _spots(n, h, w, muv[:, 0], muv[:, 1], sigma * look.reflection_blur, mamp)
     if distractors and look.lamp is not None:
         x, y, z, peak, lsig = look.lamp
@@ -204,17 +207,31 @@ def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool
 #: pixels rendered at once (a chunk of frames): bounds the float arrays a chunk needs to
 #: ~16 MB each, whatever the image size
 CHUNK_PIXELS = 2 ** 21
+#: a robot's body around its LED (m): a small AGV, 40 cm across; it hides the floor under the LED
+ROBOT_RADIUS = 0.2
+
+
+def _under_carrier(cam: Camera, points, radius) -> np.ndarray:
+    """Whether the floor point that mirrors each LED into ``cam`` lies within ``radius`` of the
+    LED's foot: on the line from the camera to the mirror image, a share h / (H + h) of the
+    way from the LED's foot towards the camera's (h the LED's height, H the camera's)."""
+    h = np.maximum(points[:, 2], 0.0)
+    c = np.asarray(cam.center, float)
+    reach = np.linalg.norm(c[:2] - points[:, :2], axis=1) * h / np.maximum(c[2] + h, 1e-300)
+    return reach < np.broadcast_to(np.asarray(radius, float), h.shape)
 
 
 def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
-                 chunk: int | None = None) -> tuple[dict, np.ndarray]:
-    """JPEG frames of an LED at each world point ``N×3`` from every true camera.
+                 chunk: int | None = None, carrier_radius=0.0) -> tuple[dict, np.ndarray]:
+    """JPEG frames of an LED at each world point ``N×3`` from every true camera
+    (``carrier_radius``: :func:`render_camera`'s, scalar or one per point).
 
     Returns ``(frames, seen)``: camera id → one JPEG per point, and ``C×N`` whether the LED's
     centre was inside each camera's image. Deterministic for (scene, points, seed); frame i
     depends only on point i, its index and the seed.
     """
     points = np.atleast_2d(np.asarray(points, float))
+    radius = np.broadcast_to(np.asarray(carrier_radius, float), len(points))
     look = scene.profile.look
     frames, seen = {}, []
     for k, cam in enumerate(scene.true):
@@ -223,7 +240,8 @@ def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
         for s in range(0, len(points), step):
             rngs = [np.random.default_rng([scene.seed, seed, STREAM_FRAMES, k + 1, i + 1])
                     for i in range(s, min(s + step, len(points)))]
-            imgs, ins = render_camera(cam, points[s:s + step], look, rngs, distractors)
+            imgs, ins = render_camera(cam, points[s:s + step], look, rngs, distractors,
+                                      radius[s:s + step])
             jpegs += [encode_jpeg(f, look.jpeg_quality) for f in imgs]
             inside.append(ins)
         frames[cam.id] = jpegs

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import CHUNK_PIXELS, STREAM_FRAMES, Scene, render_camera
+from .scene import CHUNK_PIXELS, ROBOT_RADIUS, STREAM_FRAMES, Scene, render_camera
 from .writers import trajectory
 
 
@@ -57,10 +57,11 @@ def capture_times(timing: Timing, duration: float, rng) -> np.ndarray:
 
 
 def simulate_streams(scene: Scene, root, path, duration: float, timings: dict | None = None,
-                     seed: int = 0) -> dict:
+                     seed: int = 0, carrier_radius: float = ROBOT_RADIUS) -> dict:
     """Render every true camera's frames of the LED at ``path(t)`` for ``duration`` s, each
     camera on its own :class:`Timing` (``timings``: camera id → Timing; default 30 fps, 2 ms
-    jitter, 5 % dropped), and write the asynchronous frames folder ``root``. Returns camera id
+    jitter, 5 % dropped), and write the asynchronous frames folder ``root``; the LED rides a
+    robot whose body (``carrier_radius``) hides the floor under it. Returns camera id
     → (frame numbers, capture times, true positions)."""
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
@@ -80,7 +81,8 @@ def simulate_streams(scene: Scene, root, path, duration: float, timings: dict | 
         folder.mkdir(exist_ok=True)
         step = max(1, CHUNK_PIXELS // (cam.width * cam.height))
         for s in range(0, len(t), step):
-            imgs, _ = render_camera(cam, X[s:s + step], scene.profile.look, rngs[s:s + step])
+            imgs, _ = render_camera(cam, X[s:s + step], scene.profile.look, rngs[s:s + step],
+                                   carrier_radius=carrier_radius)
             for i, img in enumerate(imgs, start=s):
                 (folder / f"{i:06d}.jpg").write_bytes(encode_jpeg(img, scene.profile.look
                                                                   .jpeg_quality))

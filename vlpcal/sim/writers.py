@@ -9,7 +9,7 @@ import numpy as np
 
 from ..datasets import write_frames_folder, write_survey_bundle, write_truth_csv
 from ..deployment import Deployment, provenance, save
-from .scene import STREAM_PATH, STREAM_TAPE, Scene, render_scene
+from .scene import ROBOT_RADIUS, STREAM_PATH, STREAM_TAPE, Scene, render_scene
 
 
 def grid_points(scene: Scene, step: float, heights, margin: float = 0.05,
@@ -69,14 +69,20 @@ def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
 
 
 def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int = 0,
-                         height: float | None = None, overwrite: bool = False):
+                         height: float | None = None, overwrite: bool = False,
+                         carrier_radius: float | None = None):
     """A free survey bundle (issue 15): the ``references`` (true positions) taped to
     ± ``profile.tape`` per axis with their frames, and ``n_free`` free sets of the LED moved
-    along :func:`free_path` (its positions unrecorded, as in life). Returns (measured
-    references, the free path's true positions)."""
+    along :func:`free_path` (its positions unrecorded, as in life; a robot's body hides the
+    floor under its LED, ``carrier_radius``, by default :data:`~.scene.ROBOT_RADIUS`).
+    Returns (measured references, the free path's true positions)."""
     refs = np.asarray(references, float)
     path = free_path(scene, n_free, height, seed)
-    frames, seen = render_scene(scene, np.vstack([refs, path]), seed=seed)
+    if carrier_radius is None:
+        carrier_radius = 0.0 if height is None else ROBOT_RADIUS
+    carrier = np.r_[np.zeros(len(refs)), np.full(len(path), carrier_radius)]
+    frames, seen = render_scene(scene, np.vstack([refs, path]), seed=seed,
+                                carrier_radius=carrier)
     rng = np.random.default_rng([scene.seed, seed, STREAM_TAPE])
     measured = refs + rng.normal(0.0, scene.profile.tape, refs.shape)
     n = len(refs)
