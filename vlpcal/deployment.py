@@ -1,7 +1,8 @@
 """The deployment file (DESIGN.md ``format: vlpcal-deployment``, ``version: 1``): load, check, save.
 
 The one module that knows the file. Required keys exactly as DESIGN.md; every other top-level
-block (detector settings, fusion policy, region maps, corrections, provenance) is optional and
+block (detector settings, fusion policy, region maps, corrections, LEDs' blink codes,
+provenance) is optional and
 kept as it was read (``Deployment.extra``), so a tool that does not know a block never drops it.
 Errors name the file, the key path (``cameras[2].fx``) and what was expected
 (:class:`DeploymentError`). Writes go through :mod:`vlpcal.writing` (staged, then renamed).
@@ -13,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .blink import BlinkCode, check_codes
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
 from .geometry import Camera
@@ -22,7 +24,7 @@ FORMAT, VERSION = "vlpcal-deployment", 1
 CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
 SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
 #: the optional top-level blocks; a missing block means the defaults
-OPTIONAL_BLOCKS = ("detector", "fusion", "corrections", "uncertainty", "provenance")
+OPTIONAL_BLOCKS = ("detector", "fusion", "corrections", "uncertainty", "leds", "provenance")
 DETECTOR_SETTINGS = tuple(DetectorSettings.__dataclass_fields__)
 DEFAULT_FUSION = "robust"
 #: px, the spot noise behind a fix's predicted uncertainty when the file states none (the blob
@@ -104,6 +106,12 @@ class Deployment:
     def pixel_noise(self) -> float:
         """px, the spot noise behind the predicted uncertainty (``uncertainty.pixel_noise``)."""
         return float(self.extra.get("uncertainty", {}).get("pixel_noise", DEFAULT_PIXEL_NOISE))
+
+    @property
+    def leds(self) -> list[BlinkCode]:
+        """The LEDs' blink codes (``leds:``; none: LEDs without identity)."""
+        return [BlinkCode(str(d["id"]), str(d["pattern"]), float(d["bit_rate"]))
+                for d in self.extra.get("leds", [])]
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:
@@ -360,8 +368,48 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
             if key != "pixel_noise":
                 raise DeploymentError(f"uncertainty.{key}: unknown key (expected pixel_noise)")
             _number(value, "uncertainty.pixel_noise", positive=True)
+    if "leds" in extra:
+        _check_leds(extra["leds"])
     if "provenance" in extra:
         _mapping(extra["provenance"], "provenance")
+
+
+LED_KEYS = ("id", "pattern", "bit_rate")
+
+
+def _check_leds(value) -> None:
+    """``leds:`` a list of ``{id, pattern, bit_rate}``: the LEDs' blink codes (issue 16)."""
+    if not isinstance(value, list) or not value:
+        raise DeploymentError(f"leds: expected a list of {{id, pattern, bit_rate}}, got "
+                              f"{shown(value)}")
+    codes = []
+    for i, d in enumerate(value):
+        where = f"leds[{i}]"
+        _mapping(d, where)
+        unknown = sorted(set(map(str, d)) - set(LED_KEYS))
+        if unknown:
+            raise DeploymentError(f"{where}.{unknown[0]}: unknown key (expected "
+                                  f"{', '.join(LED_KEYS)})")
+        for key in LED_KEYS:
+            if key not in d:
+                raise DeploymentError(f"{where}.{key}: missing (expected {', '.join(LED_KEYS)})")
+        if not is_id(d["id"]):
+            raise DeploymentError(f"{where}.id: expected {ID_RULE}, got {shown(d['id'])}")
+        if not isinstance(d["pattern"], str):
+            raise DeploymentError(f"{where}.pattern: expected a quoted string of 0 and 1, got "
+                                  f"{shown(d['pattern'])}")
+        rate = _number(d["bit_rate"], f"{where}.bit_rate", positive=True)
+        if rate > 10000:
+            raise DeploymentError(f"{where}.bit_rate: expected bits per second up to 10000, got "
+                                  f"{shown(d['bit_rate'])}")
+        codes.append(BlinkCode(str(d["id"]), d["pattern"], float(rate)))
+    ids = [c.led for c in codes]
+    if len(set(ids)) < len(ids):
+        dup = next(x for x in ids if ids.count(x) > 1)
+        raise DeploymentError(f"leds: id {dup} given twice (expected each LED once)")
+    wrong = check_codes(codes)
+    if wrong:
+        raise DeploymentError(f"leds: {wrong}")
 
 
 def load(path) -> Deployment:

@@ -463,8 +463,9 @@ def _detect_centroid(stack, s: DetectorSettings) -> SpotBatch:
     return _finish(u, v, peak, area, peak >= s.saturation, code)
 
 
-def _segment_one(img, bg: float, thr: float, floor: float, s: DetectorSettings):
-    """Choose the LED among the blobs of one frame: ``(row, col, top, candidates)`` or None.
+def _segment(img, bg: float, thr: float, floor: float, s: DetectorSettings, most: int = 1):
+    """Rank the blobs of one frame as LEDs: ``(rows, cols, tops, candidates)`` of the best
+    ``most`` (most LED-like first), or None when no blob is a candidate.
 
     Blobs are the connected components above ``thr``; a candidate is one whose height over
     ``bg`` reaches ``floor`` (it would be a spot on its own). Each is scored by its height
@@ -503,10 +504,22 @@ def _segment_one(img, bg: float, thr: float, floor: float, s: DetectorSettings):
     x0, y0, bw, bh = stats[cand, 0], stats[cand, 1], stats[cand, 2], stats[cand, 3]
     cut = (x0 == 0) | (y0 == 0) | (x0 + bw == w) | (y0 + bh == h)
     score[cut] /= 4.0  # a blob cut by the frame's edge looks compact and cannot be measured
-    j = int(cand[np.argmax(score)])
-    mine = lab == j
-    at = int(nz[mine][np.argmax(f[mine])])
-    return at // w, at % w, top[j], len(cand)
+    best = cand[np.argsort(-score, kind="stable")[:most]]
+    # each chosen blob's brightest pixel
+    order = np.lexsort((-f, lab))
+    first = np.searchsorted(lab[order], best)
+    at = nz[order[first]]
+    return at // w, at % w, top[best], len(cand)
+
+
+def _segment_one(img, bg: float, thr: float, floor: float, s: DetectorSettings):
+    """Choose the LED among the blobs of one frame: ``(row, col, top, candidates)`` or None
+    (:func:`_segment`'s best)."""
+    found = _segment(img, bg, thr, floor, s)
+    if found is None:
+        return None
+    rows, cols, tops, n = found
+    return int(rows[0]), int(cols[0]), float(tops[0]), n
 
 
 #: largest half-size of the measuring window of ``blob`` (a 15×15 window)
@@ -768,6 +781,54 @@ def detect_spots(frames, method: str = DEFAULT_DETECTOR,
         return res
     for name in ("u", "v", "peak", "area", "saturated", "reason_code", "blobs"):
         getattr(out, name)[good] = getattr(res, name)
+    return out
+
+
+def detect_several(frames, k: int, method: str = DEFAULT_DETECTOR,
+                   settings: DetectorSettings = DEFAULTS, shape=None) -> np.ndarray:
+    """Up to ``k`` spots in every frame, most LED-like first (several LEDs in view, issue 16):
+    ``N×k×2`` pixels, NaN where a frame holds fewer. ``blob`` ranks the frame's blobs by
+    height and compactness (:func:`_segment`) and measures each as it measures one; the other
+    detectors find one spot. Frames as :func:`detect_spots` takes them."""
+    if method not in DETECTORS:
+        raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
+    k = max(1, int(k))
+    n_all = len(frames)
+    out = np.full((n_all, k, 2), np.nan)
+    if k == 1 or method != "blob":
+        out[:, 0] = detect_spots(frames, method, settings, shape).uv
+        return out
+    if not isinstance(frames, np.ndarray) and n_all > _CHUNK:
+        for a in range(0, n_all, _CHUNK):
+            out[a:a + _CHUNK] = detect_several(frames[a:a + _CHUNK], k, method, settings, shape)
+        return out
+    stack, codes = _to_stack(frames, shape)
+    if stack is None or not (codes == 0).any():
+        return out
+    where = np.flatnonzero(codes == 0)
+    s = settings
+    r, c, peak, bg, sigma, code = _peak(stack, s)
+    n, h, w = stack.shape
+    rows = np.full((n, k), -1)
+    cols = np.zeros((n, k), int)
+    for i in np.flatnonzero(code == 0):
+        img = stack[i]
+        fbg = float(np.median(img[::4, ::4]))
+        floor = max(s.min_contrast, s.min_snr * sigma[i])
+        found = _segment(img, fbg, fbg + max(s.threshold * (peak[i] - fbg), 3 * sigma[i]),
+                         floor, s, k)
+        if found is not None:
+            m = len(found[0])
+            rows[i, :m], cols[i, :m] = found[0], found[1]
+    for j in range(k):
+        idx = np.flatnonzero(rows[:, j] >= 0)
+        if not len(idx):
+            continue
+        u, v, _, _, edge = _core_centroid(stack[idx], rows[idx, j], cols[idx, j], s)
+        with np.errstate(invalid="ignore"):
+            edge |= (u < 1.0) | (v < 1.0) | (u > w - 2.0) | (v > h - 2.0)
+        out[where[idx], j, 0] = np.where(edge, np.nan, u)
+        out[where[idx], j, 1] = np.where(edge, np.nan, v)
     return out
 
 

@@ -18,6 +18,13 @@ periods in all).
   carried forward, within the acceleration it allows): a track survives it, and ends after
   :data:`LOST_PERIODS` frame periods without a spot.
 
+Several LEDs: a frame gives up to ``K`` spots (:func:`~vlpcal.detection.detect_several`); each
+track takes the spot nearest its prediction (in its own sigmas; nearest pairs first, a spot to
+one track), and spots no track takes may start new ones. With the deployment's ``leds:`` blink
+codes each track records when it was lit and when a camera that should have seen it did not
+(dark), and is named by the code those fit (:func:`~vlpcal.blink.decode`); without codes, tracks
+are ``T1``, ``T2``… for as long as they last.
+
 ``Tracker.update(camera_id, t, frame)`` is the interface; frames arrive in time order, and
 ``finish()`` writes the rows still waiting for the end of their window.
 """
@@ -28,8 +35,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .blink import decode
 from .deployment import Deployment
-from .detection import detect_spots
+from .detection import detect_several
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -37,7 +45,8 @@ WINDOW = 4.0
 GATE_SIGMAS = 5.0
 #: two cameras' first spots start a track when they are this many frame periods apart or less
 START_WINDOW = 2.0
-#: a track that accepts no spot for this many frame periods is lost …
+#: a track that accepts no spot for this many frame periods (beyond its blink code's longest
+#: dark run) is lost …
 LOST_PERIODS = 15.0
 #: … and so is one that only one camera has seen for this many (its depth is then a guess)
 COAST_PERIODS = 8.0
@@ -47,6 +56,12 @@ ACCELERATION = 5.0
 TOP_SPEED = 4.0
 #: px: a moving LED's spot noise (blur, the detector), 1 sigma
 PIXEL_SIGMA = 0.15
+
+#: a track's identity is read from its last this many repeats of the longest blink code
+DECODE_REPEATS = 3.0
+#: a frame's spot this many pixels or more inside its image was there to be seen (an LED
+#: predicted there and not found was dark)
+VIEW_MARGIN_PX = 4.0
 
 #: a row whose predicted error passes this share of the room's size is ``degenerate``
 DEGENERATE_SHARE = 0.1
@@ -72,7 +87,7 @@ class TrackUpdate:
                 self.status]
 
 
-@dataclass
+@dataclass(eq=False)
 class _Ray:
     t: float
     camera: int
@@ -90,17 +105,23 @@ class _Track:
     s_pos: float = 0.0  #: m, 1 sigma per axis, of the fit's position
     s_vel: float = 0.0  #: m/s, of its velocity
     last_two: float = 0.0  #: the last time two cameras' rays placed it
+    anonymous: str = ""  #: its own name, T1…: ``led`` until a blink code names it
+    seen: list = field(default_factory=list)  #: (t, lit) for the blink code
+    decoded_at: float = -np.inf
+    margin: int = 0  #: the runner-up code's wrong slots minus the chosen one's
 
 
 class Tracker:
     """Tracks of an LED from camera frames that arrive one at a time, each at its own time.
 
     ``period``: the cameras' frame period, s (the slowest camera's); it sets the window, the
-    start window and when a track is lost. The deployment's detector and pixel corrections
-    apply as in :class:`~vlpcal.locator.Locator`."""
+    start window and when a track is lost. ``spots``: the most spots a frame is searched for
+    (default: one per LED of the deployment's ``leds:``, else 1). The deployment's detector and
+    pixel corrections apply as in :class:`~vlpcal.locator.Locator`."""
 
     def __init__(self, deployment: Deployment, period: float = 1 / 30,
-                 acceleration: float = ACCELERATION, pixel_sigma: float = PIXEL_SIGMA):
+                 acceleration: float = ACCELERATION, pixel_sigma: float = PIXEL_SIGMA,
+                 spots: int | None = None):
         self.deployment = deployment
         self.period, self.acceleration, self.pixel_sigma = period, acceleration, pixel_sigma
         self.cameras = list(deployment.cameras)
@@ -114,34 +135,47 @@ class Tracker:
         self.tracks: list[_Track] = []
         self._pending: list[_Ray] = []
         self._next = 1
+        self.codes = deployment.leds
+        self.spots = int(spots) if spots else max(1, len(self.codes))
+        self._repeat = max((c.period for c in self.codes), default=0.0)
+        # a blinking LED is dark for its code's longest run of 0s: no spot then is no loss
+        dark = max((max(map(len, (c.pattern * 2).split("1"))) / c.bit_rate
+                    for c in self.codes), default=0.0)
+        self._lost = LOST_PERIODS * period + dark
 
     # -- the interface ---------------------------------------------------------------------
     def update(self, camera_id: str, t: float, frame) -> list[TrackUpdate]:
-        """A camera's frame (JPEG bytes or an image array) captured at ``t`` s: its spot is
+        """A camera's frame (JPEG bytes or an image array) captured at ``t`` s: its spots are
         found and the tracks updated; returns the rows now complete."""
         cam = self.cameras[self._index[camera_id]]
-        spot = detect_spots([frame], self.deployment.detector, self.deployment.detector_settings,
-                            shape=(cam.height, cam.width))
-        uv = np.array([spot.u[0], spot.v[0]], float)
-        return self.update_spot(camera_id, t, uv if np.isfinite(uv).all() else None)
+        uv = detect_several([frame], self.spots, self.deployment.detector,
+                            self.deployment.detector_settings, shape=(cam.height, cam.width))
+        return self.update_spots(camera_id, t, uv[0])
 
     def update_spot(self, camera_id: str, t: float, uv) -> list[TrackUpdate]:
         """As :meth:`update`, from a spot already found (px; None: the camera saw no LED)."""
+        return self.update_spots(camera_id, t, [] if uv is None else [uv])
+
+    def update_spots(self, camera_id: str, t: float, uvs) -> list[TrackUpdate]:
+        """As :meth:`update`, from the spots already found (``K×2`` px; NaN rows: none)."""
         k = self._index[camera_id]
         out = self._due(t)
         self._drop_lost(t, out)
-        if uv is None:
-            return out
-        uv = np.asarray(uv, float) - self._offset[k]
-        ray = _Ray(t, k, self.cameras[k].normalise(uv[None])[0])
-        track = self._claim(ray, uv)
-        if track is not None:
-            track.rays.append(ray)
-            track.due.append(t)
-            track.last_ray = t
-            self._refresh(track, t)
-        else:
-            self._start(ray)
+        uvs = np.asarray(uvs, float).reshape(-1, 2)
+        uvs = uvs[np.isfinite(uvs).all(axis=1)] - self._offset[k]
+        rays = [_Ray(t, k, xy) for xy in self.cameras[k].normalise(uvs)] if len(uvs) else []
+        claims = self._claim(k, t, uvs)
+        for j, ray in enumerate(rays):
+            track = claims.get(j)
+            if track is not None:
+                track.rays.append(ray)
+                track.due.append(t)
+                track.last_ray = t
+                self._refresh(track, t)
+            else:
+                self._start(ray)
+        if self.codes:
+            self._blink(k, t, {id(tr) for tr in claims.values()})
         return out
 
     def finish(self) -> list[TrackUpdate]:
@@ -170,8 +204,8 @@ class Tracker:
     def _drop_lost(self, now: float, out: list) -> None:
         keep = []
         for tr in self.tracks:
-            if now - tr.last_ray > LOST_PERIODS * self.period or \
-                    now - tr.last_two > COAST_PERIODS * self.period:
+            if now - tr.last_ray > self._lost or \
+                    tr.last_ray - tr.last_two > COAST_PERIODS * self.period:
                 out += [self._row(tr, t) for t in tr.due]
             else:
                 keep.append(tr)
@@ -204,49 +238,107 @@ class Tracker:
             tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
             tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
 
-    def _claim(self, ray: _Ray, uv) -> _Track | None:
-        """The track whose extrapolated position this spot fits (None: none does)."""
-        best, best_d = None, np.inf
-        cam = self.cameras[ray.camera]
-        for tr in self.tracks:
-            X, _, s_pos, _ = self._extrapolated(tr, ray.t)
-            pred, front, _ = cam.project(X[None])
-            if not front[0]:
+    def _predicted(self, k: int, t: float):
+        """Each track's extrapolated spot in camera ``k`` at ``t`` (T×2 px, NaN: behind it) and
+        the scatter (px) it may show there: the spot noise and where the track may be by now."""
+        cam = self.cameras[k]
+        if not self.tracks:
+            return np.zeros((0, 2)), np.zeros(0)
+        ext = [self._extrapolated(tr, t) for tr in self.tracks]
+        X = np.array([e[0] for e in ext])
+        pred, front, _ = cam.project(X)
+        depth = cam.to_camera(X)[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slack = np.hypot(self.pixel_sigma, np.array([e[2] for e in ext]) * self._f[k] / depth)
+        pred[~front] = np.nan
+        return pred, slack
+
+    def _claim(self, k: int, t: float, uvs) -> dict:
+        """Which track each spot of camera ``k`` at ``t`` belongs to (spot index → track): the
+        spot within :data:`GATE_SIGMAS` of a track's prediction, nearest pairs first, each spot
+        to one track and each track one spot."""
+        if not self.tracks or not len(uvs):
+            return {}
+        pred, slack = self._predicted(k, t)
+        d = np.linalg.norm(uvs[None, :, :] - pred[:, None, :], axis=2) / slack[:, None]
+        d = np.where(np.isfinite(d), d, np.inf)
+        claims: dict = {}
+        for flat in np.argsort(d, axis=None):
+            i, j = np.unravel_index(flat, d.shape)
+            if not d[i, j] < GATE_SIGMAS:
+                break
+            if j in claims or any(tr is self.tracks[i] for tr in claims.values()):
                 continue
-            depth = float(cam.to_camera(X[None])[0, 2])
-            # what the spot may scatter: its noise, and where the track may be by now
-            slack = np.hypot(self.pixel_sigma, s_pos * self._f[ray.camera] / depth)
-            d = float(np.linalg.norm(uv - pred[0])) / slack
-            if d < GATE_SIGMAS and d < best_d:
-                best, best_d = tr, d
-        return best
+            claims[int(j)] = self.tracks[i]
+        return claims
+
+    def _blink(self, k: int, t: float, lit: set) -> None:
+        """Record, for the blink code, each placed track camera ``k`` should have seen at
+        ``t``: lit if it took a spot, dark if none; and name the tracks whose code is due."""
+        cam = self.cameras[k]
+        pred, _ = self._predicted(k, t)
+        m = VIEW_MARGIN_PX
+        inside = (pred[:, 0] >= m) & (pred[:, 1] >= m) & (pred[:, 0] <= cam.width - 1 - m) \
+            & (pred[:, 1] <= cam.height - 1 - m)
+        for tr, there in zip(self.tracks, inside):
+            placed = t - tr.last_two <= COAST_PERIODS * self.period
+            if id(tr) in lit or (there and placed):
+                tr.seen.append((t, id(tr) in lit))
+            tr.seen = [o for o in tr.seen if o[0] >= t - DECODE_REPEATS * self._repeat]
+            if t - tr.decoded_at >= 0.5 * self._repeat / DECODE_REPEATS:
+                tr.decoded_at = t
+                self._name(tr)
+
+    def _name(self, tr: _Track) -> None:
+        """The LED a track's recent lit and dark frames name; a name held by another track goes
+        to the one whose code reads more clearly."""
+        if len(tr.seen) < 2:
+            return
+        t, lit = np.array(tr.seen).T
+        led, e1, e2 = decode(t, lit.astype(bool), self.codes)
+        if led is None:
+            if tr.led != tr.anonymous and e2 - e1 < 0:  # its code no longer fits it
+                tr.led = tr.anonymous
+            return
+        holder = next((o for o in self.tracks if o is not tr and o.led == led), None)
+        if holder is not None:
+            if holder.margin >= e2 - e1:
+                return
+            holder.led = holder.anonymous
+        tr.led, tr.margin = led, e2 - e1
 
     def _start(self, ray: _Ray) -> None:
-        """A spot no track claims: start a track with a recent spot of another camera whose
-        ray meets this one's, else keep it for the next camera."""
+        """A spot no track claims: start a track with the recent spot of another camera whose
+        ray meets this one's best (within the motion possible between them, and above the
+        floor: a floor's mirror image of an LED meets below it), else keep it for the next."""
         window = START_WINDOW * self.period
-        self._pending = [p for p in self._pending
-                         if ray.t - p.t <= window and p.camera != ray.camera]
-        for p in reversed(self._pending):
-            fit, resid, _ = self._solve([p, ray], ray.t, order=0)
+        self._pending = [p for p in self._pending if ray.t - p.t <= window]
+        best, best_score = None, np.inf
+        for p in self._pending:
+            if p.camera == ray.camera:
+                continue
+            fit, resid, cov = self._solve([p, ray], ray.t, order=0)
             if fit is None:
                 continue
             X = fit[:3]
             depth = [float(self.cameras[r.camera].to_camera(X[None])[0, 2]) for r in (p, ray)]
-            if min(depth) <= 0:
+            if min(depth) <= 0 or X[2] < -3 * np.sqrt(max(cov[2, 2], 0.0)):
                 continue
-            allowed = 3 * self.pixel_sigma + TOP_SPEED * (ray.t - p.t) * max(
+            allowed = 3 * self.pixel_sigma + TOP_SPEED * abs(ray.t - p.t) * max(
                 self._f[r.camera] / d for r, d in zip((p, ray), depth))
-            if resid > allowed:
-                continue
-            self._pending.remove(p)
-            s_pos = TOP_SPEED * (ray.t - p.t) + self._metres_per_px(X, [ray.camera])
-            tr = _Track(f"T{self._next}", [p, ray], ray.t, np.r_[X, np.zeros(6)],
-                        [p.t, ray.t], ray.t, last_two=ray.t, s_pos=s_pos, s_vel=TOP_SPEED)
-            self._next += 1
-            self.tracks.append(tr)
+            if resid <= allowed and resid / allowed < best_score:
+                best, best_score = (p, X), resid / allowed
+        if best is None:
+            self._pending.append(ray)
             return
-        self._pending.append(ray)
+        p, X = best
+        self._pending = [q for q in self._pending if q is not p]
+        s_pos = TOP_SPEED * abs(ray.t - p.t) + self._metres_per_px(X, [ray.camera])
+        name = f"T{self._next}"
+        self._next += 1
+        self.tracks.append(_Track(name, [p, ray], ray.t, np.r_[X, np.zeros(6)], [p.t, ray.t],
+                                  ray.t, last_two=ray.t, s_pos=s_pos, s_vel=TOP_SPEED,
+                                  anonymous=name))
 
     def _row(self, tr: _Track, t: float) -> TrackUpdate:
         rays = [r for r in tr.rays if abs(r.t - t) <= self.half]

@@ -151,8 +151,37 @@ def led_brightness(cam: Camera, points: np.ndarray, look: Appearance) -> np.ndar
         * cos_emit ** look.emission_order * cos_cam * vig
 
 
+def _led_light(cam: Camera, points, look: Appearance, distractors: bool, carrier_radius,
+               on) -> tuple[np.ndarray, np.ndarray]:
+    """One LED per frame (``points`` N×3, lit where ``on``): the light it puts on each pixel
+    (``N×H×W``, its floor mirror image included) and whether its centre is in the image."""
+    n, h, w = len(points), cam.height, cam.width
+    uv, front, inside = cam.project(points)
+    uv = np.where(front[:, None], uv, np.nan)
+    r2 = ((uv[:, 0] - cam.cx) / (w / 2)) ** 2 + ((uv[:, 1] - cam.cy) / (h / 2)) ** 2
+    sigma = look.psf_sigma * (1.0 + look.psf_growth * np.clip(r2, 0, 2) / 2)
+    # a blurred spot spreads the same light: its peak falls as 1/σ²
+    amp = np.where(front & on, led_brightness(cam, points, look), 0.0) \
+        * (look.psf_sigma / sigma) ** 2
+    xc = cam.to_camera(points)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        in_lens = (xc[:, 0] ** 2 + xc[:, 1] ** 2) / xc[:, 2] ** 2 < cam.max_radius2
+    near = front & in_lens & (uv[:, 0] > -4 * sigma) & (uv[:, 0] < w - 1 + 4 * sigma) \
+        & (uv[:, 1] > -4 * sigma) & (uv[:, 1] < h - 1 + 4 * sigma)
+    amp = np.where(near, amp, 0.0)
+    light = _spots(n, h, w, uv[:, 0], uv[:, 1], sigma, amp)
+    if distractors and look.reflection > 0:
+        # the LED's mirror image in the floor, dimmer and blurred by the floor's roughness
+        mirror = points * [1.0, 1.0, -1.0]
+        muv, mfront, _ = cam.project(mirror)
+        mamp = np.where(mfront & ~_under_carrier(cam, points, carrier_radius),
+                        amp * look.reflection, 0.0)
+        light += _spots(n, h, w, muv[:, 0], muv[:, 1], sigma * look.reflection_blur, mamp)
+    return light, inside
+
+
 def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool = True,
-                  carrier_radius=0.0) -> tuple[np.ndarray, np.ndarray]:
+                  carrier_radius=0.0, on=None) -> tuple[np.ndarray, np.ndarray]:
     """Colour frames (``N×H×W×3`` uint8, BGR) of the LED at each point as ``cam`` sees it.
 
     Returns the frames and whether the LED's centre is in the image. The LED is a pixel-
@@ -160,30 +189,27 @@ def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool
     tail at the edge, as a real one does. ``carrier_radius`` (m, scalar or one per point): what
     carries the LED (a robot's body) covers the floor within this radius of the LED's foot, and
     with it the floor's mirror image of the LED wherever that falls there.
+
+    Several LEDs in each frame: ``points`` ``N×K×3`` (and ``carrier_radius`` one per LED or
+    scalar), ``on`` ``N×K`` whether each is lit (a blink code's bit; default all); the second
+    value is then ``N×K``.
     """
-    points = np.atleast_2d(np.asarray(points, float))
-    n, h, w = len(points), cam.height, cam.width
-    uv, front, inside = cam.project(points)
-    uv = np.where(front[:, None], uv, np.nan)
-    r2 = ((uv[:, 0] - cam.cx) / (w / 2)) ** 2 + ((uv[:, 1] - cam.cy) / (h / 2)) ** 2
-    sigma = look.psf_sigma * (1.0 + look.psf_growth * np.clip(r2, 0, 2) / 2)
-    # a blurred spot spreads the same light: its peak falls as 1/σ²
-    amp = np.where(front, led_brightness(cam, points, look), 0.0) * (look.psf_sigma / sigma) ** 2
-    xc = cam.to_camera(points)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        in_lens = (xc[:, 0] ** 2 + xc[:, 1] ** 2) / xc[:, 2] ** 2 < cam.max_radius2
-    near = front & in_lens & (uv[:, 0] > -4 * sigma) & (uv[:, 0] < w - 1 + 4 * sigma) \
-        & (uv[:, 1] > -4 * sigma) & (uv[:, 1] < h - 1 + 4 * sigma)
-    amp = np.where(near, amp, 0.0)
-    led = _spots(n, h, w, uv[:, 0], uv[:, 1], sigma, amp)
+    pts = np.asarray(points, float)
+    several = pts.ndim == 3
+    pts = pts if several else np.atleast_2d(pts)[:, None]
+    n, n_led = pts.shape[:2]
+    h, w = cam.height, cam.width
+    lit = np.ones((n, n_led), bool) if on is None else np.asarray(on, bool).reshape(n, n_led)
+    radius = np.asarray(carrier_radius, float)
+    radius = np.broadcast_to(radius if several or radius.ndim == 0 else radius[:, None],
+                             (n, n_led))
+    led = np.zeros((n, h, w))
+    inside = np.zeros((n, n_led), bool)
+    for k in range(n_led):
+        light, inside[:, k] = _led_light(cam, pts[:, k], look, distractors, radius[:, k],
+                                         lit[:, k])
+        led += light
     extra = np.zeros((n, h, w))
-    if distractors and look.reflection > 0:
-        # the LED's mirror image in the floor, dimmer and blurred by the floor's roughness
-        mirror = points * [1.0, 1.0, -1.0]
-        muv, mfront, _ = cam.project(mirror)
-        mamp = np.where(mfront & ~_under_carrier(cam, points, carrier_radius),
-                        amp * look.reflection, 0.0)
-        extra += _spots(n, h, w, muv[:, 0], muv[:, 1], sigma * look.reflection_blur, mamp)
     if distractors and look.lamp is not None:
         x, y, z, peak, lsig = look.lamp
         luv, lfront, _ = cam.project([[x, y, z]])
@@ -201,7 +227,7 @@ def render_camera(cam: Camera, points, look: Appearance, rngs, distractors: bool
         noise_sd = np.sqrt(look.read_noise ** 2 + look.shot_gain * np.maximum(signal, 0.0))
         signal = signal + normal[..., c] * noise_sd
         frames[..., c] = np.clip(np.rint(signal), 0, 255)
-    return frames, inside
+    return frames, (inside if several else inside[:, 0])
 
 
 #: pixels rendered at once (a chunk of frames): bounds the float arrays a chunk needs to

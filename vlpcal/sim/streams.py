@@ -5,16 +5,20 @@ and drift. Written as DESIGN.md's asynchronous frames folder:
     DIR/<camera_id>/<frame_no>.jpg
     DIR/times.csv            camera_id,frame_no,t   (capture time, s, on one clock)
 
-and ``DIR.truth.csv`` beside it (``camera_id,frame_no,t,x,y,z``: where the LED was)."""
+and ``DIR.truth.csv`` beside it (``camera_id,frame_no,t,x,y,z,led``: where each LED was, and
+whether it was lit: ``lit``, 1 or 0, the last column). Several LEDs, each with an optional blink
+code (:class:`MovingLed`), render into the same frames."""
 
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..blink import BlinkCode
 from .scene import CHUNK_PIXELS, ROBOT_RADIUS, STREAM_FRAMES, Scene, render_camera
 from .writers import trajectory
 
@@ -28,6 +32,49 @@ class Timing:
     drop: float = 0.05  #: share of frames lost
     offset: float = 0.0  #: s, the camera's clock minus the host's
     drift: float = 0.0  #: s per s, the camera's clock rate error
+
+
+@dataclass(frozen=True)
+class MovingLed:
+    """One LED in a stream: where it is (``path``: times → ``N×3``), its blink code (None: lit
+    throughout) and the code's phase (s: its pattern started at ``-phase``)."""
+
+    led: str
+    path: Callable
+    code: BlinkCode | None = None
+    phase: float = 0.0
+
+    def lit(self, t) -> np.ndarray:
+        t = np.asarray(t, float)
+        return np.ones(t.shape, bool) if self.code is None else self.code.lit(t, self.phase)
+
+
+def crossing_paths(room, speed: float, n: int = 3, height: float = 0.15,
+                   seed: int = 0) -> list[Callable]:
+    """``n`` robots' LEDs crossing: each drives to and fro along its own line through the
+    middle of ``room`` (the floor polygon; the lines ``180/n`` degrees apart), smoothly (a sine,
+    ``speed`` m/s at its fastest), each a sixth of a swing behind the one before — so their
+    paths all cross at the middle, at different moments."""
+    from shapely.geometry import Polygon
+
+    room = Polygon(room)
+    mid = np.array(room.centroid.coords[0])
+    x0, y0, x1, y1 = room.bounds
+    amp = 0.42 * min(x1 - x0, y1 - y0)
+    omega = speed / amp
+    turn = np.random.default_rng([seed, 29]).uniform(0, np.pi / n)
+    out = []
+    for k in range(n):
+        a = turn + k * np.pi / n
+        d = np.array([np.cos(a), np.sin(a)])
+
+        def at(t, d=d, phase=k * np.pi / 3):
+            s = amp * np.sin(omega * np.asarray(t, float) + phase)
+            xy = mid + s[..., None] * d
+            return np.concatenate([xy, np.full(s.shape + (1,), float(height))], axis=-1)
+
+        out.append(at)
+    return out
 
 
 def robot_path(scene: Scene, speed: float, height: float = 0.15, seed: int = 0):
@@ -58,11 +105,15 @@ def capture_times(timing: Timing, duration: float, rng) -> np.ndarray:
 
 def simulate_streams(scene: Scene, root, path, duration: float, timings: dict | None = None,
                      seed: int = 0, carrier_radius: float = ROBOT_RADIUS) -> dict:
-    """Render every true camera's frames of the LED at ``path(t)`` for ``duration`` s, each
-    camera on its own :class:`Timing` (``timings``: camera id → Timing; default 30 fps, 2 ms
-    jitter, 5 % dropped), and write the asynchronous frames folder ``root``; the LED rides a
-    robot whose body (``carrier_radius``) hides the floor under it. Returns camera id
-    → (frame numbers, capture times, true positions)."""
+    """Render every true camera's frames of the LED at ``path(t)`` — or of several LEDs, a list
+    of :class:`MovingLed` — for ``duration`` s, each camera on its own :class:`Timing`
+    (``timings``: camera id → Timing; default 30 fps, 2 ms jitter, 5 % dropped), and write the
+    asynchronous frames folder ``root``; the LEDs ride robots whose bodies
+    (``carrier_radius``) hide the floor under them. Returns camera id → (frame numbers, capture
+    times, true positions ``N×3``, or ``N×K×3`` for a list)."""
+    from .render import encode_jpeg
+
+    leds = list(path) if isinstance(path, (list, tuple)) else [MovingLed("L1", path)]
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng([scene.seed, seed, STREAM_FRAMES, 16])
@@ -72,32 +123,32 @@ def simulate_streams(scene: Scene, root, path, duration: float, timings: dict | 
     for k, cam in enumerate(scene.true):
         timing = (timings or {}).get(cam.id, Timing())
         t = capture_times(timing, duration, rng)
-        X = path(t)
+        X = np.stack([m.path(t) for m in leds], axis=1)  # N×K×3
+        on = np.stack([m.lit(t) for m in leds], axis=1)
         rngs = [np.random.default_rng([scene.seed, seed, STREAM_FRAMES, 16, k + 1, i + 1])
                 for i in range(len(t))]
-        from .render import encode_jpeg
-
         folder = root / cam.id
         folder.mkdir(exist_ok=True)
         step = max(1, CHUNK_PIXELS // (cam.width * cam.height))
         for s in range(0, len(t), step):
             imgs, _ = render_camera(cam, X[s:s + step], scene.profile.look, rngs[s:s + step],
-                                   carrier_radius=carrier_radius)
+                                   carrier_radius=carrier_radius, on=on[s:s + step])
             for i, img in enumerate(imgs, start=s):
                 (folder / f"{i:06d}.jpg").write_bytes(encode_jpeg(img, scene.profile.look
                                                                   .jpeg_quality))
         clock = timing.offset + (1 + timing.drift) * t  # as the camera's clock says
         nos = [f"{i:06d}" for i in range(len(t))]
         rows += [(cam.id, n, f"{c:.6f}") for n, c in zip(nos, clock)]
-        truth += [(cam.id, n, f"{tt:.6f}", *(f"{v:.6f}" for v in x))
-                  for n, tt, x in zip(nos, t, X)]
-        out[cam.id] = (nos, t, X)
+        truth += [(cam.id, n, f"{tt:.6f}", *(f"{v:.6f}" for v in x), m.led, int(lit))
+                  for n, tt, xs, lits in zip(nos, t, X, on)
+                  for x, m, lit in zip(xs, leds, lits)]
+        out[cam.id] = (nos, t, X if isinstance(path, (list, tuple)) else X[:, 0])
     with open(root / "times.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(("camera_id", "frame_no", "t"))
         w.writerows(rows)
     with open(root.with_name(root.name + ".truth.csv"), "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(("camera_id", "frame_no", "t", "x", "y", "z"))
+        w.writerow(("camera_id", "frame_no", "t", "x", "y", "z", "led", "lit"))
         w.writerows(truth)
     return out
