@@ -353,3 +353,28 @@ def test_test_points_in_millimetres_or_of_other_cameras_are_refused(tmp_path):
     res = subprocess.run(cal + ["--test-points", str(other)], capture_output=True, text=True,
                          timeout=300)
     assert res.returncode == 2 and "none of its cameras" in res.stderr
+
+
+@pytest.mark.parametrize("n_refs", [4, 12])
+def test_a_weak_survey_is_called_weak_and_its_error_predicted(n_refs):
+    """The paper's line of three cameras overlaps in pairs: four references leave the lenses
+    loose across the overlaps (centimetres off), twelve do not; the linearised prediction of
+    the fixes' error follows the error measured on points the survey never saw."""
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import deployment_of
+    from vlpcal.survey import plan_references
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    true, nominal = list(scene.true), list(scene.nominal)
+    rng = np.random.default_rng(5)
+    refs = plan_references(deployment_of(scene, "nominal"), n_refs).xyz
+    measured = refs + rng.normal(0, 0.002, refs.shape)
+    free = _wave(3000, (0.6, 0.1), (3.0, 1.7), rng, top=0.9)
+    cal = calibrate_free(nominal, measured, _spots(true, refs, rng, 0.03),
+                         [f"R{i}" for i in range(len(refs))], _spots(true, free, rng, 0.03),
+                         room=scene.profile.room)
+    actual = _error(cal.cameras, true, rng)
+    assert cal.weakly_fixed == (n_refs == 4), (cal.predicted_error, cal.exact_error,
+                                               cal.datum_floor, actual)
+    assert actual / 3 < cal.predicted_error < actual * 3, (cal.predicted_error, actual)

@@ -270,9 +270,11 @@ def free_calibration_figure(path, result) -> None:
     ok = np.isfinite(F).all(axis=1)
     if ok.any():
         views = np.array([c.project(F[ok])[2] for c in dep.cameras])
-        sc = top.scatter(F[ok, 0], F[ok, 1], c=views.sum(axis=0), s=4, cmap="viridis",
-                         vmin=1, vmax=max(2, len(dep.cameras)))
-        fig.colorbar(sc, ax=top, label="cameras that see the fitted LED position")
+        most = max(2, len(dep.cameras))
+        sc = top.scatter(F[ok, 0], F[ok, 1], c=views.sum(axis=0), s=4,
+                         cmap=plt.get_cmap("viridis", most), vmin=0.5, vmax=most + 0.5)
+        fig.colorbar(sc, ax=top, label="cameras that see the fitted LED position",
+                     ticks=range(1, most + 1))
     top.plot(result.points[:, 0], result.points[:, 1], "r^", ms=7, label="reference points")
     for pid, p, e in zip(result.reference_ids, result.points, cal.leave_one_out):
         top.annotate(pid + (f" {e * 1000:.1f} mm" if np.isfinite(e) else ""), p[:2],
@@ -292,6 +294,10 @@ def free_calibration_figure(path, result) -> None:
                  label=f"datum floor {cal.datum_floor * 1000:.1f} mm")
     bars.axhline(cal.point_sigma * 1000 * np.sqrt(3), color="0.5", ls=":",
                  label=f"the tape's own 3D noise {cal.point_sigma * 1000 * np.sqrt(3):.1f} mm")
+    if np.isfinite(cal.predicted_error):
+        bars.axhline(cal.predicted_error * 1000, color="#d07000", ls="-.",
+                     label=f"fixes predicted {cal.predicted_error * 1000:.1f} mm off"
+                     + (" (weakly fixed)" if cal.weakly_fixed else ""))
     bars.set_xticks(range(len(e)), result.reference_ids, rotation=90, fontsize=7)
     bars.set_ylabel("left-out error (mm)")
     bars.legend(fontsize=7)

@@ -96,6 +96,10 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     if free_sets and free_height is not None and not 0 <= free_height <= top:
         raise click.BadParameter(f"expected a height from 0 to {top:g} m",
                                  param_hint="--free-height")
+    if references is not None and references < 3 and free_height is None:
+        raise click.BadParameter(f"expected 3 or more (2 or more with --free-height: fewer "
+                                 f"cannot fix the room's frame), got {references}",
+                                 param_hint="--references")
     out.parent.mkdir(parents=True, exist_ok=True)
     with OutputSet(out, folders=True) as (stage,):
         stage.chmod(0o755)
@@ -144,9 +148,12 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
         refs = plan_references(deployment_of(scene, "nominal"), references)
         simulate_free_survey(scene, stage / "free-survey", refs.xyz, free_sets, seed=seed,
                              height=free_height, overwrite=True)
+        written = sum(1 for p in (stage / "free-survey" / "free" / "frames").iterdir())
         click.echo(f"free survey: {len(refs.ids)} reference points and {free_sets} free sets "
                    + (f"(a robot at h = {free_height:g} m) " if free_height is not None else
-                      "(an LED on a pole) ") + f"→ {out / 'free-survey'}")
+                      "(an LED on a pole) ") + f"→ {out / 'free-survey'}; {written} of the sets "
+                   "have frames (a camera saw the LED; the others are left out, as a capture "
+                   "leaves them)")
     if trajectory:
         test = path_of(scene, trajectory, seed=seed)
     else:

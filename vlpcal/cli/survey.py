@@ -36,22 +36,26 @@ def survey():
                    "(given --tape and --spot-noise)]")
 @click.option("--heights", default=None,
               help="LED heights to survey, m, comma-separated (two or more).  [default: "
-                   "0,0.35,0.7; with --free 0 and 15 % of the ceiling for the references, "
-                   "the sweep up to 40 %]")
+                   "0,0.35,0.7; with --free the floor, 20 % and 40 % of the ceiling for the "
+                   "references, the sweep from the floor to 40 %]")
 @click.option("--free", is_flag=True,
               help="Plan a free survey: a few reference points to measure, and a route to "
                    "carry the LED along while the cameras record.")
-@click.option("--references", type=click.IntRange(3, 200), default=None,
-              help="With --free: how many reference points.  [default: 6 where cameras "
-                   "overlap in threes, up to 12 on a line of cameras]")
+@click.option("--free-height", default=None, type=Finite(0.0, 10000.0),
+              help="Plan a free survey whose LED rides a robot at this height, m (implies "
+                   "--free): the route is driven, not swept.")
+@click.option("--references", type=click.IntRange(2, 200), default=None,
+              help="With --free: how many reference points (3 or more; 2 or more with "
+                   "--free-height).  [default: 6 where cameras overlap in threes, up to 12 on "
+                   "a line of cameras]")
 @click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6, 1000),
               help="Points each camera must see (more let the calibration fit more of its lens).")
 @click.option("--tape", default=0.003, show_default=True, type=Finite(1e-7, 100.0),
               help="How precisely the positions will be measured, m per axis (a tape: 0.003).")
 @click.option("--spot-noise", default=0.03, show_default=True, type=Finite(1e-4, 10.0),
               help="The spots' precision, px (0.03: the default detector at its best).")
-def survey_plan(deployment_path, out, step, heights, free, references, min_per_camera, tape,
-                spot_noise):
+def survey_plan(deployment_path, out, step, heights, free, free_height, references,
+                min_per_camera, tape, spot_noise):
     """Plan the survey: where to put the LED, with ids, and a map to print.
 
     The grid is made finer until the survey's own measurement errors add at most 10 % to the
@@ -69,8 +73,12 @@ def survey_plan(deployment_path, out, step, heights, free, references, min_per_c
     from ..survey.plan import budget_sentence
 
     dep = _load_deployment(deployment_path)
+    free = free or free_height is not None
     if references is not None and not free:
         raise click.BadParameter("is for a free survey (--free)", param_hint="--references")
+    if references is not None and references < 3 and free_height is None:
+        raise click.BadParameter(f"expected 3 or more (2 or more with --free-height), got "
+                                 f"{references}", param_hint="--references")
     hs = _floats(heights or "0,0.35,0.7", "--heights")
     top = 0.9 * min(c.position[2] for c in dep.cameras)  # below the cameras, in their view
     if len(set(hs)) < 2 or any(not 0 <= h < top for h in hs):
@@ -78,13 +86,18 @@ def survey_plan(deployment_path, out, step, heights, free, references, min_per_c
                                  f"{top:g} m (nine tenths of the lowest camera's), got "
                                  f"{heights!r}",
                                  param_hint="--heights")
+    if free_height is not None and not 0 <= free_height < top:
+        raise click.BadParameter(f"expected a height from 0 to below {top:g} m (nine tenths of "
+                                 f"the lowest camera's), got {free_height:g}",
+                                 param_hint="--free-height")
     route = None
     try:
         if free:
             from ..survey import free_route, plan_references
 
             plan = plan_references(dep, references, hs if heights else None)
-            route = free_route(dep, hs if heights else None)
+            route = free_route(dep, (free_height,) * 2 if free_height is not None
+                               else hs if heights else None)
         else:
             plan = plan_survey(dep, step, hs, min_per_camera, tape=tape, spot_noise=spot_noise)
     except SurveyError as e:
@@ -133,9 +146,15 @@ def _echo_free_plan(plan, route, out) -> None:
     for pid, (x, y, z), seen in zip(plan.ids, plan.xyz, plan.seen.T):
         who = "+".join(c for c, s in zip(plan.camera_ids, seen) if s)
         click.echo(f"  {pid}: ({x:.2f}, {y:.2f}, {z:.2f}) m, seen by {who}")
-    click.echo(f"then, while the cameras record, carry the LED along {len(route.stops)} "
-               f"stop{'s' if len(route.stops) > 1 else ''}, sweeping it from {route.low:g} to "
-               f"{route.high:g} m and back at each (the map shows the route):")
+    stops = f"{len(route.stops)} stop{'s' if len(route.stops) > 1 else ''}"
+    if route.low == route.high:
+        click.echo(f"then, while the cameras record, drive the robot (its LED at {route.low:g} m) "
+                   f"through {stops} and over the floor between them (the map shows the "
+                   "route); calibrate with --free-height " f"{route.low:g}:")
+    else:
+        click.echo(f"then, while the cameras record, carry the LED along {stops}, sweeping it "
+                   f"from {route.low:g} to {route.high:g} m and back at each (the map shows the "
+                   "route):")
     linked = {c for stop in route.pairs for pair in stop for c in pair}
     alone = [c for c in plan.camera_ids if c not in linked]
     if alone:
@@ -557,13 +576,24 @@ def _report_test_points(result, test) -> None:
     ids, X, uv = test
     result.test_points = tp = test_point_errors(result.deployment, X, uv, ids)
     fixed = round(tp["fixed"] * tp["points"])
+    few = tp["seen_by_fewer_than_two"]
+    why = []
+    if few:
+        why.append(f"{few} seen by fewer than two cameras")
+    if tp["points"] - fixed - few > 0:
+        why.append(f"{tp['points'] - fixed - few} whose spots no camera pair agreed on")
+    unfixed = f" ({'; '.join(why)})" if why else ""
     if not fixed:
-        click.echo(f"\ntest points: none of {tp['points']} was fixed (seen by two cameras)")
+        click.echo(f"\ntest points: none of {tp['points']} was fixed{unfixed}")
         return
+    cal = getattr(result, "calibration", None)
+    sigma = cal.point_sigma if cal is not None else result.precision["point_sigma_m"]
     click.echo(f"\ntest points (never used by the calibration): {fixed} of {tp['points']} "
-               f"fixed, mean {format_length(tp['mean'])}, p95 {format_length(tp['p95'])}, max "
-               f"{format_length(tp['max'])} from their measured positions (whose own "
-               "measurement error is in these figures)")
+               f"fixed{unfixed}, mean {format_length(tp['mean'])}, p95 "
+               f"{format_length(tp['p95'])}, max {format_length(tp['max'])} from their measured "
+               f"positions (whose own measurement error is in these figures: at the "
+               f"references' ±{format_length(sigma)} per axis, about "
+               f"{format_length(sigma * 1.596)} of the mean)")
 
 
 def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes, quiet,
@@ -641,6 +671,21 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     click.echo(f"your {n_ref} reference points fix the room to about "
                f"{cal.datum_floor * 1000:.1f} mm (the datum floor: no calibration does "
                "better); measure more points, or more precisely, to do better")
+    if math.isfinite(cal.predicted_error):
+        click.echo(f"predicted: fixes with these cameras {format_length(cal.predicted_error)} "
+                   "off on average over the floor (the survey's adjustment, linearised; exact "
+                   f"cameras: {format_length(cal.exact_error)})")
+    if cal.weakly_fixed:
+        from ..survey import plan_references
+
+        asked = len(plan_references(dep).ids)
+        click.echo(f"warning: this survey fixes the cameras weakly: fixes are predicted "
+                   f"{format_length(cal.predicted_error)} off, where exact cameras in the frame "
+                   f"of your references would be "
+                   f"{format_length(math.hypot(cal.exact_error, cal.datum_floor))}: the free LED "
+                   f"cannot fix the lenses across the cameras' overlaps with {n_ref} references; "
+                   f"measure more (survey plan --free asks for {asked}), or give --test-points "
+                   "to see")
     for r in result.cameras:
         if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
             click.echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "

@@ -29,7 +29,7 @@ BUDGET_MODEL = "k1"
 LOCAL_CAMERAS = 9
 
 
-def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
+def calibration_ratio(cameras, survey_xyz, test_xyz, tape, spot: float,
                       model: str = BUDGET_MODEL, margin_px: float = 5.0,
                       draws: int = 400) -> tuple[float, float]:
     """Predicted mean 3D error of fixes at ``test_xyz`` with cameras calibrated from a survey
@@ -37,18 +37,37 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
     with exact cameras: (median, 95th percentile) over ``draws`` surveys. A survey's tape
     errors are one draw: the cameras it leaves are off in one direction for every fix, so the
     ratio varies from survey to survey and both figures matter. (NaN, NaN) when no test
-    point is seen by two cameras that triangulate it. Deterministic (a fixed seed)."""
-    nan = (float("nan"), float("nan"))
+    point is seen by two cameras that triangulate it. Deterministic (a fixed seed).
+    ``tape``: m, one for all, or per point (``n``) or per point and axis (``n×3``); ``inf``
+    for a position nobody measured (a free survey's LED)."""
+    errors = fix_errors(cameras, survey_xyz, test_xyz, tape, spot, model, margin_px, draws)
+    if errors is None:
+        return float("nan"), float("nan")
+    ratio = errors[1] / errors[0]
+    return float(np.median(ratio)), float(np.quantile(ratio, 0.95))
+
+
+def fix_errors(cameras, survey_xyz, test_xyz, tape, spot: float, model: str = BUDGET_MODEL,
+               margin_px: float = 5.0, draws: int = 400):
+    """:func:`calibration_ratio`'s draws: the mean 3D error (m) of fixes at ``test_xyz`` with
+    exact cameras and with the calibrated ones, per draw (two arrays), or None."""
     cams = _local_block(list(cameras))
     survey_xyz = np.asarray(survey_xyz, float).reshape(-1, 3)
     test_xyz = np.asarray(test_xyz, float).reshape(-1, 3)
     npar = 6 + len(lens_params(model))
     P = len(cams) * npar
+    sig = np.asarray(tape, float)
+    sig = np.broadcast_to(sig[:, None] if sig.ndim == 1 else sig, survey_xyz.shape)
+    # a position nobody measured that fewer cameras see than fix it tells nothing: left out
+    views = sum(c.project(survey_xyz, margin=margin_px)[2].astype(int) for c in cams)
+    told = 2 * views + np.isfinite(sig).sum(axis=1) >= 3
+    survey_xyz, sig = survey_xyz[told], sig[told]
     n = len(survey_xyz)
     # the joint normal matrix: cameras (P × P) and the points' 3 × 3 blocks; each camera's
     # coupling to the points it sees, kept per camera (a point is seen by few cameras)
     A_cc = np.zeros((P, P))
-    A_pp = np.broadcast_to(np.eye(3) / tape ** 2, (n, 3, 3)).copy()
+    with np.errstate(divide="ignore"):
+        A_pp = np.einsum("ni,ij->nij", 1.0 / sig ** 2, np.eye(3))
     seen_by, couple = [], []
     for k, cam in enumerate(cams):
         idx = np.flatnonzero(cam.project(survey_xyz, margin=margin_px)[2])
@@ -61,7 +80,7 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
         couple.append(np.einsum("nai,naj->nij", Jc, Jp))  # n_k × npar × 3
     P_inv = _inverse(A_pp)
     if P_inv is None:
-        return nan
+        return None
     # Schur complement, pair by pair over the points both cameras see
     schur = A_cc
     for k in range(len(cams)):
@@ -93,7 +112,7 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
         w = np.linalg.eigvalsh(info[ok])
         ok[ok] = w[:, 0] > 1e-9 * w[:, -1]
     if not ok.any():
-        return nan
+        return None
     F_inv = np.linalg.inv(info[ok])
     D = -np.einsum("nij,njp->nip", F_inv, mix[ok])  # how a fix moves with the cameras
     # draws of the cameras' error (covariance schur⁻¹; its parameters scaled to unit
@@ -103,7 +122,7 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
     try:
         w, V = np.linalg.eigh(schur * d[:, None] * d[None, :])
     except np.linalg.LinAlgError:
-        return nan
+        return None
     keep = w > w.max() * 1e-12
     rng = np.random.default_rng(0)
     theta = d[:, None] * ((V[:, keep] / np.sqrt(w[keep]))
@@ -112,17 +131,20 @@ def calibration_ratio(cameras, survey_xyz, test_xyz, tape: float, spot: float,
     z = rng.standard_normal((draws, len(F_inv), 3))
     noise = np.einsum("nij,dnj->dni", L, z)
     shift = np.einsum("nip,pd->dni", D, theta)
-    ratio = (np.linalg.norm(noise + shift, axis=2).mean(axis=1)
-             / np.linalg.norm(noise, axis=2).mean(axis=1))
-    return float(np.median(ratio)), float(np.quantile(ratio, 0.95))
+    return (np.linalg.norm(noise, axis=2).mean(axis=1),
+            np.linalg.norm(noise + shift, axis=2).mean(axis=1))
 
 
 def _inverse(blocks):
-    """Inverses of 3 × 3 blocks, or None if one is not invertible."""
-    try:
-        return np.linalg.inv(blocks)
-    except np.linalg.LinAlgError:
+    """Inverses of 3 × 3 blocks, or None if one is not invertible (a point no prior holds and
+    fewer than two cameras see)."""
+    d = np.sqrt(np.einsum("nii->ni", blocks))
+    if not (d > 0).all():
         return None
+    scaled = blocks / d[:, :, None] / d[:, None, :]
+    if (np.linalg.eigvalsh(scaled)[:, 0] <= 1e-9).any():
+        return None
+    return np.linalg.inv(scaled) / d[:, :, None] / d[:, None, :]
 
 
 def _local_block(cams: list) -> list:

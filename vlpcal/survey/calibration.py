@@ -163,6 +163,8 @@ class LensChoice:
     candidates: dict
     depth_rel_range: float = float("nan")
     scene_per_px: float = float("nan")  # m per px at the camera's points (distance / f)
+    #: why the model was set rather than chosen, when the survey (not the user) set it
+    reason: str = ""
 
 
 def _lens_choice(fit: CameraFit, camera_id: str, forced: bool, candidates: dict,
@@ -606,6 +608,8 @@ def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
         return f"{px:.2f} px ({format_length(px * choice.scene_per_px)} at its points)"
 
     cid, chosen = choice.camera_id, choice.chosen
+    if choice.forced and choice.reason:
+        return f"{cid}: lens model {chosen} ({LENS_WORDS[chosen]}): {choice.reason}"
     if choice.forced:
         return f"{cid}: lens model {chosen} as asked ({LENS_WORDS[chosen]}): " \
                f"{describe_lens(camera, nominal, chosen)}"

@@ -35,6 +35,9 @@ REJECT_SIGMAS = 5.0
 MAX_FREE_SETS = 5000
 #: reference coordinates beyond the datum's that a precision estimate needs …
 MIN_REDUNDANT = 6
+#: a survey whose cameras are predicted to place fixes this many times worse than its references
+#: and spots allow is weak (the free LED cannot fix the lens across pair overlaps alone)
+WEAK_FACTOR = 2.0
 #: … else this precision (a tape measure, per axis, m) is assumed and said
 ASSUMED_TAPE = 0.003
 
@@ -59,6 +62,18 @@ class FreeCalibration:
     dropped_sets: int = 0  #: free sets of two views that disagree (which is wrong: unknown)
     notes: list = field(default_factory=list)  #: what was assumed or limited, in words
     point_sigma_assumed: bool = False  #: too few references to estimate it: a tape's assumed
+    #: m, predicted mean 3D error of fixes over the floor with these cameras (median of the
+    #: linearised adjustment's draws, :func:`.budget.fix_errors`), and with exact cameras
+    predicted_error: float = float("nan")
+    exact_error: float = float("nan")
+
+    @property
+    def weakly_fixed(self) -> bool:
+        """Whether the survey leaves the cameras far looser than its references allow: fixes
+        predicted more than :data:`WEAK_FACTOR` times the error of exact cameras placed in the
+        references' frame (the spot noise and the datum floor together)."""
+        return bool(self.predicted_error > WEAK_FACTOR * np.hypot(self.exact_error,
+                                                                  self.datum_floor))
 
 
 def datum_floor(references, sigma: float, where, free_height: bool = False) -> float:
@@ -184,6 +199,7 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
                      f"(they have {max(3 * n_ref - datum, 0)} coordinates beyond what fixes the "
                      f"room): ±{ASSUMED_TAPE * 1000:g} mm (a tape) assumed; state --point-sigma, "
                      "or measure more points")
+    kept = ""
     if lens == "auto" and free_height is not None:
         # a robot's LED shows each camera one plane: the references must fix the rest of its
         # lens, which needs three or more of them in its view at two heights or more
@@ -191,11 +207,10 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
                 if seen_r[k].sum() < 3 or np.ptp(X[seen_r[k], 2]) <= 0]
         if weak:
             lens = "pose"
-            notes.append(f"lens kept as in the deployment (pose only): camera"
-                         f"{'s' if len(weak) > 1 else ''} {', '.join(weak)} "
-                         f"{'see' if len(weak) > 1 else 'sees'} fewer than three reference "
-                         "points at two heights, and a robot's LED at one height cannot fix a "
-                         "lens alone")
+            kept = (f"camera{'s' if len(weak) > 1 else ''} {', '.join(weak)} "
+                    f"{'see' if len(weak) > 1 else 'sees'} fewer than three reference points "
+                    "at two heights, and a robot's LED at one height cannot fix a lens alone")
+            notes.append(f"lens kept as in the deployment (pose only): {kept}")
     step = 0
     total = 5 + N
 
@@ -303,6 +318,17 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
         spread[ids_c[k]] = float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan")
     where = adj[N:] if room is None else _floor_points(room, adj[N:])
     floor = datum_floor(X[seen_r.any(axis=0)], s_x, where, free_height is not None)
+    # what the whole survey leaves in the cameras, predicted by the linearised adjustment
+    from .budget import fix_errors
+
+    sig = np.where(free[:, None], np.inf, np.full((len(free), 3), s_x))
+    if free_height is not None:
+        sig[free, 2] = 1e-3 * s_x
+    errs = fix_errors(cams, adj, where, sig, s_px, models[0])
+    exact, predicted = (float("nan"),) * 2 if errs is None else map(
+        lambda e: float(np.median(e)), errs)
+    while step < total:  # the steps that had nothing to do (a reference no camera pair saw)
+        tick()
     if not choices:
         from .calibration import _lens_choice, fit_camera
 
@@ -310,11 +336,14 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
             idx = np.flatnonzero(keep[k])
             fit = fit_camera(nominal[k], adj[idx], uv_all[k, idx], [""] * len(idx), models[k],
                              start=cam)
-            choices.append(_lens_choice(fit, cam.id, True, {}, adj[idx]))
+            choice = _lens_choice(fit, cam.id, True, {}, adj[idx])
+            if kept:
+                choice.reason = f"kept as in the deployment, as {kept}"
+            choices.append(choice)
     return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
                            estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum()),
                            rejected, spread, loo, floor, dropped, notes,
-                           assumed)
+                           assumed, predicted, exact)
 
 
 def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 1200,

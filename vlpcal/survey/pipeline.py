@@ -145,7 +145,11 @@ class FreeSurveyResult:
                 "references": [{"point_id": p, "left_out_error_m": None if not np.isfinite(e)
                                 else float(e)} for p, e in zip(self.reference_ids,
                                                                cal.leave_one_out)],
-                "datum_floor_m": cal.datum_floor, "cameras": self.cameras, "lens": self.lens,
+                "datum_floor_m": cal.datum_floor,
+                "predicted_error_m": _finite(cal.predicted_error),
+                "exact_cameras_error_m": _finite(cal.exact_error),
+                "weakly_fixed": cal.weakly_fixed,
+                "cameras": self.cameras, "lens": self.lens,
                 "fusion": self.fusion,
                 "precision": {"point_sigma_m": cal.point_sigma,
                               "estimated": cal.point_sigma_estimated,
@@ -154,6 +158,10 @@ class FreeSurveyResult:
         if self.test_points is not None:
             out["test_points"] = self.test_points
         return out
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
@@ -222,6 +230,7 @@ def test_point_errors(dep, X, uv, ids) -> dict:
     fused = fuse(dep.cameras, uv, dep.fusion if dep.fusion in ("all", "robust") else "robust",
                  max_residual=dep.max_residual)
     err = np.linalg.norm(fused.X - X, axis=1)
-    return {"points": len(X), **error_stats(err),
+    views = np.isfinite(np.asarray(uv, float)).all(axis=2).sum(axis=0)
+    return {"points": len(X), **error_stats(err), "seen_by_fewer_than_two": int((views < 2).sum()),
             "per_point": [{"point_id": p, "error_m": float(e) if np.isfinite(e) else None}
                           for p, e in zip(ids, err)]}
