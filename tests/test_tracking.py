@@ -191,3 +191,67 @@ def test_track_keeps_its_inputs_reached_through_links_and_says_what_is_missing(t
                                    str(tmp_path / "bare"), "--out", str(tmp_path / "t.csv"), "-q"])
     assert res.exit_code == 2 and "none of the" in res.output
     assert not (tmp_path / "t.csv").exists()
+
+
+def test_track_live_from_four_mjpeg_cameras_on_their_own_clocks(tmp_path):
+    """Issue 16's live test: four simulated ESP32-CAMs on 127.0.0.1 at 25–40 fps, each with
+    its own clock (offsets of seconds to an hour, drift of tens of ppm) sent as X-Timestamp,
+    a robot at 1.5 m/s: vlpcal track places it within twice the install's static error, in
+    UTC seconds, and finds each camera's clock."""
+    import csv
+    import re
+    import time
+    from dataclasses import replace
+
+    from vlpcal.deployment import save
+    from vlpcal.locator import Locator
+    from vlpcal.sim.mjpeg import StreamServer
+    from vlpcal.sim.scene import make_scene, render_scene
+    from vlpcal.sim.streams import robot_path, simulate_streams
+    from vlpcal.sim.writers import deployment_of
+
+    from vlpcal.sim.profiles import get_profile
+
+    scene = make_scene(replace(get_profile("paper-2024"), name="paper-square",
+                               nominal=tuple(square_rig().cameras),
+                               room=((0, 0), (2.6, 0), (2.6, 2.4), (0, 2.4))), 0)
+    dep = deployment_of(scene, "true")
+    save(dep, tmp_path / "d.yaml")
+    timings = {"C1": Timing(25, offset=3600.3, drift=3e-5), "C2": Timing(30, offset=52.7,
+                                                                          drift=-2e-5),
+               "C3": Timing(30, offset=7.1, drift=5e-5), "C4": Timing(40, offset=300.0)}
+    path = robot_path(scene, 1.5)
+    seconds = 6.0
+    simulate_streams(scene, tmp_path / "s", path, seconds, timings)
+    server = StreamServer(tmp_path / "s", latency=0.001, latency_jitter=0.002, start=1.5)
+    cmd = [sys.executable, "-m", "vlpcal", "track", "-d", str(tmp_path / "d.yaml"), "--out",
+           str(tmp_path / "t.csv"), "--duration", str(seconds + 2)]
+    for cid in timings:
+        cmd += ["--camera", f"{cid}={server.url(cid)}"]
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    finally:
+        server.close()
+    assert res.returncode == 0, res.stderr
+    utc = time.time() - time.monotonic()  # the host's monotonic clock is shared
+    rows = list(csv.DictReader(open(tmp_path / "t.csv")))
+    t = np.array([float(r["t"]) for r in rows])
+    assert abs(np.median(t) - time.time()) < 60  # UTC seconds
+    ok = np.array([r["status"] == "ok" for r in rows])
+    assert ok.sum() > 200
+    X = np.array([[float(r[c]) for c in "xyz"] for r in rows])
+    err = np.linalg.norm(X[ok] - path(t[ok] - utc - server.host_offset), axis=1)
+    # the static error of the same install: the LED still at 150 places on its loop
+    still = path(np.linspace(0, seconds, 150))
+    frames, _ = render_scene(scene, still, seed=9)
+    fixes = Locator(dep).locate_batch([{c: frames[c][i] for c in frames}
+                                       for i in range(len(still))])
+    static = float(np.nanmean(np.linalg.norm(fixes.X - still, axis=1)))
+    assert err.mean() <= 2 * static, (err.mean(), static)
+    # each camera's clock: host − camera is the server's start − the camera's offset (its
+    # drift over these seconds is well under a millisecond), plus the least latency
+    for cid, tm in timings.items():
+        m = re.search(rf"camera {cid}: \d+ frames, \d+ with X-Timestamp \(host − its clock: "
+                      r"([-+0-9.]+) s\)", res.stderr)
+        assert m, res.stderr
+        assert abs(float(m.group(1)) - (server.host_offset - tm.offset)) < 0.005

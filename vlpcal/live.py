@@ -14,6 +14,8 @@ from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+import numpy as np
+
 #: how long a read may block before the source is declared stalled, s
 READ_TIMEOUT = 5.0
 #: bytes read without finding a frame boundary before the stream is declared not MJPEG
@@ -24,8 +26,11 @@ class Stalled(TimeoutError):
     """A source that sends, but too slowly to make a frame within the read timeout."""
 
 
-def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
+def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT, stamps: bool = False) -> Iterator:
     """JPEG frames from a ``multipart/x-mixed-replace`` HTTP stream (or one snapshot).
+
+    With ``stamps``, ``(frame, capture time)`` pairs: the part's ``X-Timestamp`` header (s on
+    the camera's clock, as the ESP32 CameraWebServer sends it), or None where it has none.
 
     Parts are read by their ``Content-Length`` when the server gives one (the ESP32 camera
     server does), otherwise by scanning for the JPEG end-of-image marker. Every read is
@@ -55,7 +60,7 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
         if "multipart" not in ctype and "jpeg" in ctype:  # a single snapshot
             while more():
                 pass
-            yield buf
+            yield (buf, _stamp(resp.headers.get("X-Timestamp", ""))) if stamps else buf
             return
         while True:
             # headers of the next part (CRLF, or bare LF as some servers send)
@@ -64,11 +69,14 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
                     return
             sep = b"\r\n\r\n" if b"\r\n\r\n" in buf else b"\n\n"
             head, buf = buf.split(sep, 1)
-            length = None
+            length = stamp = None
             for line in head.splitlines():
                 name, _, value = line.partition(b":")
-                if name.strip().lower() == b"content-length" and value.strip().isdigit():
+                name = name.strip().lower()
+                if name == b"content-length" and value.strip().isdigit():
                     length = int(value.strip())
+                elif name == b"x-timestamp":
+                    stamp = _stamp(value.decode("latin-1"))
             if length is not None:
                 if length > MAX_PART:
                     raise ValueError(f"a part of {length} bytes (more than "
@@ -84,8 +92,55 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT) -> Iterator[bytes]:
                         return
                     start = buf.find(b"\xff\xd8")
                 frame, buf = buf[start:end + 2], buf[end + 2:]
-            yield frame
+            yield (frame, stamp) if stamps else frame
             since = time.monotonic()
+
+
+def _stamp(text: str) -> float | None:
+    """An ``X-Timestamp`` value (``seconds.microseconds``) as s, or None if it is not one."""
+    import math
+
+    try:
+        value = float(text.strip()[:32])
+    except ValueError:
+        return None
+    return value if math.isfinite(value) and value >= 0 else None
+
+
+class ClockSync:
+    """A camera's capture times on the host's clock (issue 16). A frame cannot arrive before
+    it was captured: arrival − capture is the clock offset plus a latency that is never below
+    its minimum, so the lower envelope of arrival − capture follows the offset. Per
+    ``bucket`` s of the camera's clock the smallest arrival − capture is kept (over the last
+    ``span`` s); a line through them gives offset and drift. The common minimum latency stays
+    in the offset: every camera's frames are placed that much late, alike."""
+
+    def __init__(self, bucket: float = 1.0, span: float = 60.0):
+        self.bucket, self.span = bucket, span
+        self._low: dict = {}  # bucket → (stamp, arrival − stamp) at its smallest
+
+    def add(self, stamp: float, arrival: float) -> float:
+        """Record a frame captured at ``stamp`` (camera clock) that arrived at ``arrival``
+        (host clock); returns its capture time on the host's clock."""
+        b = int(stamp // self.bucket)
+        gap = arrival - stamp
+        if b not in self._low or gap < self._low[b][1]:
+            self._low[b] = (stamp, gap)
+        old = [k for k in self._low if k < b - self.span / self.bucket]
+        for k in old:
+            del self._low[k]
+        return stamp + self.offset(stamp)
+
+    def offset(self, stamp: float) -> float:
+        """host − camera clock at ``stamp`` (s)."""
+        pts = sorted(self._low.values())
+        if len(pts) < 3:
+            return min(g for _, g in pts)
+        s, g = np.array(pts).T
+        slope, icpt = np.polyfit(s - s.mean(), g, 1)
+        # the line through the lowest points: shifted down onto the envelope
+        low = float(np.min(g - (icpt + slope * (s - s.mean()))))
+        return float(icpt + low + slope * (stamp - s.mean()))
 
 
 def device_frames(device: str) -> Iterator:
@@ -105,15 +160,18 @@ def device_frames(device: str) -> Iterator:
         cap.release()
 
 
-def open_source(spec: str) -> Callable[[], Iterator]:
+def open_source(spec: str, stamps: bool = False) -> Callable[[], Iterator]:
     """A factory of frames for a ``--camera`` value: an http(s) URL or a video device
     (``/dev/videoN`` or its number); anything else is refused (ValueError), before OpenCV's
-    backends would try it as a file or a stream of their own."""
+    backends would try it as a file or a stream of their own. With ``stamps``, frames come
+    as ``(frame, capture stamp or None)`` (:func:`mjpeg_frames`; a device has none)."""
     import re
 
     if spec.startswith(("http://", "https://")):
-        return lambda: mjpeg_frames(spec)
+        return lambda: mjpeg_frames(spec, stamps=stamps)
     if re.fullmatch(r"[0-9]{1,3}|/dev/video[0-9]{1,3}|/dev/v4l/by-[a-z]+/[^/]+", spec):
+        if stamps:
+            return lambda: ((f, None) for f in device_frames(spec))
         return lambda: device_frames(spec)
     raise ValueError("expected an http(s):// MJPEG URL or a video device (/dev/videoN or N)")
 
@@ -302,3 +360,100 @@ class LiveGrouper:
                 yield close()
         if pending:
             yield close()
+
+
+class TimedFrames:
+    """Frames from live sources one at a time, each at its capture time on the host's clock
+    (issue 16), in capture-time order — what :class:`~vlpcal.tracking.Tracker` takes.
+
+    ``sources``: camera id → factory of an iterator of ``(frame, stamp)``, the stamp the
+    camera's capture time on its own clock (``X-Timestamp``) or None (then the arrival time
+    is the capture time). Each camera's stamps go through its :class:`ClockSync`. Frames are
+    held for ``hold`` periods of the slowest camera (its median interval) so that a frame
+    from a camera with a longer latency still comes in order; one that comes later than that
+    is dropped and counted (``stats.dropped``)."""
+
+    def __init__(self, sources: dict, hold: float = 3.0, deadline: float | None = None,
+                 on_event: Callable[[str], None] | None = None):
+        self.sources, self.hold, self.deadline = sources, hold, deadline
+        self.on_event = on_event or (lambda msg: None)
+        self.stats = LiveStats()
+        self.clocks = {cid: ClockSync() for cid in sources}
+        self.stamped: Counter = Counter()  #: frames per camera that carried X-Timestamp
+        self.last_stamp: dict = {}  #: camera id → its latest X-Timestamp
+        self._queue: queue.Queue = queue.Queue(maxsize=1024)
+        self._stop = threading.Event()
+        self._threads: dict = {}
+        self._last: dict = {}  # camera id → its last arrival, for its frame interval
+        self._intervals: dict = {}
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _reader(self, cid: str, factory) -> None:
+        why = "stream ended"
+        try:
+            for frame, stamp in factory():
+                if self._stop.is_set():
+                    return
+                item = (time.monotonic(), cid, frame, stamp)
+                try:
+                    self._queue.put_nowait(item)
+                except queue.Full:  # the tracker fell behind: this frame is lost, counted
+                    self.stats.dropped[cid] += 1
+        except Exception as e:  # a camera's failure is a status, never a crash
+            why = failure(e)
+        self._queue.put((time.monotonic(), cid, None, why))
+
+    def period(self) -> float:
+        """s: the slowest camera's median frame interval so far (0.1 before any)."""
+        meds = [float(np.median(v)) for v in self._intervals.values() if len(v) >= 3]
+        return max(meds) if meds else 0.1
+
+    def __iter__(self) -> Iterator[tuple]:
+        import heapq
+
+        for cid, factory in self.sources.items():
+            th = threading.Thread(target=self._reader, args=(cid, factory), daemon=True)
+            self._threads[cid] = th
+            th.start()
+        live = set(self.sources)
+        heap: list = []
+        released = -np.inf
+        n = 0
+        while not self._stop.is_set() and (live or heap):
+            if self.deadline is not None and time.monotonic() > self.deadline:
+                break
+            try:
+                arrival, cid, frame, stamp = self._queue.get(timeout=0.01)
+            except queue.Empty:
+                arrival = None
+            if arrival is not None and frame is None:  # the source stopped
+                live.discard(cid)
+                self.stats.ended[cid] = stamp
+                rest = "going on without it" if live else "no camera left"
+                self.on_event(f"camera {cid}: {stamp} after {self.stats.frames[cid]} frames; "
+                              f"{rest}")
+            elif arrival is not None:
+                self.stats.frames[cid] += 1
+                if cid in self._last:
+                    gaps = self._intervals.setdefault(cid, [])
+                    gaps.append(arrival - self._last[cid])
+                    del gaps[:-50]
+                self._last[cid] = arrival
+                if stamp is not None:
+                    self.stamped[cid] += 1
+                    self.last_stamp[cid] = stamp
+                    t = self.clocks[cid].add(stamp, arrival)
+                else:
+                    t = arrival
+                if t <= released:
+                    self.stats.dropped[cid] += 1  # later than the hold allows
+                else:
+                    n += 1
+                    heapq.heappush(heap, (t, n, cid, frame))
+            horizon = time.monotonic() - self.hold * self.period()
+            while heap and (heap[0][0] <= horizon or not live):
+                t, _, cid, frame = heapq.heappop(heap)
+                released = t
+                yield t, cid, frame

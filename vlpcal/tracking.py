@@ -50,6 +50,9 @@ START_WINDOW = 2.0
 LOST_PERIODS = 15.0
 #: … and so is one that only one camera has seen for this many (its depth is then a guess)
 COAST_PERIODS = 8.0
+#: a window's fit whose RMS residual passes this many spot sigmas does not fit the path (a
+#: turn sharper than the window's quadratic): the window is halved, else the motion carries it
+FIT_SIGMAS = 4.0
 #: m/s²: the LED's acceleration, 1 sigma (a robot turning, a cart; a hand waves harder)
 ACCELERATION = 5.0
 #: m/s: the fastest the LED is expected to go (how far it may move between two first spots)
@@ -231,8 +234,8 @@ class Tracker:
         # the state before anchors a window whose rays barely cross (loosened threefold: it
         # holds these rays already, and counted twice they would make the track overconfident)
         pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
-        fit, _, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel))
-        if fit is not None:
+        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel))
+        if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma:
             tr.last_two = t
             tr.fit, tr.fit_t = fit, t
             tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
@@ -341,10 +344,20 @@ class Tracker:
                                   anonymous=name))
 
     def _row(self, tr: _Track, t: float) -> TrackUpdate:
-        rays = [r for r in tr.rays if abs(r.t - t) <= self.half]
-        cams = sorted({r.camera for r in rays})
-        fit, _, cov = self._solve(rays, t) if len(cams) >= 2 else (None, None, None)
-        if fit is None:  # one camera: the track's motion places the LED along that ray
+        fit = cov = None
+        rays: list = []
+        cams: list = []
+        for reach in (self.half, 0.5 * self.half):  # a window the path does not fit: halved
+            rays = [r for r in tr.rays if abs(r.t - t) <= reach]
+            cams = sorted({r.camera for r in rays})
+            if len(cams) < 2:
+                break
+            fit, resid, cov = self._solve(rays, t)
+            if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma:
+                break
+            fit = cov = None
+        fit_ok = fit is not None
+        if fit is None:  # one camera (or none that fits): the motion places it on a ray
             pos, vel, s_pos, _ = self._extrapolated(tr, t)
             if rays:
                 near = min(rays, key=lambda r: abs(r.t - t))
@@ -354,7 +367,7 @@ class Tracker:
                 pos = cam.center + d * float((pos - cam.center) @ d)
             fit, cov = np.r_[pos, vel, np.zeros(3)], np.eye(9) * s_pos ** 2
         sigma = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0)))
-        status = "ok" if len(cams) >= 2 else "one_camera"
+        status = "ok" if fit_ok else "one_camera"
         if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name
             status = "degenerate"
         return TrackUpdate(t, tr.led, fit[:3].copy(), fit[3:6].copy(), sigma,

@@ -163,8 +163,9 @@ def _floats(text: str, option: str) -> list[float]:
 MAX_LIST = 12
 
 
-def _camera_sources(cameras, dep) -> dict:
-    """``--camera ID=SOURCE`` values → camera id → frame source, checked against ``dep``."""
+def _camera_sources(cameras, dep, stamps: bool = False) -> dict:
+    """``--camera ID=SOURCE`` values → camera id → frame source, checked against ``dep``
+    (``stamps``: :func:`~vlpcal.live.open_source`'s)."""
     from ..live import open_source
 
     ids = [c.id for c in dep.cameras]
@@ -180,7 +181,7 @@ def _camera_sources(cameras, dep) -> dict:
         if cid in sources:
             raise UserError(f"--camera {spec!r}: camera {cid} given twice")
         try:
-            sources[cid] = open_source(src)
+            sources[cid] = open_source(src, stamps)
         except ValueError as e:
             raise UserError(f"--camera {spec!r}: {e}") from None
     return sources

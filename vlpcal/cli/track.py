@@ -14,34 +14,51 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
 @main.command()
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="Deployment YAML (docs/formats.md).")
-@click.option("--frames", "frames_dir", required=True, type=click.Path(file_okay=False),
+@click.option("--frames", "frames_dir", default=None, type=click.Path(file_okay=False),
               help="Asynchronous frames: <camera_id>/<frame_no>.jpg and times.csv "
                    "(camera_id,frame_no,t: capture time, s, on one clock).")
+@click.option("--camera", "cameras", multiple=True, metavar="ID=SOURCE",
+              help="Live source per camera instead of --frames: an MJPEG URL (ESP32-CAM: "
+                   "http://IP:81/stream; its X-Timestamp is used) or a video device. Repeat "
+                   "for each camera.")
+@click.option("--duration", type=Finite(0, 1e7, min_open=True), default=None,
+              help="Live: stop after this many seconds.  [default: until Ctrl-C or every "
+                   "camera stops]")
+@click.option("--leds", "spots", type=click.IntRange(1, 64), default=None,
+              help="The most LEDs in view (spots looked for in each frame).  [default: the "
+                   "deployment's leds: block's count, else 1]")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
               help="Tracks file to write (.csv).")
 @click.option("--fps", default=None, type=Finite(0.1, 10000.0),
               help="The cameras' frame rate.  [default: from times.csv, the slowest camera's]")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
-def track(deployment_path, frames_dir, out, fps, quiet):
-    """Track a moving LED from cameras that are not synchronised.
+def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet):
+    """Track moving LEDs from cameras that are not synchronised.
 
     Each camera frame is a ray at its own capture time; the LED's path over a short window is
     fitted to every ray in it, so no two views need to be simultaneous. One row per camera
-    frame that saw the LED: t,led,x,y,z,vx,vy,vz,sigma_m,cameras,status (m, m/s; status ok
-    where two cameras or more placed it, one_camera where its motion carried it).
+    frame that saw an LED: t,led,x,y,z,vx,vy,vz,sigma_m,cameras,status (m, m/s; t in s on the
+    frames' clock, or UTC seconds live; status ok where two cameras or more placed it,
+    one_camera where its motion carried it). With the deployment's leds: block, each LED is
+    named by its blink code; without, tracks are T1, T2…
 
     Example: vlpcal track -d deployment.yaml --frames streams/ --out tracks.csv
     """
-    import csv
     import sys
 
     import numpy as np
 
     from ..datasets import DatasetError, read_async_frames
-    from ..tracking import TRACK_COLUMNS, Tracker
-    from ..writing import OutputSet
+    from ..tracking import Tracker
 
     dep = _load_deployment(deployment_path)
+    if bool(frames_dir) == bool(cameras):
+        raise UserError("give either --frames DIR or --camera ID=SOURCE … (one per camera)")
+    if cameras:
+        _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet)
+        return
+    if duration is not None:
+        raise click.BadParameter("is for live cameras (--camera)", param_hint="--duration")
     try:
         folder = read_async_frames(frames_dir)
     except DatasetError as e:
@@ -62,9 +79,9 @@ def track(deployment_path, frames_dir, out, fps, quiet):
 
     held = [Path(frames_dir) / "times.csv", *(Path(frames_dir) / c for c in folder.camera_ids)]
     out = _output_file(out, inputs=(deployment_path, frames_dir, *held), what="the tracks")
-    from ..detection import detect_spots
+    from ..detection import detect_several
 
-    tracker = Tracker(dep, period=1.0 / fps)
+    tracker = Tracker(dep, period=1.0 / fps, spots=spots)
     cams = {c.id: c for c in dep.cameras}
     rows = []
     missing = 0
@@ -72,15 +89,16 @@ def track(deployment_path, frames_dir, out, fps, quiet):
     def track_block(block):
         """Each camera's frames of the block detected as one batch (a tenth of the cost of
         one by one), then fed to the tracker in time order."""
-        spots: dict = {}
+        found_at: dict = {}
         for cid in {c for _, c, _, _ in block}:
             mine = [(no, f) for _, c, no, f in block if c == cid]
-            found = detect_spots([f for _, f in mine], dep.detector, dep.detector_settings,
-                                 shape=(cams[cid].height, cams[cid].width))
-            for (no, _), u, v in zip(mine, found.u, found.v):
-                spots[(cid, no)] = (u, v) if np.isfinite(u) and np.isfinite(v) else None
+            found = detect_several([f for _, f in mine], tracker.spots, dep.detector,
+                                   dep.detector_settings,
+                                   shape=(cams[cid].height, cams[cid].width))
+            for (no, _), uv in zip(mine, found):
+                found_at[(cid, no)] = uv
         for t, cid, no, _ in block:
-            rows.extend(tracker.update_spot(cid, t, spots[(cid, no)]))
+            rows.extend(tracker.update_spots(cid, t, found_at[(cid, no)]))
 
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
@@ -101,14 +119,81 @@ def track(deployment_path, frames_dir, out, fps, quiet):
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += tracker.finish()
+    _write_tracks(out, rows)
+    if not quiet:
+        click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
+                   + (f"; {missing} listed frames missing" if missing else ""), err=True)
+
+
+def _write_tracks(out, rows, utc: float = 0.0) -> None:
+    """The tracks file, staged and renamed (``utc``: added to each row's time)."""
+    import csv
+
+    from ..tracking import TRACK_COLUMNS
+    from ..writing import OutputSet
+
     with OutputSet(out) as (tmp,):
         with open(tmp, "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(TRACK_COLUMNS)
-            w.writerows(r.row() for r in rows)
-    if not quiet:
-        ok = sum(r.status == "ok" for r in rows)
-        leds = sorted({r.led for r in rows})
-        click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {len(rows)} rows, {ok} "
-                   f"placed by two cameras or more, tracks {', '.join(leds) or '–'} → {out}"
-                   + (f"; {missing} listed frames missing" if missing else ""), err=True)
+            for r in rows:
+                row = r.row()
+                if utc:
+                    row[0] = f"{r.t + utc:.6f}"
+                w.writerow(row)
+
+
+def _summary(rows) -> str:
+    ok = sum(r.status == "ok" for r in rows)
+    leds = sorted({r.led for r in rows})
+    shown = ", ".join(leds[:12]) + (f" and {len(leds) - 12} more" if len(leds) > 12 else "")
+    return (f"{len(rows)} rows, {ok} placed by two cameras or more, tracks {shown or '–'}")
+
+
+def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet) -> None:
+    """``vlpcal track --camera …``: frames as they come, each at its capture time on the
+    host's clock (X-Timestamp through each camera's clock estimate, else arrival), fed to
+    the tracker in that order; rows in UTC seconds."""
+    import time
+
+    from ..live import TimedFrames
+    from ..tracking import Tracker
+    from .common import _camera_sources
+
+    sources = _camera_sources(cameras, dep, stamps=True)
+    out = _output_file(out, inputs=(deployment_path,), what="the tracks")
+
+    def say(msg):
+        if not quiet:
+            click.echo(msg, err=True)
+
+    t_end = time.monotonic() + duration if duration else None
+    frames = TimedFrames(sources, deadline=t_end, on_event=say)
+    tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots)
+    utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
+    rows: list = []
+    n = 0
+    try:
+        for t, cid, frame in frames:
+            rows += tracker.update(cid, t, frame)
+            n += 1
+            if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
+                tracker.period = frames.period()
+    except KeyboardInterrupt:
+        say("stopped (Ctrl-C): writing what was tracked")
+    finally:
+        frames.stop()
+    rows += tracker.finish()
+    st = frames.stats
+    if not n:
+        why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)
+        raise UserError(f"no frames from any camera, nothing tracked ({why})")
+    _write_tracks(out, rows, utc)
+    for cid in sources:
+        say(f"camera {cid}: {st.frames[cid]} frames"
+            + (f", {frames.stamped[cid]} with X-Timestamp (host − its clock: "
+               f"{frames.clocks[cid].offset(frames.last_stamp[cid]):+.4f} s)"
+               if frames.stamped[cid] else ", no X-Timestamp (arrival times used)")
+            + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
+            + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
+    say(f"{n} camera frames → {_summary(rows)} → {out}")

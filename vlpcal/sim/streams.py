@@ -77,17 +77,41 @@ def crossing_paths(room, speed: float, n: int = 3, height: float = 0.15,
     return out
 
 
-def robot_path(scene: Scene, speed: float, height: float = 0.15, seed: int = 0):
-    """A robot's LED driving the closed loop of :func:`~.writers.trajectory` at ``speed`` m/s:
-    a function of time (s, any array) → positions ``N×3``."""
+#: m/s²: a robot's largest acceleration, along its path and across it (a brisk AGV)
+ROBOT_ACCELERATION = 2.0
+
+
+def robot_path(scene: Scene, speed: float, height: float = 0.15, seed: int = 0,
+               acceleration: float = ROBOT_ACCELERATION):
+    """A robot's LED driving the closed loop of :func:`~.writers.trajectory` at up to
+    ``speed`` m/s, slowing into its turns as a robot does: never more than ``acceleration``
+    across its path (``v² κ``) or along it. A function of time (s, any array) → ``N×3``."""
     loop = trajectory(scene, 4000, height, seed)
-    seg = np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1)
-    s = np.r_[0.0, np.cumsum(seg)]
     closed = np.vstack([loop, loop[:1]])
+    seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
+    s = np.r_[0.0, np.cumsum(seg)]
     length = s[-1]
+    # curvature of the loop (periodic differences), and the speed each point allows
+    d1 = (np.roll(loop, -1, axis=0) - np.roll(loop, 1, axis=0)) / 2
+    d2 = np.roll(loop, -1, axis=0) - 2 * loop + np.roll(loop, 1, axis=0)
+    cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    kappa = np.abs(cross) / np.maximum(np.linalg.norm(d1[:, :2], axis=1), 1e-12) ** 3
+    v = np.minimum(speed, np.sqrt(acceleration / np.maximum(kappa, 1e-12)))
+    # and no faster than braking and speeding up at ``acceleration`` allow (twice round)
+    n = len(v)
+    for _ in range(2):
+        for i in range(1, 2 * n):
+            k, j = i % n, (i - 1) % n
+            v[k] = min(v[k], np.sqrt(v[j] ** 2 + 2 * acceleration * seg[j]))
+        for i in range(2 * n - 2, -1, -1):
+            k, j = i % n, (i + 1) % n
+            v[k] = min(v[k], np.sqrt(v[j] ** 2 + 2 * acceleration * seg[k]))
+    vc = np.r_[v, v[:1]]
+    when = np.r_[0.0, np.cumsum(seg / np.maximum(0.5 * (vc[1:] + vc[:-1]), 1e-9))]
+    lap = when[-1]
 
     def at(t):
-        d = np.mod(speed * np.asarray(t, float), length)
+        d = np.interp(np.mod(np.asarray(t, float), lap), when, s)
         return np.stack([np.interp(d, s, closed[:, i]) for i in range(3)], axis=-1)
 
     return at

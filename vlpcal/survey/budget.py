@@ -62,7 +62,6 @@ def fix_errors(cameras, survey_xyz, test_xyz, tape, spot: float, model: str = BU
     views = sum(c.project(survey_xyz, margin=margin_px)[2].astype(int) for c in cams)
     told = 2 * views + np.isfinite(sig).sum(axis=1) >= 3
     survey_xyz, sig = survey_xyz[told], sig[told]
-    n = len(survey_xyz)
     # the joint normal matrix: cameras (P × P) and the points' 3 × 3 blocks; each camera's
     # coupling to the points it sees, kept per camera (a point is seen by few cameras)
     A_cc = np.zeros((P, P))
