@@ -206,11 +206,10 @@ def test_track_live_from_four_mjpeg_cameras_on_their_own_clocks(tmp_path):
     from vlpcal.deployment import save
     from vlpcal.locator import Locator
     from vlpcal.sim.mjpeg import StreamServer
+    from vlpcal.sim.profiles import get_profile
     from vlpcal.sim.scene import make_scene, render_scene
     from vlpcal.sim.streams import robot_path, simulate_streams
     from vlpcal.sim.writers import deployment_of
-
-    from vlpcal.sim.profiles import get_profile
 
     scene = make_scene(replace(get_profile("paper-2024"), name="paper-square",
                                nominal=tuple(square_rig().cameras),
