@@ -90,7 +90,6 @@ def robot_path(scene: Scene, speed: float, height: float = 0.15, seed: int = 0,
     closed = np.vstack([loop, loop[:1]])
     seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
     s = np.r_[0.0, np.cumsum(seg)]
-    length = s[-1]
     # curvature of the loop (periodic differences), and the speed each point allows
     d1 = (np.roll(loop, -1, axis=0) - np.roll(loop, 1, axis=0)) / 2
     d2 = np.roll(loop, -1, axis=0) - 2 * loop + np.roll(loop, 1, axis=0)
