@@ -378,3 +378,41 @@ def test_a_weak_survey_is_called_weak_and_its_error_predicted(n_refs):
     assert cal.weakly_fixed == (n_refs == 4), (cal.predicted_error, cal.exact_error,
                                                cal.datum_floor, actual)
     assert actual / 3 < cal.predicted_error < actual * 3, (cal.predicted_error, actual)
+
+
+def test_a_free_survey_that_contradicts_itself_is_refused(free_case, tmp_path):
+    """From a second hostile probe: a pole's survey stated to be at one height, a free/ whose
+    camera ids are swapped, references all at one place, a huge observations file."""
+    from vlpcal.datasets import DatasetError, read_survey_bundle
+
+    true, refs, measured, free, uv_r, uv_f = free_case
+    ids = [f"R{i}" for i in range(len(refs))]
+    room = [[0, 0], [2.8, 0], [2.8, 2.4], [0, 2.4]]
+    with pytest.raises(SurveyError, match="--free-height 0: .* the LED was not at that height"):
+        calibrate_free(true, measured, uv_r, ids, uv_f, free_height=0.0, room=room)
+    # the paper's line of cameras with C1 and C2 swapped in free/ only: no camera pose fits
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import deployment_of
+    from vlpcal.survey import plan_references
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    rng = np.random.default_rng(2)
+    line = list(scene.true)
+    r12 = plan_references(deployment_of(scene, "nominal"), 12).xyz
+    wave = _wave(1500, (0.6, 0.1), (3.0, 1.7), rng)
+    with pytest.raises(SurveyError, match="the free spots do not fit these cameras"):
+        calibrate_free(list(scene.nominal), r12, _spots(line, r12, rng),
+                       [f"R{i}" for i in range(12)], _spots(line, wave, rng)[[1, 0, 2]],
+                       room=scene.profile.room)
+    one = np.repeat(measured[:1], len(refs), axis=0) + 1e-5
+    with pytest.raises(SurveyError, match="all at one place"):
+        calibrate_free(true, one, uv_r, ids, uv_f, room=room)
+    # a free/observations.csv larger than any capture writes: refused before it is read
+    (tmp_path / "b" / "free").mkdir(parents=True)
+    (tmp_path / "b" / "points.csv").write_text("point_id,x,y,z\nR1,1,1,0\n")
+    with open(tmp_path / "b" / "free" / "observations.csv", "wb") as f:
+        f.write(b"set_id,camera_id,u,v\n")
+        f.truncate(40 << 20)  # sparse: 40 MB in name only
+    with pytest.raises(DatasetError, match="larger than 32 MB"):
+        read_survey_bundle(tmp_path / "b")

@@ -78,34 +78,43 @@ def _finite(text: str, where: str) -> float:
     try:
         value = float(text)
     except (TypeError, ValueError):
-        raise DatasetError(f"{where}: expected a number, got {text!r}") from None
+        raise DatasetError(f"{where}: expected a number, got {shown(text)}") from None
     if not math.isfinite(value):
-        raise DatasetError(f"{where}: expected a finite number, got {text!r}")
+        raise DatasetError(f"{where}: expected a finite number, got {shown(text)}")
     return value
 
 
-def _read_csv(path: Path, columns: tuple) -> list[dict]:
+def _read_csv(path: Path, columns: tuple):
+    """The rows of a CSV file with ``columns`` (dicts), read one at a time (a file of a
+    million rows is never held as a million dicts)."""
     try:
-        with open(path, newline="", encoding="utf-8-sig") as f:  # -sig: Excel's BOM
-            reader = csv.DictReader(f)
-            header = [h.strip() for h in (reader.fieldnames or [])]
-            reader.fieldnames = header
-            rows = list(reader)
+        f = open(path, newline="", encoding="utf-8-sig")  # -sig: Excel's BOM
     except OSError as e:
         raise DatasetError(f"{path}: cannot read ({e.strerror})") from None
-    except (csv.Error, UnicodeDecodeError) as e:
-        raise DatasetError(f"{path}: not a readable CSV ({e})") from None
-    missing = [c for c in columns if c not in (header or [])]
-    if missing:
-        raise DatasetError(f"{path}: missing column {missing[0]!r} (expected columns "
-                           f"{','.join(columns)})")
-    twice = sorted({h for h in header if header.count(h) > 1})
-    if twice:
-        raise DatasetError(f"{path}: column {twice[0]!r} appears twice")
-    for n, row in enumerate(rows, start=2):
-        if None in row:
-            raise DatasetError(f"{path} line {n}: more cells than columns")
-    return rows
+    with f:
+        try:
+            reader = csv.DictReader(f)
+            header = [h.strip() for h in (reader.fieldnames or [])]
+        except (csv.Error, UnicodeDecodeError) as e:
+            raise DatasetError(f"{path}: not a readable CSV ({e})") from None
+        reader.fieldnames = header
+        missing = [c for c in columns if c not in (header or [])]
+        if missing:
+            raise DatasetError(f"{path}: missing column {missing[0]!r} (expected columns "
+                               f"{','.join(columns)})")
+        twice = sorted({h for h in header if header.count(h) > 1})
+        if twice:
+            raise DatasetError(f"{path}: column {twice[0]!r} appears twice")
+        n = 1
+        try:
+            for n, row in enumerate(reader, start=2):
+                if None in row:
+                    raise DatasetError(f"{path} line {n}: more cells than columns")
+                yield row
+        except OSError as e:
+            raise DatasetError(f"{path}: cannot read ({e.strerror})") from None
+        except (csv.Error, UnicodeDecodeError) as e:
+            raise DatasetError(f"{path} line {n + 1}: not a readable CSV ({e})") from None
 
 
 def _write_csv(path: Path, columns, rows) -> None:
@@ -254,7 +263,8 @@ def read_survey_bundle(root) -> SurveyBundle:
     path = root / "points.csv"
     if not path.is_file():
         if (root.parent / "points.csv").is_file():
-            hint = f": {root} looks like a bundle's frames folder; give its parent, {root.parent}"
+            hint = (f": {root} looks like a folder inside a bundle ({root.name}/); give the "
+                    f"bundle, {root.parent}")
         elif any(root.glob("*/*.jpg")):
             hint = ": it holds frames only, like a locate frames folder (vlpcal locate --frames)"
         else:
@@ -287,6 +297,9 @@ def read_survey_bundle(root) -> SurveyBundle:
 def _read_free(free: Path, bundle: SurveyBundle) -> None:
     """The free survey of a bundle, if any: ``free/frames/<set_id>/<camera_id>.jpg`` or
     ``free/observations.csv`` (``set_id,camera_id,u,v``); sets in natural order."""
+    if free.exists() and not free.is_dir():
+        raise DatasetError(f"{free}: is not a folder (expected a free survey's folder: "
+                           "frames/<set_id>/<camera_id>.jpg or observations.csv)")
     if not free.is_dir():
         return
     ids = set()
@@ -302,6 +315,10 @@ def _read_free(free: Path, bundle: SurveyBundle) -> None:
     if opath.is_file():
         if bundle.free_frames:
             raise DatasetError(f"{free}: has both frames/ and observations.csv (expected one)")
+        if opath.stat().st_size > MAX_FREE_BYTES:
+            raise DatasetError(f"{opath}: larger than {MAX_FREE_BYTES >> 20} MB (expected a "
+                               "free survey's spots, set_id,camera_id,u,v: hours of motion fit "
+                               "in less; a calibration uses at most 5000 sets)")
         bundle.free_observations, order = read_observations(opath, "set_id")
         ids.update(order)
     if not ids:
@@ -550,8 +567,9 @@ class SurveyAppender:
             os.fsync(f.fileno())
 
 
-#: a free survey's observations file is at most this large (a million sets of four cameras)
-MAX_FREE_BYTES = 256 << 20
+#: a free survey's observations file is at most this large: ~800 000 spots, hours of motion
+#: (survey capture --free stops at 100 000 sets; a calibration uses at most 5000)
+MAX_FREE_BYTES = 32 << 20
 
 
 class FreeAppender:

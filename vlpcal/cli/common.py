@@ -50,6 +50,7 @@ class OneLineErrors(click.Group):
         # numbers are checked where files are read and numeric edge cases end in statuses:
         # numpy's floating-point notes (0/0 in an empty mean) are not the user's business
         warnings.simplefilter("ignore", RuntimeWarning)
+        warnings.filterwarnings("ignore", module="scipy")  # e.g. a rank note: said in words
         try:
             return super().invoke(ctx)
         except OutputError as e:

@@ -96,6 +96,9 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     if free_sets and free_height is not None and not 0 <= free_height <= top:
         raise click.BadParameter(f"expected a height from 0 to {top:g} m",
                                  param_hint="--free-height")
+    for value, name in ((free_height, "--free-height"), (references, "--references")):
+        if value is not None and not free_sets:
+            raise click.BadParameter("is for a free survey (--free-sets N)", param_hint=name)
     if references is not None and references < 3 and free_height is None:
         raise click.BadParameter(f"expected 3 or more (2 or more with --free-height: fewer "
                                  f"cannot fix the room's frame), got {references}",

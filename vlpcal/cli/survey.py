@@ -560,6 +560,22 @@ def _read_test_points(dep, test_path, survey_path):
         raise UserError(f"{test_path}: none of its cameras ({', '.join(tb.camera_ids()[:6])}) "
                         "is in the deployment (expected its camera ids)")
     _check_survey_positions(test_path, dep, tb.xyz, tb.point_ids)
+    try:
+        survey = read_survey_bundle(survey_path)
+    except DatasetError:
+        survey = None  # the survey's own error is said where it is read
+    if survey is not None and len(survey.xyz):
+        import numpy as np
+
+        same = sorted(set(tb.point_ids) & set(survey.point_ids))
+        gap = np.linalg.norm(tb.xyz[:, None] - survey.xyz[None], axis=2).min(axis=1)
+        spread = float(np.ptp(survey.xyz, axis=0).max()) or 1.0
+        at = [p for p, g in zip(tb.point_ids, gap) if g <= 1e-6 * spread]
+        if same or at:
+            raise UserError(f"--test-points {test_path}: point {(same or at)[0]} is also "
+                            f"{'a reference point' if same else 'at a reference point'} of "
+                            f"{survey_path} (test points must be points the calibration never "
+                            "sees)")
     uv, notes = survey_spots(dep, tb)
     for note in notes:
         click.echo(f"test points: {note}", err=True)
@@ -624,7 +640,10 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
         click.echo(note, err=True)
     n_ref = len(bundle.point_ids)
     try:
-        with click.progressbar(length=5 + n_ref, label="calibrating from the free survey",
+        from ..survey.free import MAX_LEFT_OUT
+
+        with click.progressbar(length=5 + min(n_ref, MAX_LEFT_OUT),
+                               label="calibrating from the free survey",
                                hidden=quiet, file=sys.stderr) as bar:
             result = calibrate_free_survey(
                 dep, bundle.xyz, uv, bundle.point_ids, uv_free, lens, point_sigma, free_height,

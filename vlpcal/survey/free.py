@@ -35,6 +35,8 @@ REJECT_SIGMAS = 5.0
 MAX_FREE_SETS = 5000
 #: reference coordinates beyond the datum's that a precision estimate needs …
 MIN_REDUNDANT = 6
+#: references left out in turn, at most (an even sample of more)
+MAX_LEFT_OUT = 24
 #: a survey whose cameras are predicted to place fixes this many times worse than its references
 #: and spots allow is weak (the free LED cannot fix the lens across pair overlaps alone)
 WEAK_FACTOR = 2.0
@@ -131,7 +133,9 @@ def _linkage(camera_ids, seen) -> None:
                           "where they overlap")
 
 
-def _check_references(X, seen_ref, free_height) -> None:
+def _check_references(X, seen_ref, free_height, scale: float) -> None:
+    """Refuse references that cannot fix the room's frame: too few, all at one place (within
+    1e-3 of ``scale``, the cameras' distance), or on one line."""
     need = 2 if free_height is not None else 3
     used = np.asarray(X, float)[seen_ref.any(axis=0)]
     if len(used) < need:
@@ -139,11 +143,58 @@ def _check_references(X, seen_ref, free_height) -> None:
                           f"a camera; fixing the room's frame needs at least {need}"
                           + (" (or --free-height and 2)" if free_height is None else ""))
     s = np.linalg.svd(used - used.mean(axis=0), compute_uv=False)
+    if not s[0] > 1e-3 * scale:
+        raise SurveyError("the reference points are all at one place: they cannot fix the "
+                          "room's scale and rotation (spread them over the room)")
     if free_height is None and s[1] <= 1e-3 * s[0]:
         raise SurveyError("the reference points lie on one line: they cannot fix the room's "
                           "rotation about it (add a point off the line)")
-    if s[0] <= 0:
-        raise SurveyError("the reference points are all at one place")
+
+
+def _check_height(cameras, X, uv, uv_free, free_height) -> None:
+    """Refuse a stated free height the free sets contradict: where two cameras or more saw
+    the LED, the nominal cameras place it; their heights must sit about ``free_height`` as
+    closely as the references' triangulated heights sit about their measured ones (five times
+    that, and the references as the yardstick: the nominal cameras' own error)."""
+    from ..triangulation import triangulate
+
+    two = np.isfinite(uv_free).all(axis=2).sum(axis=0) >= 2
+    ref_two = np.isfinite(uv).all(axis=2).sum(axis=0) >= 2
+    if two.sum() < 10 or not ref_two.any():
+        return
+    z = triangulate(cameras, uv_free[:, two]).X[:, 2]
+    zr = triangulate(cameras, uv[:, ref_two]).X[:, 2]
+    yard = float(np.nanmedian(np.abs(zr - np.asarray(X, float)[ref_two, 2])))
+    off = np.abs(z - free_height)
+    if np.nanmedian(off) > 5 * yard + 1e-12:
+        lo, hi = np.nanpercentile(z, [5, 95])
+        raise SurveyError(f"--free-height {free_height:g}: the {int(two.sum())} free sets that "
+                          f"two cameras saw put the LED at {lo:.2f}–{hi:.2f} m (half of them "
+                          f"more than {np.nanmedian(off):.2f} m from {free_height:g}), while the "
+                          f"reference points come out within {yard * 1000:.0f} mm of their "
+                          "measured heights: the LED was not at that height (drop --free-height"
+                          " if it moved up and down)")
+
+
+def _check_inside(free_xyz, room, cameras) -> None:
+    """Refuse a fit that puts most free LED positions outside the room — the spots did not
+    fit these cameras (a camera's ids swapped, frames of another site)."""
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    P = free_xyz[np.isfinite(free_xyz).all(axis=1)]
+    if room is None or len(P) < 10:
+        return
+    poly = Polygon(room)
+    top = max(c.position[2] for c in cameras)
+    grow = 0.1 * np.sqrt(poly.area)
+    inside = contains_xy(poly.buffer(grow), P[:, 0], P[:, 1]) & (P[:, 2] > -grow) \
+        & (P[:, 2] < top)
+    if inside.mean() < 0.5:
+        raise SurveyError(f"the fit puts {1 - inside.mean():.0%} of the free LED positions "
+                          "outside the room: the free spots do not fit these cameras (are the "
+                          "camera ids in free/ the deployment's? is the survey from this "
+                          "site?); nothing was written")
 
 
 def _start(cameras, uv_free, free_height):
@@ -174,6 +225,19 @@ def _observations(uv_all, keep):
 def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
                    point_sigma: float | str = "auto", free_height: float | None = None,
                    room=None, progress=None) -> FreeCalibration:
+    """:func:`_calibrate_free`; a joint fit that cannot converge is a :class:`SurveyError`."""
+    try:
+        return _calibrate_free(nominal, X, uv, ids, uv_free, lens, point_sigma, free_height,
+                               room, progress)
+    except np.linalg.LinAlgError:
+        raise SurveyError("the joint fit did not converge: the free spots do not fit these "
+                          "cameras (are the camera ids in free/ the deployment's? is the "
+                          "survey from this site?); nothing was written") from None
+
+
+def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
+                    point_sigma: float | str = "auto", free_height: float | None = None,
+                    room=None, progress=None) -> FreeCalibration:
     """Calibrate every camera from a free survey: ``X`` N×3 the references' measured
     positions, ``uv`` C×N×2 their spots, ``uv_free`` C×M×2 the free sets' spots (NaN: not seen).
     ``lens``: ``"auto"`` (one model for every camera, chosen by the free LED's held-out
@@ -185,7 +249,10 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
     seen_f = np.isfinite(uv_free).all(axis=2)
     seen_r = np.isfinite(uv).all(axis=2)
     _linkage(ids_c, seen_f)
-    _check_references(X, seen_r, free_height)
+    scale = float(np.median([c.position[2] for c in nominal])) or 1.0
+    _check_references(X, seen_r, free_height, scale)
+    if free_height is not None:
+        _check_height(nominal, X, uv, uv_free, free_height)
     estimated = isinstance(point_sigma, str)
     stated = None if estimated else float(point_sigma)
     notes: list = []
@@ -212,7 +279,7 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
                     "at two heights, and a robot's LED at one height cannot fix a lens alone")
             notes.append(f"lens kept as in the deployment (pose only): {kept}")
     step = 0
-    total = 5 + N
+    total = 5 + min(N, MAX_LEFT_OUT)
 
     def tick():
         nonlocal step
@@ -292,14 +359,20 @@ def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto
     tick()
     obs, (s_x, s_px, cams, adj) = adjust(cams, models, keep)
     tick()
-    # each reference left out: its prior removed (its spots kept), where the rest put it
+    _check_inside(adj[N:], room, cams)
+    # each reference left out: its prior removed (its spots kept), where the rest put it; of
+    # many, an even sample (each costs a joint fit)
     loo = np.full(N, np.nan)
     need = 2 if free_height is not None else 3
     if seen_r.any(axis=0).sum() > need:
         base = np.where(free[:, None], np.inf, np.full((len(free), 3), s_x))
         if free_height is not None:
             base[free, 2] = 1e-3 * s_x  # stated: as good as exact
-        for i in range(N):
+        left_out = np.unique(np.linspace(0, N - 1, min(N, MAX_LEFT_OUT)).round().astype(int))
+        if len(left_out) < N:
+            notes.append(f"{len(left_out)} of the {N} references left out in turn (an even "
+                         "sample: each costs a joint fit)")
+        for i in left_out:
             tick()
             if keep[:, i].sum() < (1 if free_height is not None else 2):
                 continue
