@@ -112,6 +112,9 @@ class _Track:
     seen: list = field(default_factory=list)  #: (t, lit) for the blink code
     decoded_at: float = -np.inf
     margin: int = 0  #: the runner-up code's wrong slots minus the chosen one's
+    #: started from two spots that may be two LEDs: no rows until a third ray fits with them
+    tentative: bool = True
+    misfits: int = 0  #: a tentative track's windows that did not fit
 
 
 class Tracker:
@@ -198,6 +201,8 @@ class Tracker:
         """Rows whose window has passed by ``now``."""
         out = []
         for tr in self.tracks:
+            if tr.tentative:  # its rows wait until it is confirmed
+                continue
             ready = [t for t in tr.due if t <= now - self.half]
             tr.due = [t for t in tr.due if t > now - self.half]
             out += [self._row(tr, t) for t in ready]
@@ -209,7 +214,8 @@ class Tracker:
         for tr in self.tracks:
             if now - tr.last_ray > self._lost or \
                     tr.last_ray - tr.last_two > COAST_PERIODS * self.period:
-                out += [self._row(tr, t) for t in tr.due]
+                if not tr.tentative:
+                    out += [self._row(tr, t) for t in tr.due]
             else:
                 keep.append(tr)
         self.tracks = keep
@@ -234,12 +240,21 @@ class Tracker:
         # the state before anchors a window whose rays barely cross (loosened threefold: it
         # holds these rays already, and counted twice they would make the track overconfident)
         pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
-        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel))
-        if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma:
-            tr.last_two = t
-            tr.fit, tr.fit_t = fit, t
-            tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
-            tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
+        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=pos)
+        if not (fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma):
+            if tr.tentative:  # two LEDs' spots paired by chance: undone, its rays set free
+                tr.misfits += 1
+                if tr.misfits >= 2:
+                    self.tracks = [o for o in self.tracks if o is not tr]
+                    self._pending += [r for r in tr.rays
+                                      if r.t >= t - START_WINDOW * self.period]
+            return
+        if len(rays) >= 3:
+            tr.tentative = False
+        tr.last_two = t
+        tr.fit, tr.fit_t = fit, t
+        tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
+        tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
 
     def _predicted(self, k: int, t: float):
         """Each track's extrapolated spot in camera ``k`` at ``t`` (T×2 px, NaN: behind it) and
@@ -258,18 +273,20 @@ class Tracker:
 
     def _claim(self, k: int, t: float, uvs) -> dict:
         """Which track each spot of camera ``k`` at ``t`` belongs to (spot index → track): the
-        spot within :data:`GATE_SIGMAS` of a track's prediction, nearest pairs first, each spot
-        to one track and each track one spot."""
+        spot within :data:`GATE_SIGMAS` of a track's prediction, nearest pairs first (confirmed
+        tracks before tentative ones), each spot to one track and each track one spot."""
         if not self.tracks or not len(uvs):
             return {}
         pred, slack = self._predicted(k, t)
         d = np.linalg.norm(uvs[None, :, :] - pred[:, None, :], axis=2) / slack[:, None]
         d = np.where(np.isfinite(d), d, np.inf)
+        # confirmed tracks choose first; a tentative one takes what they leave
+        later = np.array([GATE_SIGMAS if tr.tentative else 0.0 for tr in self.tracks])
         claims: dict = {}
-        for flat in np.argsort(d, axis=None):
+        for flat in np.argsort(d + later[:, None], axis=None):
             i, j = np.unravel_index(flat, d.shape)
             if not d[i, j] < GATE_SIGMAS:
-                break
+                continue
             if j in claims or any(tr is self.tracks[i] for tr in claims.values()):
                 continue
             claims[int(j)] = self.tracks[i]
@@ -347,12 +364,13 @@ class Tracker:
         fit = cov = None
         rays: list = []
         cams: list = []
+        guess = self._extrapolated(tr, t)[0]
         for reach in (self.half, 0.5 * self.half):  # a window the path does not fit: halved
             rays = [r for r in tr.rays if abs(r.t - t) <= reach]
             cams = sorted({r.camera for r in rays})
             if len(cams) < 2:
                 break
-            fit, resid, cov = self._solve(rays, t)
+            fit, resid, cov = self._solve(rays, t, guess=guess)
             if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma:
                 break
             fit = cov = None
@@ -379,66 +397,78 @@ class Tracker:
         k = cams[0]
         return float(self.cameras[k].to_camera(X[None])[0, 2]) / self._f[k] * self.pixel_sigma
 
-    def _solve(self, rays, t0: float, prior=None, order: int = 2):
+    def _solve(self, rays, t0: float, prior=None, order: int = 2, guess=None):
         """Least squares over rays: the LED at ``t0 + τ`` is ``a + b τ + c τ² / 2`` (``order``
         2; 0: a still point). Each ray gives two linear equations, ``(R₀ − x R₂)·(X − C) = 0``
         and ``(R₁ − y R₂)·(X − C) = 0``, weighted by pixels per metre at the point (``f /
-        depth``, from a first solve) over the spot noise; the acceleration is held to
-        :data:`ACCELERATION` and ``prior`` (position, velocity, their sigmas per axis) joins
-        as equations. Returns (the 9 (or 3) numbers, RMS residual px, their covariance);
-        (None, inf, None) when the rays do not determine them."""
+        depth``, the depth from ``guess``, a position near ``t0``, or from a first solve) over
+        the spot noise; the acceleration is held to :data:`ACCELERATION` and ``prior``
+        (position, velocity, their sigmas per axis) joins as equations. Returns (the 9 (or 3)
+        numbers, RMS residual px, their covariance); (None, inf, None) when the rays do not
+        determine them."""
         if not rays:
             return None, np.inf, None
-        k = np.array([r.camera for r in rays])
+        k = np.fromiter((r.camera for r in rays), int, len(rays))
         xy = np.array([r.xy for r in rays])
-        tau = np.array([r.t for r in rays]) - t0
+        tau = np.fromiter((r.t for r in rays), float, len(rays)) - t0
         R = self._R[k]
         rows = np.concatenate([R[:, 0] - xy[:, :1] * R[:, 2], R[:, 1] - xy[:, 1:] * R[:, 2]])
         C = np.concatenate([self._C[k], self._C[k]])
-        ff = np.concatenate([self._f[k], self._f[k]])
+        axis = np.concatenate([R[:, 2], R[:, 2]])
+        ff = np.concatenate([self._f[k], self._f[k]]) / self.pixel_sigma
         tt = np.concatenate([tau, tau])
-        basis = [np.ones_like(tt), tt, 0.5 * tt * tt][:order + 1]
-        A = np.concatenate([rows * b[:, None] for b in basis], axis=1)
+        A = rows if order == 0 else np.hstack([rows, rows * tt[:, None],
+                                              rows * (0.5 * tt * tt)[:, None]])
         y = np.einsum("ij,ij->i", rows, C)
-        w = np.ones(len(A))
-        fit = None
-        for _ in range(2):
-            Aw, yw = A * w[:, None], y * w
-            if order == 2:
-                P = np.zeros((3, 9))
-                P[:, 6:] = np.eye(3) / self.acceleration
-                Aw, yw = np.vstack([Aw, P]), np.r_[yw, np.zeros(3)]
-            if prior is not None and order == 2:
+        D, b = np.zeros(A.shape[1]), np.zeros(A.shape[1])  # the priors, diagonal
+        if order == 2:
+            D[6:] = 1.0 / self.acceleration ** 2
+            if prior is not None:
                 pos, vel, s_pos, s_vel = prior
-                P = np.zeros((6, 9))
-                P[:3, :3] = np.eye(3) / s_pos
-                P[3:, 3:6] = np.eye(3) / s_vel
-                Aw = np.vstack([Aw, P])
-                yw = np.r_[yw, pos / s_pos, vel / s_vel]
-            N = Aw.T @ Aw
-            if not _well_posed(N):
-                return None, np.inf, None
-            fit = np.linalg.solve(N, Aw.T @ yw)
-            X = fit[:3] + (fit[3:6] * tt[:, None] + 0.5 * fit[6:9] * (tt * tt)[:, None]
-                           if order == 2 else 0.0)
-            depth = np.einsum("ij,ij->i", np.concatenate([R[:, 2], R[:, 2]]), X - C)
+                D[:3] += 1.0 / s_pos ** 2
+                D[3:6] += 1.0 / s_vel ** 2
+                b[:3] += pos / s_pos ** 2
+                b[3:6] += vel / s_vel ** 2
+        if guess is not None:
+            depth = np.einsum("ij,ij->i", axis, np.asarray(guess, float) - C)
             if (depth <= 0).any():
                 return None, np.inf, None
-            w = ff / depth / self.pixel_sigma  # rows in units of the spot noise
-        resid = (A @ fit - y) * w * self.pixel_sigma
+            w2 = (ff / depth) ** 2
+            passes = 1
+        else:
+            w2, passes = np.ones(len(A)), 2
+        fit = N = None
+        for _ in range(passes):
+            Aw = A * w2[:, None]
+            N = Aw.T @ A
+            N[np.diag_indices_from(N)] += D
+            fit = _solve_posed(N, Aw.T @ y + b)
+            if fit is None:
+                return None, np.inf, None
+            X = fit[:3] + (fit[3:6] * tt[:, None] + 0.5 * fit[6:9] * (tt * tt)[:, None]
+                           if order == 2 else 0.0)
+            depth = np.einsum("ij,ij->i", axis, X - C)
+            if (depth <= 0).any():
+                return None, np.inf, None
+            if passes == 2:
+                w2 = (ff / depth) ** 2
+        resid = (A @ fit - y) * np.sqrt(w2) * self.pixel_sigma
         return fit, float(np.sqrt(np.mean(resid ** 2))), np.linalg.inv(N)
 
 
-def _well_posed(N) -> bool:
-    """Whether the normal matrix ``N`` determines every unknown: its Cholesky factor, with the
-    unknowns scaled to unit information, has no pivot below 1e-6 of the largest (a relative
-    test: metres, seconds and pixels alike)."""
+def _solve_posed(N, rhs):
+    """``N⁻¹ rhs`` when the normal matrix ``N`` determines every unknown, else None: its
+    Cholesky factor, with the unknowns scaled to unit information, has no pivot below 1e-6 of
+    the largest (a relative test: metres, seconds and pixels alike)."""
     d = np.sqrt(np.diag(N))
     if not (d > 0).all():
-        return False
+        return None
+    scaled = N / d[:, None] / d[None, :]
     try:
-        L = np.linalg.cholesky(N / d[:, None] / d[None, :])
+        L = np.linalg.cholesky(scaled)
     except np.linalg.LinAlgError:
-        return False
+        return None
     piv = np.abs(np.diag(L))
-    return bool(piv.min() > 1e-6 * piv.max())
+    if not piv.min() > 1e-6 * piv.max():
+        return None
+    return np.linalg.solve(scaled, rhs / d) / d
