@@ -148,12 +148,22 @@ Example: `surveys/paper-2024/survey/`.
 - Asynchronous frames: `DIR/<camera_id>/<frame_no>.jpg` and `DIR/times.csv` with
   `camera_id,frame_no,t` (each frame's capture time, s, on one clock) — `vlpcal track --frames
   DIR`; `vlpcal simulate --robot-speed V` writes one (`streams/`, with `streams.truth.csv`:
-  `camera_id,frame_no,t,x,y,z`, where the LED was).
-- Tracks (`vlpcal track --out tracks.csv`): one row per camera frame that saw the LED, at that
-  frame's capture time: `t,led,x,y,z,vx,vy,vz,sigma_m,cameras,status` — m, m/s; `led` a track
-  id (`T1`, …); `cameras` the cameras whose rays the fit's window held (`C1+C3`); `status` `ok`
-  (two cameras or more), `one_camera` (one camera's rays, the track's motion placing the LED
-  along them) or `degenerate` (a predicted error past a tenth of the room's size).
+  `camera_id,frame_no,t,x,y,z,led,lit`, where each LED was and whether it was lit).
+- Live: `vlpcal track --camera ID=URL …`: MJPEG parts' `X-Timestamp` header (the capture time
+  on the camera's clock, s, as the ESP32 CameraWebServer sends it) is the frame's time, mapped
+  to the host's clock by each camera's offset and drift estimated online (the lower envelope of
+  arrival − capture); without it, the arrival time.
+- Tracks (`vlpcal track --out tracks.csv`): one row per camera frame that saw an LED, at that
+  frame's capture time: `t,led,x,y,z,vx,vy,vz,sigma_m,cameras,status` — t in s on the frames'
+  clock (live: UTC seconds); m, m/s; `led` the LED's id from its blink code (the deployment's
+  `leds:`), else a track id (`T1`, …; also while a code is being read); `cameras` the cameras
+  whose rays the fit's window held (`C1+C3`); `status` `ok` (two cameras or more), `one_camera`
+  (one camera's rays, the track's motion placing the LED along them) or `degenerate` (a
+  predicted error past a tenth of the room's size).
+- Blink codes (`leds:` in the deployment): per LED `id`, `pattern` (a quoted string of `0`
+  dark and `1` lit, 2–64 bits, repeated) and `bit_rate` (bits/s); no two patterns the same up
+  to a shift at one bit rate. A track is named once its lit and dark frames over a whole repeat
+  fit one code clearly better than any other and than a steady light.
 
 ## Calibration report (`<calibrated>.report.json`)
 
