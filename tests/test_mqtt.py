@@ -1,0 +1,109 @@
+"""Fixes to the robots and spots from the cameras over MQTT (issue 17), against a real
+Mosquitto."""
+
+import json
+import threading
+import time
+
+import pytest
+
+from vlpcal.mqtt import MqttError, Publisher, _spots_of, parse_url
+
+
+class Listener:
+    """A plain paho subscriber collecting every message under ``prefix/#``."""
+
+    def __init__(self, url):
+        import paho.mqtt.client as mqtt
+
+        t = parse_url(url)
+        self.messages = []
+        self.ready = threading.Event()
+        self.c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+        if t.user:
+            self.c.username_pw_set(t.user, t.password)
+        self.c.on_connect = lambda c, *a: (c.subscribe(f"{t.prefix}/#", qos=1),
+                                           self.ready.set())
+        self.c.on_message = lambda c, u, m: self.messages.append(
+            (m.topic, json.loads(m.payload), m.retain))
+        self.c.connect(t.host, t.port)
+        self.c.loop_start()
+        assert self.ready.wait(5)
+        time.sleep(0.1)
+
+    def on(self, topic):
+        return [m for tp, m, _ in self.messages if tp.endswith(topic)]
+
+    def close(self):
+        self.c.disconnect()
+        self.c.loop_stop()
+
+
+def test_urls_are_read_and_wrong_ones_are_one_line(monkeypatch):
+    t = parse_url("mqtt://robot:pa%3Ass@broker.local:1884/site/a")
+    assert (t.host, t.port, t.prefix, t.user, t.password, t.tls) == (
+        "broker.local", 1884, "site/a", "robot", "pa:ss", False)
+    assert "pa:ss" not in t.shown() and parse_url("mqtts://h/p").port == 8883
+    monkeypatch.setenv("VLPCAL_MQTT_PASSWORD", "fromenv")
+    assert parse_url("mqtt://u@h/p").password == "fromenv"
+    for bad in ("http://h/p", "mqtt:///p", "mqtt://h", "mqtt://h/", "mqtt://h/a b",
+                "mqtt://h:99999/p", "mqtt://u:secret@h:x/p"):
+        with pytest.raises(MqttError) as e:
+            parse_url(bad)
+        assert "secret" not in str(e.value) and "\n" not in str(e.value)
+
+
+def test_spot_messages_are_read_or_counted_bad():
+    assert _spots_of(b'{"t": 1.5, "u": 10, "v": 20}') == (1.5, [(10.0, 20.0)])
+    assert _spots_of(b'[{"t": 1, "u": 1, "v": 2}, {"t": 1, "u": 3, "v": 4}]')[1] == [
+        (1.0, 2.0), (3.0, 4.0)]
+    for bad in (b"", b"{", b'{"t": 1}', b'{"t": "x", "u": 1, "v": 1}', b'{"t": NaN, "u": 1, '
+                b'"v": 1}', b"[" * 5000 + b"]" * 5000, b'[]', b'"text"', b"x" * 5000):
+        assert _spots_of(bad) is None
+
+
+def test_publisher_sends_fixes_status_and_its_will(broker):
+    listen = Listener(broker.url())
+    pub = Publisher(parse_url(broker.url()), {"deployment": "d", "hash": "abc"})
+    for i in range(20):
+        pub.publish("L1", {"t": float(i), "x": 0.1 * i})
+    pub.status(cameras_alive=["C1", "C2"], rate_hz=30.0)
+    time.sleep(0.3)
+    assert [m["t"] for m in listen.on("fixes/L1")] == [float(i) for i in range(20)]
+    status = listen.on("status")
+    assert status[-1]["state"] == "online" and status[-1]["cameras_alive"] == ["C1", "C2"]
+    pub.close()
+    time.sleep(0.2)
+    assert listen.on("status")[-1]["state"] == "stopped"
+    listen.close()
+
+
+def test_a_wrong_password_is_refused_and_the_right_one_works(auth_broker):
+    with pytest.raises(MqttError, match="refused"):
+        Publisher(parse_url(auth_broker.url(user="robot", password="wrong")), {}, timeout=5)
+    pub = Publisher(parse_url(auth_broker.url(user="robot", password="s3cret")), {})
+    pub.close()
+
+
+def test_the_broker_restarted_mid_run_loses_nothing_it_could_hold(broker):
+    pub = Publisher(parse_url(broker.url()), {"deployment": "d"}, qos=1)
+    listen = Listener(broker.url())
+    for i in range(10):
+        pub.publish("L1", {"t": float(i)})
+    time.sleep(0.3)
+    broker.stop()
+    time.sleep(0.5)
+    for i in range(10, 30):  # while the broker is away: held
+        pub.publish("L1", {"t": float(i)})
+    assert pub.held > 0
+    listen.close()
+    broker.start()
+    listen = Listener(broker.url())  # subscribed before the publisher's first retry (1 s)
+    deadline = time.monotonic() + 40
+    while (pub.held or len(listen.on("fixes/L1")) < 20) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert pub.held == 0 and pub.reconnects >= 1 and pub.lost == 0
+    got = [m["t"] for m in listen.on("fixes/L1")]
+    assert got == [float(i) for i in range(10, 30)], got
+    pub.close()
+    listen.close()

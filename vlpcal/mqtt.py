@@ -1,0 +1,373 @@
+"""Fixes out to the robots, spots in from the cameras: MQTT (issue 17).
+
+``mqtt://[user[:password]@]host[:port]/prefix`` (``mqtts://`` for TLS) names a broker and a topic
+prefix. A :class:`Publisher` sends one JSON message per fix or track update on
+``prefix/fixes/<led>``, keeps a retained ``prefix/status`` (the deployment, the cameras alive, the
+rate) and leaves a last will there (``"state": "offline"``) for when the process dies. While the
+broker is away it reconnects with backoff and holds messages in a bounded buffer; what the buffer
+cannot hold is counted as lost and said. A :class:`SpotSubscriber` reads the spots cameras publish
+on ``prefix/spots/<camera_id>`` (``{"t": …, "u": …, "v": …}``, or a list of such) for the
+locator. paho-mqtt is the client; it is imported only when MQTT is used.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import queue
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from urllib.parse import unquote, urlsplit
+
+#: the password, when the URL has none, comes from this environment variable (never echoed)
+PASSWORD_ENV = "VLPCAL_MQTT_PASSWORD"
+#: messages held while the broker is away, at most (older ones go first, counted as lost)
+BUFFER = 100_000
+#: s to wait for the broker's answer when connecting first
+CONNECT_TIMEOUT = 10.0
+#: a spot message's size, at most (bytes): a few spots of one frame
+MAX_SPOT_MESSAGE = 4096
+
+
+class MqttError(Exception):
+    """A broker that cannot be used as asked (one line: which, and why)."""
+
+
+@dataclass(frozen=True)
+class Target:
+    """A broker and a topic prefix, from an ``mqtt://`` URL."""
+
+    host: str
+    port: int
+    prefix: str
+    tls: bool = False
+    user: str | None = None
+    password: str | None = None
+
+    def shown(self) -> str:
+        """The URL without its password (for messages)."""
+        who = f"{self.user}@" if self.user else ""
+        return f"{'mqtts' if self.tls else 'mqtt'}://{who}{self.host}:{self.port}/{self.prefix}"
+
+
+def parse_url(url: str) -> Target:
+    """Read an ``mqtt://[user[:password]@]host[:port]/prefix`` URL (``mqtts://`` for TLS); the
+    password may instead be in :data:`PASSWORD_ENV`. A wrong URL is an :class:`MqttError`."""
+    from .reading import is_id
+
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError as e:
+        raise MqttError(f"{_safe(url)}: not an MQTT URL ({e}); expected "
+                        "mqtt://[user[:password]@]host[:port]/prefix") from None
+    if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
+        raise MqttError(f"{_safe(url)}: expected mqtt://[user[:password]@]host[:port]/prefix "
+                        "(or mqtts:// for TLS)")
+    prefix = parts.path.strip("/")
+    if not prefix or not all(is_id(p) for p in prefix.split("/")) or len(prefix) > 200:
+        raise MqttError(f"{_safe(url)}: expected a topic prefix after the host (letters, digits, "
+                        "_ - . between slashes, e.g. mqtt://broker/site1)")
+    tls = parts.scheme == "mqtts"
+    password = unquote(parts.password) if parts.password is not None else \
+        os.environ.get(PASSWORD_ENV)
+    return Target(parts.hostname, port or (8883 if tls else 1883), prefix, tls,
+                  unquote(parts.username) if parts.username else None, password)
+
+
+def _safe(url: str) -> str:
+    """``url`` as a message may show it: its password replaced, cut short, one line."""
+    from .reading import one_line
+
+    try:
+        p = urlsplit(url)
+        if p.password is not None:
+            url = url.replace(f":{p.password}@", ":***@", 1)
+    except ValueError:
+        pass
+    return one_line(url, 120)
+
+
+def _client(target: Target, client_id: str, ca_file=None):
+    import paho.mqtt.client as mqtt
+
+    c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
+                    protocol=mqtt.MQTTv311)
+    if target.user is not None:
+        c.username_pw_set(target.user, target.password)
+    if target.tls:
+        c.tls_set(ca_certs=ca_file)
+    c.reconnect_delay_set(min_delay=1, max_delay=30)
+    return c
+
+
+def _connect(client, target: Target, connected: threading.Event, refused: list,
+             timeout: float) -> None:
+    """Start the client's loop and wait for the broker's first answer; a refusal (a wrong
+    password) or no answer is an :class:`MqttError`."""
+    try:
+        client.connect_async(target.host, target.port, keepalive=30)
+    except (OSError, ValueError) as e:
+        raise MqttError(f"{target.shown()}: cannot connect ({e})") from None
+    client.loop_start()
+    deadline = time.monotonic() + timeout
+    while not connected.is_set() and not refused and time.monotonic() < deadline:
+        time.sleep(0.01)
+    if refused:
+        client.loop_stop()
+        raise MqttError(f"{target.shown()}: the broker refused the connection ({refused[0]})")
+    if not connected.is_set():
+        client.loop_stop()
+        raise MqttError(f"{target.shown()}: no answer from the broker in {timeout:g} s (is it "
+                        "running, and is the host and port right?)")
+
+
+class Publisher:
+    """Fixes and track updates to a broker (module docstring). ``status``: the retained status
+    message's fixed part (deployment name and hash, cameras); :meth:`status` updates it."""
+
+    def __init__(self, target: Target, status: dict, qos: int = 0, ca_file=None,
+                 client_id: str | None = None, buffer: int = BUFFER,
+                 timeout: float = CONNECT_TIMEOUT):
+        self.target, self.qos = target, qos
+        self._status = dict(status)
+        self._buffer: deque = deque()
+        self._limit = buffer
+        self._lock = threading.Lock()
+        self.sent = 0
+        self.lost = 0
+        self.reconnects = 0
+        self._connected = threading.Event()
+        self._refused: list = []
+        self._ever = False
+        #: QoS ≥ 1: sent, not yet acknowledged (mid → message): sent again after a reconnect
+        self._inflight: dict = {}
+        self._acked: set = set()  # acknowledged before publish() returned its mid
+        self._ilock = threading.Lock()  # never held around a paho call (its callbacks take it)
+        self.client = _client(target, client_id or f"vlpcal-{os.getpid()}-{time.time_ns()}",
+                              ca_file)
+        self.client.will_set(self.topic("status"), json.dumps({**self._status,
+                                                               "state": "offline"}),
+                             qos=1, retain=True)
+        self.client.on_connect = self._on_connect
+        self.client.on_disconnect = self._on_disconnect
+        self.client.on_publish = self._on_publish
+        _connect(self.client, target, self._connected, self._refused, timeout)
+        self.status()
+
+    def topic(self, *parts: str) -> str:
+        return "/".join((self.target.prefix, *parts))
+
+    def _on_connect(self, client, userdata, flags, reason_code, properties=None):
+        if reason_code.is_failure:
+            if not self._ever:
+                self._refused.append(str(reason_code).lower())
+            return
+        if self._ever:
+            self.reconnects += 1
+        self._ever = True
+        with self._ilock:  # what the broker never acknowledged goes first, again
+            again = [self._inflight[m] for m in sorted(self._inflight)]
+            self._inflight.clear()
+            self._acked.clear()
+        with self._lock:
+            self._buffer.extendleft(reversed(again))
+        self._connected.set()
+        self._flush()
+
+    def _on_disconnect(self, client, userdata, flags, reason_code, properties=None):
+        self._connected.clear()
+
+    def _on_publish(self, client, userdata, mid, reason_code=None, properties=None):
+        with self._ilock:
+            if self._inflight.pop(mid, None) is None:
+                self._acked.add(mid)
+
+    def _flush(self) -> None:
+        while self._connected.is_set():
+            with self._lock:
+                if not self._buffer:
+                    return
+                topic, payload, retain = self._buffer.popleft()
+            self._send(topic, payload, retain)
+
+    def _send(self, topic: str, payload: str, retain: bool = False) -> None:
+        info = self.client.publish(topic, payload, qos=self.qos, retain=retain)
+        if info.rc == 0 and self.qos:
+            with self._ilock:  # the acknowledgement may have come before publish() returned
+                if info.mid in self._acked:
+                    self._acked.discard(info.mid)
+                else:
+                    self._inflight[info.mid] = (topic, payload, retain)
+        if info.rc == 0:
+            self.sent += 1
+        else:  # the connection went between the check and the send: keep it for later
+            self._hold(topic, payload, retain)
+
+    def _hold(self, topic: str, payload: str, retain: bool) -> None:
+        with self._lock:
+            self._buffer.append((topic, payload, retain))
+            while len(self._buffer) > self._limit:
+                self._buffer.popleft()
+                self.lost += 1
+
+    def publish(self, led: str, message: dict) -> None:
+        """One fix or track update on ``prefix/fixes/<led>``."""
+        payload = json.dumps(message, allow_nan=False, separators=(",", ":"))
+        topic = self.topic("fixes", led)
+        if self._connected.is_set() and not self._buffer:
+            self._send(topic, payload)
+        else:
+            self._hold(topic, payload, False)
+            if self._connected.is_set():
+                self._flush()
+
+    def status(self, **live) -> None:
+        """The retained status: the fixed part, ``live`` (cameras alive, rate, …), online."""
+        self._status.update(live)
+        payload = json.dumps({**self._status, "state": "online", "t": time.time()},
+                             allow_nan=False)
+        if self._connected.is_set():
+            self.client.publish(self.topic("status"), payload, qos=1, retain=True)
+
+    @property
+    def held(self) -> int:
+        """Messages waiting for the broker."""
+        return len(self._buffer)
+
+    def close(self, wait: float = 5.0) -> None:
+        """Send what is held (up to ``wait`` s), mark the status stopped, disconnect."""
+        deadline = time.monotonic() + wait
+        while self._buffer and time.monotonic() < deadline:
+            if self._connected.is_set():
+                self._flush()
+            time.sleep(0.01)
+        with self._lock:
+            self.lost += len(self._buffer)
+            self._buffer.clear()
+        if self._connected.is_set():
+            info = self.client.publish(self.topic("status"),
+                                       json.dumps({**self._status, "state": "stopped",
+                                                   "t": time.time()}), qos=1, retain=True)
+            try:
+                info.wait_for_publish(timeout=max(0.1, deadline - time.monotonic()))
+            except (RuntimeError, ValueError):
+                pass
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+def fix_message(t: float, fix_row: dict) -> dict:
+    """A fix (a :class:`~vlpcal.locator.Fix` row) as its MQTT message: UTC time, position,
+    sigma_m, cameras, status (numbers as numbers, missing ones null)."""
+    def num(v):
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            return None
+        return x if math.isfinite(x) else None
+
+    return {"t": t, "frame_id": fix_row.get("frame_id"),
+            "x": num(fix_row.get("x")), "y": num(fix_row.get("y")), "z": num(fix_row.get("z")),
+            "sigma_m": num(fix_row.get("sigma_m")), "cameras": fix_row.get("cameras") or "",
+            "status": fix_row.get("status")}
+
+
+def track_message(t: float, update) -> dict:
+    """A track update (:class:`~vlpcal.tracking.TrackUpdate`) as its MQTT message."""
+    return {"t": t, "led": update.led, "x": float(update.position[0]),
+            "y": float(update.position[1]), "z": float(update.position[2]),
+            "vx": float(update.velocity[0]), "vy": float(update.velocity[1]),
+            "vz": float(update.velocity[2]), "sigma_m": update.sigma_m,
+            "cameras": update.cameras, "status": update.status}
+
+
+class SpotSubscriber:
+    """Spots cameras publish on ``prefix/spots/<camera_id>``: ``{"t": capture time (UTC s),
+    "u": px, "v": px}`` or a list of such (several spots of one frame). Iterating gives
+    ``(t, camera_id, [(u, v), …])`` as they come; a message that is not that is counted
+    (``bad``) and skipped, never raised."""
+
+    def __init__(self, target: Target, camera_ids, ca_file=None, qos: int = 0,
+                 timeout: float = CONNECT_TIMEOUT):
+        self.target = target
+        self.camera_ids = set(camera_ids)
+        self.bad = 0
+        self.unknown = 0
+        self.received = 0
+        self._queue: queue.Queue = queue.Queue(maxsize=100_000)
+        self.dropped = 0
+        self._connected = threading.Event()
+        self._refused: list = []
+        self._ever = False
+        self.client = _client(target, f"vlpcal-spots-{os.getpid()}-{time.time_ns()}", ca_file)
+        self._qos = qos
+        self.client.on_connect = self._on_connect
+        self.client.on_disconnect = lambda *a, **k: self._connected.clear()
+        self.client.on_message = self._on_message
+        _connect(self.client, target, self._connected, self._refused, timeout)
+
+    def _on_connect(self, client, userdata, flags, reason_code, properties=None):
+        if reason_code.is_failure:
+            if not self._ever:
+                self._refused.append(str(reason_code).lower())
+            return
+        self._ever = True
+        client.subscribe(f"{self.target.prefix}/spots/+", qos=self._qos)
+        self._connected.set()
+
+    def _on_message(self, client, userdata, msg):
+        cid = msg.topic.rsplit("/", 1)[-1]
+        if cid not in self.camera_ids:
+            self.unknown += 1
+            return
+        spots = _spots_of(msg.payload)
+        if spots is None:
+            self.bad += 1
+            return
+        t, uv = spots
+        self.received += 1
+        try:
+            self._queue.put_nowait((t, cid, uv))
+        except queue.Full:
+            self.dropped += 1
+
+    def get(self, timeout: float):
+        """The next ``(t, camera_id, spots)``, or None after ``timeout`` s."""
+        try:
+            return self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+def _spots_of(payload: bytes):
+    """``(t, [(u, v), …])`` from a spot message, or None if it is not one."""
+    if len(payload) > MAX_SPOT_MESSAGE:
+        return None
+    try:
+        doc = json.loads(payload)
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        return None
+    items = doc if isinstance(doc, list) else [doc]
+    if not items or len(items) > 64:
+        return None
+    t, uv = None, []
+    for it in items:
+        if not isinstance(it, dict):
+            return None
+        try:
+            tt, u, v = float(it["t"]), float(it["u"]), float(it["v"])
+        except (KeyError, TypeError, ValueError, OverflowError):
+            return None
+        if not all(map(math.isfinite, (tt, u, v))):
+            return None
+        t = tt if t is None else t
+        uv.append((u, v))
+    return t, uv
