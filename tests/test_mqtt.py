@@ -107,3 +107,75 @@ def test_the_broker_restarted_mid_run_loses_nothing_it_could_hold(broker):
     assert got == [float(i) for i in range(10, 30)], got
     pub.close()
     listen.close()
+
+
+def test_published_fixes_equal_the_csv_of_the_same_run(broker, tmp_path):
+    """vlpcal locate --frames … --publish: every row of the CSV is a message, equal to it."""
+    import csv
+    import subprocess
+    import sys
+
+    run = [sys.executable, "-m", "vlpcal"]
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--out",
+                                str(tmp_path / "sim"), "--test-points", "60"],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    listen = Listener(broker.url("lab"))
+    res = subprocess.run(run + ["locate", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/frames"), "--out", str(tmp_path / "f.csv"),
+                                "--publish", broker.url("lab"), "--qos", "1"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert "published 60 messages" in res.stderr, res.stderr
+    time.sleep(0.5)
+    rows = list(csv.DictReader(open(tmp_path / "f.csv")))
+    got = listen.on("fixes/L1")
+    assert len(got) == len(rows) == 60
+    for row, msg in zip(rows, got):
+        assert msg["frame_id"] == row["frame_id"] and msg["status"] == row["status"]
+        for k in ("x", "y", "z", "sigma_m"):
+            assert (msg[k] is None and row[k] == "") or abs(msg[k] - float(row[k])) < 1e-6
+    status = listen.on("status")
+    assert status[0]["deployment"] and len(status[0]["deployment_sha256"]) == 16
+    assert status[-1]["state"] == "stopped"
+    listen.close()
+    # a wrong password: one line, exit 2, nothing written
+    res = subprocess.run(run + ["locate", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/frames"), "--out", str(tmp_path / "g.csv"),
+                                "--publish", f"mqtt://u:nope@127.0.0.1:1/lab"],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert "nope" not in res.stderr and not (tmp_path / "g.csv").exists()
+
+
+def test_track_publishes_its_updates_and_a_wrong_password_is_one_line(auth_broker, tmp_path):
+    import csv
+    import subprocess
+    import sys
+
+    run = [sys.executable, "-m", "vlpcal"]
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--out",
+                                str(tmp_path / "sim"), "--robot-speed", "1", "--seconds", "2"],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    url = auth_broker.url("lab", "robot", "s3cret")
+    listen = Listener(url)
+    res = subprocess.run(run + ["track", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/streams"), "--out", str(tmp_path / "t.csv"),
+                                "--publish", url],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert "s3cret" not in res.stderr + res.stdout
+    time.sleep(0.5)
+    rows = list(csv.DictReader(open(tmp_path / "t.csv")))
+    got = [m for tp, m, _ in listen.messages if "/fixes/" in tp]
+    assert len(rows) > 20 and len(got) == len(rows)
+    assert sorted((m["t"], m["led"]) for m in got) == sorted(
+        (float(r["t"]), r["led"]) for r in rows)
+    listen.close()
+    res = subprocess.run(run + ["track", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/streams"), "--out", str(tmp_path / "u.csv"),
+                                "--publish", auth_broker.url("lab", "robot", "wrong")],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and "refused" in res.stderr, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and "wrong" not in res.stderr

@@ -5,6 +5,14 @@ from __future__ import annotations
 import click
 
 from .common import Finite, UserError, _camera_sources, _load_deployment, _output_file, main
+from .mqtt import (
+    PublishingWriter,
+    led_of,
+    mqtt_options,
+    open_publisher,
+    parse_mqtt,
+    publisher_summary,
+)
 
 
 @main.command()
@@ -17,6 +25,10 @@ from .common import Finite, UserError, _camera_sources, _load_deployment, _outpu
 @click.option("--camera", "cameras", multiple=True, metavar="ID=SOURCE",
               help="Live source per camera: an MJPEG URL (ESP32-CAM: http://IP:81/stream) or "
                    "a video device (/dev/video0). Repeat for each camera.")
+@click.option("--spots", "spots_url", default=None, metavar="mqtt://…/PREFIX",
+              help="Live spots the cameras publish on PREFIX/spots/<camera_id> "
+                   "({\"t\": UTC s, \"u\": px, \"v\": px}).")
+@mqtt_options
 @click.option("--out", "-o", default="-", show_default=True,
               help="Fixes file (.csv or .jsonl), or - for stdout.")
 @click.option("--format", "fmt", type=click.Choice(["csv", "jsonl"]), default=None,
@@ -30,8 +42,8 @@ from .common import Finite, UserError, _camera_sources, _load_deployment, _outpu
 @click.option("--max-sets", type=click.IntRange(1), default=None,
               help="Live: stop after this many frame sets.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
-def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, tolerance,
-           duration, max_sets, quiet):
+def locate(deployment_path, frames_dir, observations, cameras, spots_url, publish, qos, ca_file,
+           out, fmt, batch, tolerance, duration, max_sets, quiet):
     """Turn camera frames into 3D fixes (metres, world frame, z up).
 
     One row per frame set: frame_id,x,y,z,status first (the contract), then the cameras used,
@@ -48,20 +60,27 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
 
     sources = [name for name, given in (("--frames", frames_dir),
                                          ("--observations", observations),
-                                         ("--camera", cameras)) if given]
+                                         ("--camera", cameras), ("--spots", spots_url)) if given]
     if len(sources) != 1:
-        raise click.UsageError("give exactly one input: --frames DIR, --observations CSV or "
-                               "--camera ID=SOURCE …")
+        raise click.UsageError("give exactly one input: --frames DIR, --observations CSV, "
+                               "--camera ID=SOURCE … or --spots mqtt://…")
     loc = Locator(_load_deployment(deployment_path))
+    spots_target = parse_mqtt(spots_url, "--spots") if spots_url else None
     if out != "-":  # never over the deployment or the frames it reads
         out = str(_output_file(out, inputs=[p for p in (deployment_path, frames_dir,
                                                          observations) if p], what="the fixes"))
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
-    live = bool(cameras)
+    live = bool(cameras) or bool(spots_url)
+    publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path)
     try:
         writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else ())
     except OSError as e:
+        if publisher:
+            publisher.close()
         raise UserError(f"{out}: cannot write the fixes there ({e.strerror})") from None
+    if publisher:
+        writer = PublishingWriter(writer, publisher, led_of(loc.deployment),
+                                  utc="t_s" if spots_url else None)
     # from here on every way out either closes the writer (the fixes so far are kept) or
     # aborts it (nothing replaced)
     t0 = time.perf_counter()
@@ -72,6 +91,9 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
             n = _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet)
         elif observations:
             n = _locate_observations(loc, observations, writer, statuses, notes)
+        elif spots_target:
+            n = _locate_spots(loc, spots_target, ca_file, writer, tolerance, duration, max_sets,
+                              statuses, notes, say)
         else:
             n = _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses,
                              notes, say)
@@ -90,6 +112,10 @@ def locate(deployment_path, frames_dir, observations, cameras, out, fmt, batch, 
     except BaseException:
         writer.abort()
         raise
+    finally:
+        if publisher:
+            publisher.close()
+            notes.append(publisher_summary(publisher))
     writer.close()
     secs = time.perf_counter() - t0
     if n and not quiet:
@@ -231,4 +257,62 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
                          + (f"; {st.dropped[cid]} dropped (the locator fell behind)"
                             if st.dropped[cid] else "")
                          + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
+    return n
+
+
+def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, statuses, notes,
+                  say) -> int:
+    """``--spots mqtt://…``: the spots cameras publish, grouped by their capture times (those
+    within ``tolerance`` s of a set's first form the set) and located as they come."""
+    import time
+
+    import numpy as np
+
+    from ..mqtt import MqttError, SpotSubscriber
+
+    try:
+        sub = SpotSubscriber(target, loc.camera_ids, ca_file)
+    except MqttError as e:
+        raise UserError(str(e)) from None
+    say(f"listening for spots on {target.shown()}/spots/+")
+    index = {c: k for k, c in enumerate(loc.camera_ids)}
+    t_end = time.monotonic() + duration if duration else None
+    pending: dict = {}
+    first = None
+    n = 0
+
+    def close():
+        nonlocal pending, first, n
+        uv = np.full((len(index), 1, 2), np.nan)
+        for cid, spots in pending.items():
+            uv[index[cid], 0] = spots[0]
+        fixes = loc.locate_pixels(uv, frame_ids=[f"{n:06d}"])
+        statuses.update(fixes.counts())
+        writer.write(fixes, {"t_s": round(first, 6)})
+        n += 1
+        pending, first = {}, None
+
+    try:
+        while not (t_end and time.monotonic() > t_end) and not (max_sets and n >= max_sets):
+            got = sub.get(timeout=tolerance)
+            if got is None:
+                if pending and time.time() - first > 2 * tolerance:
+                    close()
+                continue
+            t, cid, spots = got
+            if pending and (cid in pending or abs(t - first) > tolerance):
+                close()
+            if first is None:
+                first = t
+            pending[cid] = spots
+            if len(pending) == len(index):
+                close()
+        if pending:
+            close()
+    finally:
+        sub.close()
+    notes.append(f"spots: {sub.received} messages"
+                 + (f", {sub.bad} not spots (skipped)" if sub.bad else "")
+                 + (f", {sub.unknown} of cameras not in the deployment" if sub.unknown else "")
+                 + (f", {sub.dropped} dropped (the locator fell behind)" if sub.dropped else ""))
     return n

@@ -6,6 +6,7 @@ from __future__ import annotations
 import click
 
 from .common import Finite, UserError, _load_deployment, _output_file, main
+from .mqtt import mqtt_options, open_publisher, publisher_summary
 
 #: camera frames read and detected at once, at most — and at most this many bytes of them
 BLOCK, BLOCK_BYTES = 2048, 64 << 20
@@ -31,8 +32,10 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
               help="Tracks file to write (.csv).")
 @click.option("--fps", default=None, type=Finite(0.1, 10000.0),
               help="The cameras' frame rate.  [default: from times.csv, the slowest camera's]")
+@mqtt_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
-def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet):
+def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, publish, qos, ca_file,
+          quiet):
     """Track moving LEDs from cameras that are not synchronised.
 
     Each camera frame is a ray at its own capture time; the LED's path over a short window is
@@ -44,6 +47,35 @@ def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet
 
     Example: vlpcal track -d deployment.yaml --frames streams/ --out tracks.csv
     """
+
+
+
+    dep = _load_deployment(deployment_path)
+    if bool(frames_dir) == bool(cameras):
+        raise UserError("give either --frames DIR or --camera ID=SOURCE … (one per camera)")
+    publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
+    try:
+        _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet,
+               publisher)
+    finally:
+        if publisher:
+            publisher.close()
+            if not quiet:
+                click.echo(publisher_summary(publisher), err=True)
+
+
+def _published(publisher, rows, utc: float = 0.0):
+    """``rows`` (track updates) published as they are made, when --publish asks; returned."""
+    if publisher:
+        from ..mqtt import track_message
+
+        for r in rows:
+            publisher.publish(r.led, track_message(r.t + utc, r))
+    return rows
+
+
+def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet,
+           publisher) -> None:
     import sys
 
     import numpy as np
@@ -51,11 +83,9 @@ def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet
     from ..datasets import DatasetError, read_async_frames
     from ..tracking import Tracker
 
-    dep = _load_deployment(deployment_path)
-    if bool(frames_dir) == bool(cameras):
-        raise UserError("give either --frames DIR or --camera ID=SOURCE … (one per camera)")
     if cameras:
-        _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet)
+        _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
+                    publisher)
         return
     if duration is not None:
         raise click.BadParameter("is for live cameras (--camera)", param_hint="--duration")
@@ -98,7 +128,7 @@ def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet
             for (no, _), uv in zip(mine, found):
                 found_at[(cid, no)] = uv
         for t, cid, no, _ in block:
-            rows.extend(tracker.update_spots(cid, t, found_at[(cid, no)]))
+            rows.extend(_published(publisher, tracker.update_spots(cid, t, found_at[(cid, no)])))
 
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
@@ -118,7 +148,7 @@ def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet
     if missing == len(folder.events):
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
-    rows += tracker.finish()
+    rows += _published(publisher, tracker.finish())
     _write_tracks(out, rows)
     if not quiet:
         click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
@@ -150,7 +180,8 @@ def _summary(rows) -> str:
     return (f"{len(rows)} rows, {ok} placed by two cameras or more, tracks {shown or '–'}")
 
 
-def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet) -> None:
+def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
+                publisher=None) -> None:
     """``vlpcal track --camera …``: frames as they come, each at its capture time on the
     host's clock (X-Timestamp through each camera's clock estimate, else arrival), fed to
     the tracker in that order; rows in UTC seconds."""
@@ -175,7 +206,7 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet)
     n = 0
     try:
         for t, cid, frame in frames:
-            rows += tracker.update(cid, t, frame)
+            rows += _published(publisher, tracker.update(cid, t, frame), utc)
             n += 1
             if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
                 tracker.period = frames.period()
@@ -183,7 +214,7 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet)
         say("stopped (Ctrl-C): writing what was tracked")
     finally:
         frames.stop()
-    rows += tracker.finish()
+    rows += _published(publisher, tracker.finish(), utc)
     st = frames.stats
     if not n:
         why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)

@@ -1,0 +1,90 @@
+"""``--publish`` / ``--spots``: the command line's side of MQTT (issue 17, :mod:`vlpcal.mqtt`)."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from .common import UserError
+
+
+def mqtt_options(f):
+    """``--publish URL``, ``--qos``, ``--ca-file`` on a command."""
+    f = click.option("--ca-file", type=click.Path(dir_okay=False, exists=True), default=None,
+                     help="mqtts://: the CA certificate to check the broker's against.")(f)
+    f = click.option("--qos", type=click.IntRange(0, 2), default=0, show_default=True,
+                     help="MQTT quality of service of the published messages.")(f)
+    f = click.option("--publish", default=None, metavar="mqtt://[USER[:PASS]@]HOST[:PORT]/PREFIX",
+                     help="Also publish each fix as JSON on PREFIX/fixes/<led>, with a retained "
+                          "PREFIX/status (mqtts:// for TLS; the password may instead be in "
+                          "VLPCAL_MQTT_PASSWORD).")(f)
+    return f
+
+
+def parse_mqtt(url: str, option: str):
+    from ..mqtt import MqttError, parse_url
+
+    try:
+        return parse_url(url)
+    except MqttError as e:
+        raise UserError(f"{option} {e}") from None
+
+
+def open_publisher(url, qos, ca_file, dep, deployment_path):
+    """The :class:`~vlpcal.mqtt.Publisher` for ``--publish`` (None without it); a broker that
+    cannot be used is one line (exit 2)."""
+    if not url:
+        return None
+    import hashlib
+    from pathlib import Path
+
+    from ..mqtt import MqttError, Publisher
+
+    target = parse_mqtt(url, "--publish")
+    try:
+        digest = hashlib.sha256(Path(deployment_path).read_bytes()).hexdigest()[:16]
+    except OSError:
+        digest = None
+    try:
+        return Publisher(target, {"deployment": dep.name, "deployment_sha256": digest,
+                                  "cameras": [c.id for c in dep.cameras]}, qos, ca_file)
+    except MqttError as e:
+        raise UserError(f"--publish {e}") from None
+
+
+def led_of(dep) -> str:
+    """The LED a locator's fixes are of: the deployment's one ``leds:`` entry, else L1."""
+    leds = dep.leds
+    return leds[0].led if len(leds) == 1 else "L1"
+
+
+def publisher_summary(pub) -> str:
+    held = f"; {pub.lost} lost (the broker away longer than the buffer holds)" if pub.lost \
+        else ""
+    again = f"; reconnected {pub.reconnects} time{'s' if pub.reconnects != 1 else ''}" \
+        if pub.reconnects else ""
+    return f"published {pub.sent} messages (fixes or track updates) to {pub.target.shown()}"\
+        f"{held}{again}"
+
+
+class PublishingWriter:
+    """A :class:`~vlpcal.locator.FixWriter` that also publishes every fix it writes, at UTC
+    ``extra[utc]`` when the fixes carry their time in that column, else now."""
+
+    def __init__(self, writer, publisher, led: str, utc: str | None = None):
+        self.writer, self.publisher, self.led, self.utc = writer, publisher, led, utc
+
+    def write(self, fixes, extra: dict | None = None) -> None:
+        from ..mqtt import fix_message
+
+        self.writer.write(fixes, extra)
+        t = (extra or {}).get(self.utc, time.time()) if self.utc else time.time()
+        for fix in fixes:
+            self.publisher.publish(self.led, fix_message(t, fix.row()))
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def abort(self) -> None:
+        self.writer.abort()
