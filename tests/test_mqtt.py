@@ -142,7 +142,7 @@ def test_published_fixes_equal_the_csv_of_the_same_run(broker, tmp_path):
     # a wrong password: one line, exit 2, nothing written
     res = subprocess.run(run + ["locate", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
                                 str(tmp_path / "sim/frames"), "--out", str(tmp_path / "g.csv"),
-                                "--publish", f"mqtt://u:nope@127.0.0.1:1/lab"],
+                                "--publish", "mqtt://u:nope@127.0.0.1:1/lab"],
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "nope" not in res.stderr and not (tmp_path / "g.csv").exists()
