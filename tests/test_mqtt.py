@@ -179,3 +179,44 @@ def test_track_publishes_its_updates_and_a_wrong_password_is_one_line(auth_broke
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 2 and "refused" in res.stderr, res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and "wrong" not in res.stderr
+
+
+def test_spots_published_by_simulated_cameras_are_located(broker, tmp_path):
+    """The chain without hardware: vlpcal simulate --publish plays a site's spots in real time,
+    vlpcal locate --spots locates them, and the fixes follow the robot."""
+    import csv
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.streams import robot_path
+    from vlpcal.sim.writers import write_deployments
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    write_deployments(scene, tmp_path)
+    run = [sys.executable, "-m", "vlpcal"]
+    loc = subprocess.Popen(run + ["locate", "-d", str(tmp_path / "truth.yaml"), "--spots",
+                                  broker.url("lab"), "--out", str(tmp_path / "f.csv"),
+                                  "--duration", "6", "--publish", broker.url("out")],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(1.5)  # subscribed
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--publish",
+                                broker.url("lab"), "--seconds", "3", "--robot-speed", "0.1"],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    _, err = loc.communicate(timeout=60)
+    assert loc.returncode == 0, err
+    rows = [r for r in csv.DictReader(open(tmp_path / "f.csv")) if r["status"] == "ok"]
+    assert len(rows) > 30, err
+    t = np.array([float(r["t_s"]) for r in rows])
+    X = np.array([[float(r[c]) for c in "xyz"] for r in rows])
+    assert abs(np.median(t) - time.time()) < 60  # the spots' capture times, UTC
+    # spots of different cameras are of moments up to a frame apart (locate groups them; the
+    # tracker is what undoes that), so the robot crawls: the fixes lie on its path
+    curve = robot_path(scene, 0.1)(np.linspace(0, 100, 20001))
+    off = np.linalg.norm(X[:, None, :2] - curve[None, :, :2], axis=2).min(axis=1)
+    assert np.median(off) < 0.005 and np.median(np.abs(X[:, 2] - 0.15)) < 0.01, (
+        np.median(off), np.median(np.abs(X[:, 2] - 0.15)))

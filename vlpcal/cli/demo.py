@@ -36,10 +36,15 @@ from .common import Finite, UserError, _floats, main
                    "each from a random phase, 2 ms jitter, 5 % dropped) for vlpcal track.")
 @click.option("--seconds", default=10.0, show_default=True, type=Finite(0.1, 600.0),
               help="With --robot-speed: how long the robot drives.")
+@click.option("--publish", default=None, metavar="mqtt://…/PREFIX",
+              help="Instead of a folder: the install's cameras publish their spots of a robot's "
+                   "LED (--robot-speed, default 1 m/s) live on PREFIX/spots/<camera_id> for "
+                   "--seconds, each at 30 fps from its own phase (for vlpcal locate --spots).")
 @click.option("--overwrite", is_flag=True, help="Replace what is in --out.")
 @click.option("--describe", is_flag=True, help="Print the profile's parameters and sources.")
 def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, trajectory,
-             free_sets, free_height, references, robot_speed, seconds, overwrite, describe):
+             free_sets, free_height, references, robot_speed, seconds, publish, overwrite,
+             describe):
     """Simulate an install: nominal and true deployments, a survey bundle, a frames folder.
 
     Writes OUT/nominal.yaml (the cameras as planned), OUT/truth.yaml (as really installed, for
@@ -64,6 +69,9 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
         click.echo(f"{profile.name}: {profile.description}")
         for key, text in profile.sources.items():
             click.echo(f"  {key}: {text}")
+        return
+    if publish:
+        _publish_spots(profile, seed, publish, robot_speed or 1.0, seconds)
         return
     if not out:
         raise click.UsageError("--out is required (the folder to write)")
@@ -121,6 +129,28 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
 #: what vlpcal simulate writes in its --out folder
 SIMULATED = {"nominal.yaml", "truth.yaml", "survey", "frames", "frames.truth.csv",
              "free-survey", "streams", "streams.truth.csv"}
+
+
+def _publish_spots(profile, seed, url, speed, seconds) -> None:
+    """``simulate --publish``: the reference publisher of spots (:mod:`vlpcal.sim.publish`)."""
+    from ..mqtt import MqttError
+    from ..sim.publish import play_spots, spot_schedule
+    from ..sim.scene import make_scene
+    from ..sim.streams import robot_path
+    from .mqtt import parse_mqtt
+
+    target = parse_mqtt(url, "--publish")
+    scene = make_scene(profile, seed)
+    events = spot_schedule(scene, robot_path(scene, speed, seed=seed), seconds, seed=seed)
+    click.echo(f"{profile.name}: {len(scene.true)} cameras publishing {len(events)} spots of a "
+               f"robot at {speed:g} m/s over {seconds:g} s on {target.shown()}/spots/…",
+               err=True)
+    try:
+        res = play_spots(target, events, say=lambda m: click.echo(m, err=True))
+    except MqttError as e:
+        raise UserError(f"--publish {e}") from None
+    click.echo(f"published {res['sent']} spots (p99 {res['late_p99_ms']:.1f} ms behind "
+               "schedule)", err=True)
 
 
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
