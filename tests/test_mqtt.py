@@ -203,11 +203,20 @@ def test_spots_published_by_simulated_cameras_are_located(broker, tmp_path):
                                   "--duration", "6", "--publish", broker.url("out")],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(1.5)  # subscribed
+    follow = subprocess.Popen(["tail", "-n", "+1", "-F", str(tmp_path / "f.csv")],
+                              stdout=open(tmp_path / "followed.txt", "w"),
+                              stderr=subprocess.DEVNULL)
     res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--publish",
                                 broker.url("lab"), "--seconds", "3", "--robot-speed", "0.1"],
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
+    time.sleep(0.5)
+    # the live --out is followed while the run goes on: tail -F has its rows already
+    assert loc.poll() is None
+    followed = (tmp_path / "followed.txt").read_text().splitlines()
+    assert followed[0].startswith("frame_id,") and len(followed) > 30
     _, err = loc.communicate(timeout=60)
+    follow.terminate()
     assert loc.returncode == 0, err
     rows = [r for r in csv.DictReader(open(tmp_path / "f.csv")) if r["status"] == "ok"]
     assert len(rows) > 30, err

@@ -217,9 +217,14 @@ class Locator:
 
 class FixWriter:
     """Fix rows to CSV or JSON lines, to a file (staged, renamed into place on :meth:`close`:
-    :mod:`vlpcal.writing`) or to stdout (``-``, flushed row by row so it pipes into other tools)."""
+    :mod:`vlpcal.writing`) or to stdout (``-``, flushed row by row so it pipes into other tools).
 
-    def __init__(self, path: str, fmt: str | None = None, extra_columns=()):
+    ``live``: the file is written where it is asked for, row by row and flushed, so that a
+    reader (``tail -f``) sees each fix as it is made and the file holds whole rows whenever the
+    run stops; it must be a new file (a live run cannot stage what others follow, and replaces
+    nothing)."""
+
+    def __init__(self, path: str, fmt: str | None = None, extra_columns=(), live: bool = False):
         import sys
 
         self.fmt = fmt or ("jsonl" if str(path).endswith((".jsonl", ".json")) else "csv")
@@ -228,6 +233,8 @@ class FixWriter:
         self._set = None
         if path == "-":
             self._f = sys.stdout
+        elif live:
+            self._f = open_live(path)
         else:
             from .writing import OutputSet
 
@@ -240,6 +247,9 @@ class FixWriter:
             import csv
 
             self._csv = csv.DictWriter(self._f, fieldnames=self.columns, extrasaction="ignore")
+        if live and path != "-":  # a follower sees the header at once
+            self._start()
+            self._f.flush()
 
     def _start(self) -> None:
         if not self._header:
@@ -269,7 +279,7 @@ class FixWriter:
         try:
             self._start()
             self._f.flush()
-            if self._set is not None:
+            if self.path != "-":
                 self._f.close()
         except OSError as e:
             self.abort()
@@ -285,3 +295,22 @@ class FixWriter:
             except OSError:
                 pass
             self._set.discard()
+        elif self._f is not None and self.path != "-":  # live: its whole rows stay
+            try:
+                self._f.close()
+            except OSError:
+                pass
+
+
+def open_live(path):
+    """A new file for a live run's rows (text, line-buffered): refused (OutputError) if
+    something is there already."""
+    from .writing import OutputError
+
+    try:
+        return open(path, "x", newline="", encoding="utf-8", buffering=1)
+    except FileExistsError:
+        raise OutputError(f"{path}: exists; a live run writes its rows there as they come (to be "
+                          "followed) and replaces nothing: give a new file") from None
+    except OSError as e:
+        raise OutputError(f"{path}: cannot write there ({e.strerror})") from None

@@ -72,12 +72,15 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, publis
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
     live = bool(cameras) or bool(spots_url)
     publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path)
+    from ..writing import OutputError
+
     try:
-        writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else ())
-    except OSError as e:
+        writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else (), live=live)
+    except (OSError, OutputError) as e:
         if publisher:
             publisher.close()
-        raise UserError(f"{out}: cannot write the fixes there ({e.strerror})") from None
+        raise UserError(str(e) if isinstance(e, OutputError) else
+                        f"{out}: cannot write the fixes there ({e.strerror})") from None
     if publisher:
         writer = PublishingWriter(writer, publisher, led_of(loc.deployment),
                                   utc="t_s" if spots_url else None)

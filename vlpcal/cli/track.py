@@ -202,11 +202,14 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
     frames = TimedFrames(sources, deadline=t_end, on_event=say)
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots)
     utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
+    live = _LiveTracks(out, utc)  # row by row, flushed: a reader can follow it
     rows: list = []
     n = 0
     try:
         for t, cid, frame in frames:
-            rows += _published(publisher, tracker.update(cid, t, frame), utc)
+            made = _published(publisher, tracker.update(cid, t, frame), utc)
+            live.write(made)
+            rows += made
             n += 1
             if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
                 tracker.period = frames.period()
@@ -214,12 +217,15 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
         say("stopped (Ctrl-C): writing what was tracked")
     finally:
         frames.stop()
-    rows += _published(publisher, tracker.finish(), utc)
+        made = _published(publisher, tracker.finish(), utc)
+        live.write(made)
+        rows += made
+        live.close()
     st = frames.stats
     if not n:
+        live.remove()
         why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)
         raise UserError(f"no frames from any camera, nothing tracked ({why})")
-    _write_tracks(out, rows, utc)
     for cid in sources:
         say(f"camera {cid}: {st.frames[cid]} frames"
             + (f", {frames.stamped[cid]} with X-Timestamp (host − its clock: "
@@ -228,3 +234,42 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
     say(f"{n} camera frames → {_summary(rows)} → {out}")
+
+
+class _LiveTracks:
+    """A live run's tracks file: new, its header at once, each row flushed as it is made
+    (:func:`vlpcal.locator.open_live`)."""
+
+    def __init__(self, out, utc: float):
+        import csv
+
+        from ..locator import open_live
+        from ..tracking import TRACK_COLUMNS
+        from ..writing import OutputError
+
+        self.path, self.utc = out, utc
+        try:
+            self.f = open_live(out)
+        except OutputError as e:
+            raise UserError(str(e)) from None
+        self.w = csv.writer(self.f)
+        self.w.writerow(TRACK_COLUMNS)
+        self.f.flush()
+
+    def write(self, rows) -> None:
+        for r in rows:
+            row = r.row()
+            row[0] = f"{r.t + self.utc:.6f}"
+            self.w.writerow(row)
+        self.f.flush()
+
+    def close(self) -> None:
+        self.f.close()
+
+    def remove(self) -> None:
+        import os
+
+        try:
+            os.unlink(self.path)
+        except OSError:
+            pass
