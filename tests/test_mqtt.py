@@ -57,7 +57,8 @@ def test_spot_messages_are_read_or_counted_bad():
     assert _spots_of(b'{"t": 1.5, "u": 10, "v": 20}') == (1.5, [(10.0, 20.0)])
     assert _spots_of(b'[{"t": 1, "u": 1, "v": 2}, {"t": 1, "u": 3, "v": 4}]')[1] == [
         (1.0, 2.0), (3.0, 4.0)]
-    for bad in (b"", b"{", b'{"t": 1}', b'{"t": "x", "u": 1, "v": 1}', b'{"t": NaN, "u": 1, '
+    assert _spots_of(b'{"t": 2.5}') == (2.5, [])
+    for bad in (b"", b"{", b'{"u": 1}', b'{"t": "x", "u": 1, "v": 1}', b'{"t": NaN, "u": 1, '
                 b'"v": 1}', b"[" * 5000 + b"]" * 5000, b'[]', b'"text"', b"x" * 5000):
         assert _spots_of(bad) is None
 
@@ -229,3 +230,78 @@ def test_spots_published_by_simulated_cameras_are_located(broker, tmp_path):
     off = np.linalg.norm(X[:, None, :2] - curve[None, :, :2], axis=2).min(axis=1)
     assert np.median(off) < 0.005 and np.median(np.abs(X[:, 2] - 0.15)) < 0.01, (
         np.median(off), np.median(np.abs(X[:, 2] - 0.15)))
+
+
+def test_two_zone_locators_give_the_site_locators_fixes_and_keep_the_leds_id(broker,
+                                                                               tmp_path):
+    """A line of five cameras split into two zones (C2 and C3 on the border, in both): one
+    locator per zone and one for the whole site, all on one broker; an LED driving along the
+    line crosses the border. Each zone's fixes are the site locator's fixes inside its polygon,
+    and every published fix is the same LED."""
+    import csv
+    import subprocess
+    import sys
+
+    import numpy as np
+    import paho.mqtt.client as mqtt
+
+    from vlpcal.deployment import Deployment, save
+    from vlpcal.geometry import paper_camera
+
+    cams = [paper_camera(f"C{k + 1}", (1.2 * (k + 1), 0.9, 2.3)) for k in range(5)]
+    room = [[0, 0], [7.2, 0], [7.2, 1.8], [0, 1.8]]
+    zones = [{"id": "west", "polygon": [[0, 0], [3.0, 0], [3.0, 1.8], [0, 1.8]],
+              "cameras": ["C1", "C2", "C3"]},
+             {"id": "east", "polygon": [[3.0, 0], [7.2, 0], [7.2, 1.8], [3.0, 1.8]],
+              "cameras": ["C2", "C3", "C4", "C5"]}]
+    save(Deployment("line", 2.3, room, cams, [], {"zones": zones}), tmp_path / "d.yaml")
+    run = [sys.executable, "-m", "vlpcal", "locate", "-d", str(tmp_path / "d.yaml"), "--spots",
+           broker.url("site"), "--duration", "7", "--publish", broker.url("out"), "-q"]
+    procs = {name: subprocess.Popen(run + ["--out", str(tmp_path / f"{name}.csv")]
+                                    + (["--zone", name] if name != "all" else []),
+                                    stderr=subprocess.PIPE, text=True)
+             for name in ("all", "west", "east")}
+    listen = Listener(broker.url("out"))
+    time.sleep(2.0)  # all subscribed
+    # the cameras, in step (one capture time for all): a spot where each sees the LED
+    pub = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+    pub.connect("127.0.0.1", broker.port)
+    pub.loop_start()
+    rng = np.random.default_rng(3)
+    t0 = time.time()
+    for k, x in enumerate(np.linspace(0.7, 6.5, 120)):
+        t = round(t0 + 0.025 * k, 6)
+        X = np.array([[x, 0.9 + 0.3 * np.sin(k / 9), 0.15]])
+        for cam in cams:
+            uv, _, inside = cam.project(X, margin=2.0)
+            doc = {"t": t}
+            if inside[0]:
+                doc.update(u=float(uv[0, 0] + rng.normal(0, 0.05)),
+                           v=float(uv[0, 1] + rng.normal(0, 0.05)))
+            pub.publish(f"site/spots/{cam.id}", json.dumps(doc), qos=1)
+        time.sleep(0.025)
+    time.sleep(0.5)
+    pub.disconnect()
+    pub.loop_stop()
+    for name, p in procs.items():
+        _, err = p.communicate(timeout=60)
+        assert p.returncode == 0, (name, err)
+
+    def fixes(name):
+        rows = csv.DictReader(open(tmp_path / f"{name}.csv"))
+        return {r["t_s"]: np.array([float(r[c]) for c in "xyz"]) for r in rows
+                if r["status"] == "ok"}
+
+    site, west, east = fixes("all"), fixes("west"), fixes("east")
+    assert len(site) > 60 and len(west) > 15 and len(east) > 15
+    assert not set(west) & set(east)  # each fix in one zone
+    assert set(west) | set(east) == set(site)
+    for t, X in {**west, **east}.items():
+        assert np.allclose(X, site[t], atol=1e-9), (t, X, site[t])
+    # published: the site's and the zones' fixes all as the one LED, L1
+    time.sleep(0.3)
+    topics = {tp for tp, _, _ in listen.messages if "/fixes/" in tp}
+    assert topics == {"out/fixes/L1"}
+    site_rows = sum(1 for _ in csv.DictReader(open(tmp_path / "all.csv")))  # failed ones too
+    assert len(listen.on("fixes/L1")) == site_rows + len(west) + len(east)
+    listen.close()

@@ -24,7 +24,8 @@ FORMAT, VERSION = "vlpcal-deployment", 1
 CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
 SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
 #: the optional top-level blocks; a missing block means the defaults
-OPTIONAL_BLOCKS = ("detector", "fusion", "corrections", "uncertainty", "leds", "provenance")
+OPTIONAL_BLOCKS = ("detector", "fusion", "corrections", "uncertainty", "leds", "zones",
+                   "provenance")
 DETECTOR_SETTINGS = tuple(DetectorSettings.__dataclass_fields__)
 DEFAULT_FUSION = "robust"
 #: px, the spot noise behind a fix's predicted uncertainty when the file states none (the blob
@@ -112,6 +113,25 @@ class Deployment:
         """The LEDs' blink codes (``leds:``; none: LEDs without identity)."""
         return [BlinkCode(str(d["id"]), str(d["pattern"]), float(d["bit_rate"]))
                 for d in self.extra.get("leds", [])]
+
+    @property
+    def zones(self) -> dict:
+        """Zone id → (floor polygon, camera ids) (``zones:``; none: one zone, the site)."""
+        return {str(z["id"]): ([tuple(map(float, p)) for p in z["polygon"]],
+                               [str(c) for c in z["cameras"]])
+                for z in self.extra.get("zones", [])}
+
+    def zone(self, zone_id: str) -> Deployment:
+        """The deployment of one zone: its cameras only (and the rest as it is)."""
+        from dataclasses import replace
+
+        polygon, ids = self.zones[zone_id]
+        keep = set(ids)
+        extra = {k: v for k, v in self.extra.items() if k != "fusion"}
+        fusion = {k: v for k, v in self.extra.get("fusion", {}).items() if k != "region_map"}
+        if fusion:
+            extra["fusion"] = fusion
+        return replace(self, cameras=[c for c in self.cameras if c.id in keep], extra=extra)
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:
@@ -370,8 +390,45 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
             _number(value, "uncertainty.pixel_noise", positive=True)
     if "leds" in extra:
         _check_leds(extra["leds"])
+    if "zones" in extra:
+        _check_zones(extra["zones"], camera_ids)
     if "provenance" in extra:
         _mapping(extra["provenance"], "provenance")
+
+
+ZONE_KEYS = ("id", "polygon", "cameras")
+
+
+def _check_zones(value, camera_ids: set) -> None:
+    """``zones:`` a list of ``{id, polygon, cameras}``: a site split among locator processes
+    (issue 17); a camera on a border belongs to both zones."""
+    if not isinstance(value, list) or not value:
+        raise DeploymentError(f"zones: expected a list of {{id, polygon, cameras}}, got "
+                              f"{shown(value)}")
+    seen = set()
+    for i, z in enumerate(value):
+        where = f"zones[{i}]"
+        _mapping(z, where)
+        unknown = sorted(set(map(str, z)) - set(ZONE_KEYS))
+        if unknown:
+            raise DeploymentError(f"{where}.{unknown[0]}: unknown key (expected "
+                                  f"{', '.join(ZONE_KEYS)})")
+        for key in ZONE_KEYS:
+            if key not in z:
+                raise DeploymentError(f"{where}.{key}: missing (expected {', '.join(ZONE_KEYS)})")
+        if not is_id(z["id"]):
+            raise DeploymentError(f"{where}.id: expected {ID_RULE}, got {shown(z['id'])}")
+        if str(z["id"]) in seen:
+            raise DeploymentError(f"zones: id {z['id']} given twice (expected each zone once)")
+        seen.add(str(z["id"]))
+        _polygon(z["polygon"], f"{where}.polygon")
+        ids = z["cameras"]
+        if not isinstance(ids, list) or len(set(map(str, ids))) < 2:
+            raise DeploymentError(f"{where}.cameras: expected a list of at least 2 camera ids, "
+                                  f"got {shown(ids)}")
+        for cid in ids:
+            if str(cid) not in camera_ids:
+                raise DeploymentError(f"{where}.cameras: unknown camera {shown(cid)}")
 
 
 LED_KEYS = ("id", "pattern", "bit_rate")

@@ -287,7 +287,8 @@ def track_message(t: float, update) -> dict:
 
 class SpotSubscriber:
     """Spots cameras publish on ``prefix/spots/<camera_id>``: ``{"t": capture time (UTC s),
-    "u": px, "v": px}`` or a list of such (several spots of one frame). Iterating gives
+    "u": px, "v": px}``, a list of such (several spots of one frame), or ``{"t": …}`` alone (the
+    camera saw no spot then). Iterating gives
     ``(t, camera_id, [(u, v), …])`` as they come; a message that is not that is counted
     (``bad``) and skipped, never raised."""
 
@@ -316,7 +317,9 @@ class SpotSubscriber:
                 self._refused.append(str(reason_code).lower())
             return
         self._ever = True
-        client.subscribe(f"{self.target.prefix}/spots/+", qos=self._qos)
+        # its cameras' topics only: a zone's locator hears its zone (a site's broker carries all)
+        client.subscribe([(f"{self.target.prefix}/spots/{c}", self._qos)
+                          for c in sorted(self.camera_ids)])
         self._connected.set()
 
     def _on_message(self, client, userdata, msg):
@@ -355,6 +358,12 @@ def _spots_of(payload: bytes):
         doc = json.loads(payload)
     except (ValueError, UnicodeDecodeError, RecursionError):
         return None
+    if isinstance(doc, dict) and set(doc) == {"t"}:  # the camera saw no spot then
+        try:
+            t = float(doc["t"])
+        except (TypeError, ValueError, OverflowError):
+            return None
+        return (t, []) if math.isfinite(t) else None
     items = doc if isinstance(doc, list) else [doc]
     if not items or len(items) > 64:
         return None

@@ -7,6 +7,7 @@ import click
 from .common import Finite, UserError, _camera_sources, _load_deployment, _output_file, main
 from .mqtt import (
     PublishingWriter,
+    ZoneWriter,
     led_of,
     mqtt_options,
     open_publisher,
@@ -28,6 +29,9 @@ from .mqtt import (
 @click.option("--spots", "spots_url", default=None, metavar="mqtt://…/PREFIX",
               help="Live spots the cameras publish on PREFIX/spots/<camera_id> "
                    "({\"t\": UTC s, \"u\": px, \"v\": px}).")
+@click.option("--zone", default=None, metavar="ID",
+              help="One zone of the deployment's zones: block: its cameras only, and only the "
+                   "fixes inside its polygon (one locator process per zone).")
 @mqtt_options
 @click.option("--out", "-o", default="-", show_default=True,
               help="Fixes file (.csv or .jsonl), or - for stdout.")
@@ -42,8 +46,8 @@ from .mqtt import (
 @click.option("--max-sets", type=click.IntRange(1), default=None,
               help="Live: stop after this many frame sets.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
-def locate(deployment_path, frames_dir, observations, cameras, spots_url, publish, qos, ca_file,
-           out, fmt, batch, tolerance, duration, max_sets, quiet):
+def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, publish, qos,
+           ca_file, out, fmt, batch, tolerance, duration, max_sets, quiet):
     """Turn camera frames into 3D fixes (metres, world frame, z up).
 
     One row per frame set: frame_id,x,y,z,status first (the contract), then the cameras used,
@@ -64,7 +68,14 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, publis
     if len(sources) != 1:
         raise click.UsageError("give exactly one input: --frames DIR, --observations CSV, "
                                "--camera ID=SOURCE … or --spots mqtt://…")
-    loc = Locator(_load_deployment(deployment_path))
+    dep = _load_deployment(deployment_path)
+    if zone is not None:
+        if zone not in dep.zones:
+            raise click.BadParameter(f"{deployment_path} has no zone {zone!r} (its zones: "
+                                     f"{', '.join(dep.zones) or 'none: add a zones: block'})",
+                                     param_hint="--zone")
+        site_led, dep = led_of(dep), dep.zone(zone)
+    loc = Locator(dep)
     spots_target = parse_mqtt(spots_url, "--spots") if spots_url else None
     if out != "-":  # never over the deployment or the frames it reads
         out = str(_output_file(out, inputs=[p for p in (deployment_path, frames_dir,
@@ -82,8 +93,10 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, publis
         raise UserError(str(e) if isinstance(e, OutputError) else
                         f"{out}: cannot write the fixes there ({e.strerror})") from None
     if publisher:
-        writer = PublishingWriter(writer, publisher, led_of(loc.deployment),
+        writer = PublishingWriter(writer, publisher, site_led if zone else led_of(dep),
                                   utc="t_s" if spots_url else None)
+    if zone is not None:  # written and published: the fixes inside the zone's polygon
+        writer = ZoneWriter(writer, _load_deployment(deployment_path).zones[zone][0])
     # from here on every way out either closes the writer (the fixes so far are kept) or
     # aborts it (nothing replaced)
     t0 = time.perf_counter()
@@ -119,6 +132,9 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, publis
         if publisher:
             publisher.close()
             notes.append(publisher_summary(publisher))
+        if zone is not None and writer.outside:
+            notes.append(f"zone {zone}: {writer.outside} fixes outside its polygon left to the "
+                         "zones around it")
     writer.close()
     secs = time.perf_counter() - t0
     if n and not quiet:
@@ -288,7 +304,8 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
         nonlocal pending, first, n
         uv = np.full((len(index), 1, 2), np.nan)
         for cid, spots in pending.items():
-            uv[index[cid], 0] = spots[0]
+            if spots:
+                uv[index[cid], 0] = spots[0]
         fixes = loc.locate_pixels(uv, frame_ids=[f"{n:06d}"])
         statuses.update(fixes.counts())
         writer.write(fixes, {"t_s": round(first, 6)})

@@ -88,3 +88,31 @@ class PublishingWriter:
 
     def abort(self) -> None:
         self.writer.abort()
+
+
+class ZoneWriter:
+    """Fixes inside a zone's floor polygon only (``locate --zone``): each zone's locator
+    writes and publishes its own part of the site; a fix without a position is no zone's."""
+
+    def __init__(self, writer, polygon):
+        from shapely.geometry import Polygon
+
+        self.writer, self.polygon = writer, Polygon(polygon)
+        self.outside = 0
+
+    def write(self, fixes, extra: dict | None = None) -> None:
+        import numpy as np
+        from shapely import contains_xy
+
+        fixes = list(fixes)
+        X = np.array([(f.x, f.y, f.z) for f in fixes], float).reshape(-1, 3)
+        inside = np.isfinite(X).all(axis=1)
+        inside[inside] = contains_xy(self.polygon, X[inside, 0], X[inside, 1])
+        self.outside += int((~inside).sum())
+        self.writer.write([f for f, ok in zip(fixes, inside) if ok], extra)
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def abort(self) -> None:
+        self.writer.abort()
