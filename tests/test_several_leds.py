@@ -149,3 +149,36 @@ def test_three_crossing_leds_keep_their_identity(coded):
             assert named[0].t - mine[0].t < 3 * m.code.period
         else:  # one anonymous track all along
             assert len(set(names)) == 1 and names[0].startswith("T")
+
+
+def test_a_camera_clock_that_jumps_is_not_believed_and_a_reboot_is_followed():
+    """From a hostile probe: one stamp a million seconds off had moved every later frame of
+    that camera; a camera whose clock restarts (a reboot) never recovered."""
+    from vlpcal.live import ClockSync, _stamp
+
+    clock, rng = ClockSync(), np.random.default_rng(0)
+    offset, errors = 500.0, []
+    for i in range(600):
+        t = i / 30
+        if i == 300:
+            offset = 10_000.0  # rebooted: its clock now reads otherwise
+        stamp = t - offset + (1e6 if i == 30 else 0.0)
+        host = clock.add(stamp, t + 0.004 + rng.exponential(0.003))
+        if i > 40:
+            errors.append(host - t)
+    assert clock.restarts == 1 and clock.ignored >= 1
+    assert np.max(np.abs(errors)) < 0.05
+    assert _stamp("1e308") is None and _stamp("nan") is None and _stamp("12.5") == 12.5
+
+
+def test_blink_codes_far_apart_in_rate_are_read_within_bounds():
+    """From a hostile probe: a 10 kbit/s code beside a 0.1 bit/s one took 3 GB and crashed."""
+    codes = [BlinkCode("A", "01" * 32, 10_000), BlinkCode("B", "01", 0.1)]
+    t = np.sort(np.random.default_rng(0).uniform(0, 60, 20_000))
+    led, _, _ = decode(t, np.ones(len(t), bool), codes)  # a steady light: neither
+    assert led is None
+    doc = square_rig().to_dict()
+    doc["leds"] = [{"id": f"L{i}", "pattern": format(i + 1, "07b"), "bit_rate": 10}
+                   for i in range(70)]
+    with pytest.raises(deployment.DeploymentError, match="1 to 64"):
+        deployment.from_dict(doc, "site.yaml")

@@ -254,3 +254,36 @@ def test_track_live_from_four_mjpeg_cameras_on_their_own_clocks(tmp_path):
                       r"([-+0-9.]+) s\)", res.stderr)
         assert m, res.stderr
         assert abs(float(m.group(1)) - (server.host_offset - tm.offset)) < 0.005
+
+
+def test_track_refuses_times_that_are_not_seconds_and_says_which_frames_it_could_not_read(
+        tmp_path):
+    """From a hostile probe: capture times of 1e298 s ended in an OverflowError; frames of
+    the wrong size gave no rows and no word."""
+    import shutil
+
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main as cli
+    from vlpcal.deployment import save
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.streams import robot_path, simulate_streams
+    from vlpcal.sim.writers import deployment_of
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    save(deployment_of(scene, "true"), tmp_path / "d.yaml")
+    simulate_streams(scene, tmp_path / "s", robot_path(scene, 1.0), 1.0)
+    shutil.copytree(tmp_path / "s", tmp_path / "huge")
+    lines = (tmp_path / "s" / "times.csv").read_text().splitlines()
+    (tmp_path / "huge" / "times.csv").write_text("\n".join(
+        [lines[0]] + [",".join(r.split(",")[:2] + [f"{float(r.split(',')[2]) * 1e300:g}"])
+                      for r in lines[1:]]) + "\n")
+    res = CliRunner().invoke(cli, ["track", "-d", str(tmp_path / "d.yaml"), "--frames",
+                                   str(tmp_path / "huge"), "--out", str(tmp_path / "t.csv")])
+    assert res.exit_code == 2 and "capture time in seconds" in res.output, res.output
+    for f in (tmp_path / "s" / "C1").iterdir():  # C1's frames from another camera model
+        f.write_bytes((tmp_path / "s" / "C1" / "000000.jpg").read_bytes()[:200])
+    res = CliRunner().invoke(cli, ["track", "-d", str(tmp_path / "d.yaml"), "--frames",
+                                   str(tmp_path / "s"), "--out", str(tmp_path / "t.csv")])
+    assert res.exit_code == 0 and "not whole JPEGs (not used)" in res.output, res.output

@@ -19,6 +19,10 @@ import numpy as np
 PHASES_PER_BIT = 8
 #: at most this many bits in a pattern
 MAX_BITS = 64
+#: a track's code is read over its last this many repeats of the longest code …
+WINDOW_REPEATS = 3.0
+#: … and at most this many observations (the latest)
+MAX_OBSERVATIONS = 4096
 
 
 @dataclass(frozen=True)
@@ -75,6 +79,8 @@ def decode(t, lit, codes: list[BlinkCode]) -> tuple[str | None, int, int]:
     lit = np.asarray(lit, bool)
     if not len(codes) or len(t) < 2:
         return None, 0, 0
+    order = np.argsort(t, kind="stable")[-MAX_OBSERVATIONS:]  # the latest, in time order
+    t, lit = t[order], lit[order]
     scores = []
     steady = BlinkCode("", "11", codes[0].bit_rate)  # a light that never blinks: no LED here
     for code in [*codes, steady]:
@@ -82,16 +88,16 @@ def decode(t, lit, codes: list[BlinkCode]) -> tuple[str | None, int, int]:
         n = len(bits)
         phases = np.arange(n * PHASES_PER_BIT) / (PHASES_PER_BIT * code.bit_rate)
         slot = np.floor((t[None, :] + phases[:, None]) * code.bit_rate).astype(np.int64)
-        want = bits[np.mod(slot, n)]
-        agree = want == lit[None, :]
-        # per phase, per slot: the majority of its observations
-        base = slot - slot.min(axis=1, keepdims=True)
-        width = int(base.max()) + 1
-        idx = base + np.arange(len(phases))[:, None] * width
-        votes = np.bincount(idx.ravel(), (2 * agree - 1).ravel(), len(phases) * width)
-        count = np.bincount(idx.ravel(), minlength=len(phases) * width)
-        votes, count = votes.reshape(len(phases), width), count.reshape(len(phases), width)
-        wrong = ((votes < 0) & (count > 0)).sum(axis=1)
+        signed = np.where(bits[np.mod(slot, n)] == lit[None, :], 1, -1)
+        # per phase, per slot (a run of equal slots along time): the majority of its
+        # observations; the work is phases × observations, whatever the bit rate
+        end = np.ones(slot.shape, bool)
+        end[:, :-1] = slot[:, 1:] != slot[:, :-1]
+        rows, cols = np.nonzero(end)
+        total = np.cumsum(signed, axis=1)[rows, cols]
+        before = np.r_[0, total[:-1]]
+        before[np.r_[True, rows[1:] != rows[:-1]]] = 0
+        wrong = np.bincount(rows, (total - before) < 0, len(phases))
         best = int(np.argmin(wrong))
         span = (t.max() - t.min()) >= code.period
         scores.append((int(wrong[best]), span, code.led))

@@ -400,6 +400,8 @@ def read_frames_folder(root) -> FramesFolder:
 
 #: an asynchronous folder's times.csv is read whole: at most this large
 MAX_TIMES_BYTES = 32 << 20
+#: s: capture times are seconds since a camera's boot or since 1970, far less than this
+MAX_CAPTURE_TIME = 1e10
 
 
 @dataclass
@@ -436,7 +438,12 @@ def read_async_frames(root) -> AsyncFrames:
         if (cid, no) in seen:
             raise DatasetError(f"{where}: camera {cid!r} frame {no!r} is listed twice")
         seen.add((cid, no))
-        events.append((_finite(row["t"], f"{where} t"), cid, no))
+        t = _finite(row["t"], f"{where} t")
+        if not abs(t) < MAX_CAPTURE_TIME:
+            raise DatasetError(f"{where} t: expected a capture time in seconds (under "
+                               f"{MAX_CAPTURE_TIME:g}: since a camera's boot or 1970), got "
+                               f"{shown(row['t'])}")
+        events.append((t, cid, no))
     if not events:
         raise DatasetError(f"{times}: no frames listed")
     events.sort(key=lambda e: (e[0], e[1]))

@@ -432,13 +432,15 @@ def _check_zones(value, camera_ids: set) -> None:
 
 
 LED_KEYS = ("id", "pattern", "bit_rate")
+#: LEDs a deployment may name (a frame is searched for as many spots)
+MAX_LEDS = 64
 
 
 def _check_leds(value) -> None:
     """``leds:`` a list of ``{id, pattern, bit_rate}``: the LEDs' blink codes (issue 16)."""
-    if not isinstance(value, list) or not value:
-        raise DeploymentError(f"leds: expected a list of {{id, pattern, bit_rate}}, got "
-                              f"{shown(value)}")
+    if not isinstance(value, list) or not value or len(value) > MAX_LEDS:
+        raise DeploymentError(f"leds: expected a list of 1 to {MAX_LEDS} {{id, pattern, "
+                              f"bit_rate}}, got {shown(value)}")
     codes = []
     for i, d in enumerate(value):
         where = f"leds[{i}]"
@@ -454,7 +456,8 @@ def _check_leds(value) -> None:
             raise DeploymentError(f"{where}.id: expected {ID_RULE}, got {shown(d['id'])}")
         if not isinstance(d["pattern"], str):
             raise DeploymentError(f"{where}.pattern: expected a quoted string of 0 and 1, got "
-                                  f"{shown(d['pattern'])}")
+                                  f"{shown(d['pattern'])} (YAML reads an unquoted 0101 as a "
+                                  "number: write '0101')")
         rate = _number(d["bit_rate"], f"{where}.bit_rate", positive=True)
         if rate > 10000:
             raise DeploymentError(f"{where}.bit_rate: expected bits per second up to 10000, got "

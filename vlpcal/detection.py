@@ -785,24 +785,44 @@ def detect_spots(frames, method: str = DEFAULT_DETECTOR,
 
 
 def detect_several(frames, k: int, method: str = DEFAULT_DETECTOR,
-                   settings: DetectorSettings = DEFAULTS, shape=None) -> np.ndarray:
+                   settings: DetectorSettings = DEFAULTS, shape=None, reasons: bool = False):
     """Up to ``k`` spots in every frame, most LED-like first (several LEDs in view, issue 16):
     ``N×k×2`` pixels, NaN where a frame holds fewer. ``blob`` ranks the frame's blobs by
     height and compactness (:func:`_segment`) and measures each as it measures one; the other
-    detectors find one spot. Frames as :func:`detect_spots` takes them."""
+    detectors find one spot. Frames as :func:`detect_spots` takes them. With ``reasons``,
+    ``(spots, reason per frame)``: None, or why a frame could not be measured (``corrupt_frame``,
+    ``wrong_size``, ``missing``; a frame without a spot has None and NaN rows)."""
+    if reasons:
+        codes = np.zeros(len(frames), np.int8)
+        uv = _detect_several(frames, k, method, settings, shape, codes)
+        return uv, [_CODE_REASON[int(c)] if c in (_REASON_CODE[CORRUPT],
+                                                   _REASON_CODE[WRONG_SIZE],
+                                                   _REASON_CODE[MISSING]) else None
+                    for c in codes]
+    return _detect_several(frames, k, method, settings, shape, None)
+
+
+def _detect_several(frames, k, method, settings, shape, codes_out) -> np.ndarray:
     if method not in DETECTORS:
         raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
     k = max(1, int(k))
     n_all = len(frames)
     out = np.full((n_all, k, 2), np.nan)
     if k == 1 or method != "blob":
-        out[:, 0] = detect_spots(frames, method, settings, shape).uv
+        found = detect_spots(frames, method, settings, shape)
+        out[:, 0] = found.uv
+        if codes_out is not None:
+            codes_out[:] = found.reason_code
         return out
     if not isinstance(frames, np.ndarray) and n_all > _CHUNK:
         for a in range(0, n_all, _CHUNK):
-            out[a:a + _CHUNK] = detect_several(frames[a:a + _CHUNK], k, method, settings, shape)
+            part = None if codes_out is None else codes_out[a:a + _CHUNK]
+            out[a:a + _CHUNK] = _detect_several(frames[a:a + _CHUNK], k, method, settings,
+                                                shape, part)
         return out
     stack, codes = _to_stack(frames, shape)
+    if codes_out is not None:
+        codes_out[:] = codes
     if stack is None or not (codes == 0).any():
         return out
     where = np.flatnonzero(codes == 0)

@@ -96,15 +96,17 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT, stamps: bool = False) 
             since = time.monotonic()
 
 
+#: s: a capture stamp past this is no clock's (time since boot, or since 1970, is far less)
+MAX_STAMP = 1e10
+
+
 def _stamp(text: str) -> float | None:
     """An ``X-Timestamp`` value (``seconds.microseconds``) as s, or None if it is not one."""
-    import math
-
     try:
         value = float(text.strip()[:32])
     except ValueError:
         return None
-    return value if math.isfinite(value) and value >= 0 else None
+    return value if 0 <= value < MAX_STAMP else None
 
 
 class ClockSync:
@@ -113,17 +115,41 @@ class ClockSync:
     its minimum, so the lower envelope of arrival − capture follows the offset. Per
     ``bucket`` s of the camera's clock the smallest arrival − capture is kept (over the last
     ``span`` s); a line through them gives offset and drift. The common minimum latency stays
-    in the offset: every camera's frames are placed that much late, alike."""
+    in the offset: every camera's frames are placed that much late, alike.
+
+    A stamp that does not fit — its frame would have arrived :data:`JUMP` s or more from where
+    the clock says (a glitch, a reboot that restarted the camera's clock) — is not believed: the
+    frame's arrival stands in for it. Three such in a row that agree with each other are the
+    camera's new clock: the estimate starts again (``restarts`` counts them)."""
+
+    #: s: a stamp this far from the clock's line is a jump, not latency (a frame that late is
+    #: lost to a live run anyway)
+    JUMP = 1.0
 
     def __init__(self, bucket: float = 1.0, span: float = 60.0):
         self.bucket, self.span = bucket, span
         self._low: dict = {}  # bucket → (stamp, arrival − stamp) at its smallest
+        self._odd: list = []  # the gaps of stamps that did not fit, in a row
+        self.restarts = 0
+        self.ignored = 0  #: stamps not believed
 
     def add(self, stamp: float, arrival: float) -> float:
         """Record a frame captured at ``stamp`` (camera clock) that arrived at ``arrival``
         (host clock); returns its capture time on the host's clock."""
-        b = int(stamp // self.bucket)
         gap = arrival - stamp
+        if self._low:
+            expected = self.offset(stamp)
+            if not abs(gap - expected) < self.JUMP:
+                self._odd.append(gap)
+                if len(self._odd) < 3 or max(self._odd) - min(self._odd) >= self.JUMP:
+                    if len(self._odd) >= 3:
+                        self._odd = self._odd[-2:]
+                    self.ignored += 1
+                    return arrival
+                self._low.clear()  # three that agree: the camera's clock was set anew
+                self.restarts += 1
+        self._odd = []
+        b = int(stamp // self.bucket)
         if b not in self._low or gap < self._low[b][1]:
             self._low[b] = (stamp, gap)
         old = [k for k in self._low if k < b - self.span / self.bucket]
@@ -137,10 +163,12 @@ class ClockSync:
         if len(pts) < 3:
             return min(g for _, g in pts)
         s, g = np.array(pts).T
-        slope, icpt = np.polyfit(s - s.mean(), g, 1)
+        sc = s - s.mean()
+        slope = float(sc @ (g - g.mean()) / (sc @ sc)) if sc @ sc > 0 else 0.0
+        icpt = float(g.mean())
         # the line through the lowest points: shifted down onto the envelope
-        low = float(np.min(g - (icpt + slope * (s - s.mean()))))
-        return float(icpt + low + slope * (stamp - s.mean()))
+        low = float(np.min(g - (icpt + slope * sc)))
+        return icpt + low + slope * (stamp - s.mean())
 
 
 def device_frames(device: str) -> Iterator:

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .blink import decode
+from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode
 from .deployment import Deployment
 from .detection import detect_several
 
@@ -60,8 +60,6 @@ TOP_SPEED = 4.0
 #: px: a moving LED's spot noise (blur, the detector), 1 sigma
 PIXEL_SIGMA = 0.15
 
-#: a track's identity is read from its last this many repeats of the longest blink code
-DECODE_REPEATS = 3.0
 #: a frame's spot this many pixels or more inside its image was there to be seen (an LED
 #: predicted there and not found was dark)
 VIEW_MARGIN_PX = 4.0
@@ -304,8 +302,10 @@ class Tracker:
             placed = t - tr.last_two <= COAST_PERIODS * self.period
             if id(tr) in lit or (there and placed):
                 tr.seen.append((t, id(tr) in lit))
-            tr.seen = [o for o in tr.seen if o[0] >= t - DECODE_REPEATS * self._repeat]
-            if t - tr.decoded_at >= 0.5 * self._repeat / DECODE_REPEATS:
+            since = t - WINDOW_REPEATS * self._repeat
+            if len(tr.seen) > 2 * MAX_OBSERVATIONS or (tr.seen and tr.seen[0][0] < since):
+                tr.seen = [o for o in tr.seen[-MAX_OBSERVATIONS:] if o[0] >= since]
+            if t - tr.decoded_at >= 0.5 * self._repeat / WINDOW_REPEATS:
                 tr.decoded_at = t
                 self._name(tr)
 

@@ -104,6 +104,10 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps,
             if len(t) > 1:
                 gaps.append(float(np.median(np.diff(t))))
         fps = 1.0 / max(gaps) if gaps and max(gaps) > 0 else 30.0
+        if not 0.1 <= fps <= 10000:
+            raise UserError(f"{frames_dir}/times.csv: its cameras' frames are "
+                            f"{1 / fps:.3g} s apart (expected capture times in seconds: "
+                            "0.1 to 10 000 frames a second); or give --fps")
     # the folder, and what it holds through links (times.csv, each camera's folder)
     from pathlib import Path
 
@@ -115,6 +119,9 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps,
     cams = {c.id: c for c in dep.cameras}
     rows = []
     missing = 0
+    from collections import Counter
+
+    unreadable: Counter = Counter()
 
     def track_block(block):
         """Each camera's frames of the block detected as one batch (a tenth of the cost of
@@ -122,11 +129,14 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps,
         found_at: dict = {}
         for cid in {c for _, c, _, _ in block}:
             mine = [(no, f) for _, c, no, f in block if c == cid]
-            found = detect_several([f for _, f in mine], tracker.spots, dep.detector,
-                                   dep.detector_settings,
-                                   shape=(cams[cid].height, cams[cid].width))
-            for (no, _), uv in zip(mine, found):
+            found, why = detect_several([f for _, f in mine], tracker.spots, dep.detector,
+                                        dep.detector_settings,
+                                        shape=(cams[cid].height, cams[cid].width),
+                                        reasons=True)
+            for (no, f), uv, w in zip(mine, found, why):
                 found_at[(cid, no)] = uv
+                if w is not None and f is not None:
+                    unreadable[w] += 1
         for t, cid, no, _ in block:
             rows.extend(_published(publisher, tracker.update_spots(cid, t, found_at[(cid, no)])))
 
@@ -151,8 +161,12 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps,
     rows += _published(publisher, tracker.finish())
     _write_tracks(out, rows)
     if not quiet:
+        words = {"wrong_size": "of another size than their camera's",
+                 "corrupt_frame": "not whole JPEGs"}
+        bad = "; ".join(f"{n} frames {words.get(w, w)}" for w, n in unreadable.items())
         click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
-                   + (f"; {missing} listed frames missing" if missing else ""), err=True)
+                   + (f"; {missing} listed frames missing" if missing else "")
+                   + (f"; {bad} (not used)" if bad else ""), err=True)
 
 
 def _write_tracks(out, rows, utc: float = 0.0) -> None:
@@ -229,7 +243,11 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
     for cid in sources:
         say(f"camera {cid}: {st.frames[cid]} frames"
             + (f", {frames.stamped[cid]} with X-Timestamp (host − its clock: "
-               f"{frames.clocks[cid].offset(frames.last_stamp[cid]):+.4f} s)"
+               f"{frames.clocks[cid].offset(frames.last_stamp[cid]):+.4f} s"
+               + (f"; {frames.clocks[cid].ignored} stamps that jumped not believed"
+                  if frames.clocks[cid].ignored else "")
+               + (f"; its clock started again {frames.clocks[cid].restarts}×"
+                  if frames.clocks[cid].restarts else "") + ")"
                if frames.stamped[cid] else ", no X-Timestamp (arrival times used)")
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
