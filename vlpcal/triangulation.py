@@ -137,8 +137,9 @@ class _Views:
             raise ValueError(f"uv must be C×N×2 with C = {len(cameras)} cameras, got {uv.shape}")
         self.cameras = cameras
         self.uv = uv
-        xy = np.stack([c.normalise(p) for c, p in zip(cameras, uv)]) if cameras \
-            else np.zeros(uv.shape)
+        # a camera with no spot in the batch: NaN without undistorting anything
+        xy = np.stack([c.normalise(p) if np.isfinite(p).any() else np.full(p.shape, np.nan)
+                       for c, p in zip(cameras, uv)]) if cameras else np.zeros(uv.shape)
         # a pixel with no undistorted inverse (past the lens's fold) counts as not seen
         self.seen = np.isfinite(xy).all(axis=2)
         self.xy = np.where(self.seen[..., None], xy, 0.0)
@@ -166,6 +167,12 @@ def _project_n(cam: Camera, X: np.ndarray):
 
 
 def _solve_chunk(cameras, xy: np.ndarray, use: np.ndarray, iterations: int) -> np.ndarray:
+    # the cameras that see none of these points add nothing: a site's hundred cameras cost
+    # only the few that see its LED
+    some = use.any(axis=1)
+    if not some.all():
+        idx = np.flatnonzero(some)
+        cameras, xy, use = [cameras[i] for i in idx], xy[idx], use[idx]
     n = use.shape[1]
     A = np.zeros((n, 6))  # symmetric 3×3: 00 01 02 11 12 22
     b = np.zeros((n, 3))
@@ -236,6 +243,8 @@ def _residuals(views: _Views, X: np.ndarray) -> np.ndarray:
     """Reprojection error of ``X`` in undistorted pixels, every camera: ``C×N``, NaN if unseen."""
     out = np.full(views.seen.shape, np.nan)
     for k, cam in enumerate(views.cameras):
+        if not views.seen[k].any():  # it saw none of them: NaN throughout
+            continue
         with np.errstate(invalid="ignore", divide="ignore"):
             a, b, _ = _project_n(cam, X)
         err = np.hypot(cam.fx * (a - views.xy[k, :, 0]), cam.fy * (b - views.xy[k, :, 1]))

@@ -282,7 +282,8 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
 def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, statuses, notes,
                   say) -> int:
     """``--spots mqtt://…``: the spots cameras publish, grouped by their capture times (those
-    within ``tolerance`` s of a set's first form the set) and located as they come."""
+    within ``tolerance`` s of a set's first form the set; a set is complete when every camera,
+    or every camera that saw the LED in the set before, has sent) and located as they come."""
     import time
 
     import numpy as np
@@ -299,18 +300,24 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
     pending: dict = {}
     first = None
     n = 0
+    seeing: set = set()  # the cameras that saw the LED in the last set
+    times: dict = {}  # camera id → its spots' capture time, in the set being gathered
 
     def close():
-        nonlocal pending, first, n
+        nonlocal pending, first, n, seeing
+        seeing = {cid for cid, spots in pending.items() if spots} or seeing
         uv = np.full((len(index), 1, 2), np.nan)
         for cid, spots in pending.items():
             if spots:
                 uv[index[cid], 0] = spots[0]
         fixes = loc.locate_pixels(uv, frame_ids=[f"{n:06d}"])
         statuses.update(fixes.counts())
-        writer.write(fixes, {"t_s": round(first, 6)})
+        # the set's time: its first spot's capture (a camera that saw nothing tells no time)
+        when = min((times[c] for c, spots in pending.items() if spots), default=first)
+        writer.write(fixes, {"t_s": round(when, 6)})
         n += 1
         pending, first = {}, None
+        times.clear()
 
     try:
         while not (t_end and time.monotonic() > t_end) and not (max_sets and n >= max_sets):
@@ -325,7 +332,11 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
             if first is None:
                 first = t
             pending[cid] = spots
-            if len(pending) == len(index):
+            times[cid] = t
+            # complete when every camera has sent, or every camera that saw the LED last time
+            # has (the others' frames say nothing of it: waiting for them is only latency)
+            if len(pending) == len(index) or (seeing and seeing <= pending.keys()
+                                              and any(pending.values())):
                 close()
         if pending:
             close()

@@ -1,0 +1,197 @@
+"""A site on MQTT (issue 17): the spots of N cameras at 50 fps through one Mosquitto into one
+locator process for the whole site, then two (one per zone), publishing fixes back.
+
+The site: N of the paper's cameras (160 × 120, 2.3 m up) in a grid 1.2 m × 0.9 m apart; a robot's
+LED drives a loop under them. Each camera captures at 50 fps from its own random phase and
+publishes every frame on ``site/spots/<camera_id>``: its spot (true projection + 0.05 px of
+noise) where it sees the LED, else ``{"t": …}`` alone — one Python process plays them all, on
+schedule. ``vlpcal locate --spots … --publish …`` (one process; then ``--zone west`` and
+``--zone east``, the border cameras in both) locates and publishes; a subscriber in this process
+records when each fix arrives. Figures: spot messages the locators got against those sent,
+fixes published against received (lost), sustained fixes/s, and the latency from the capture
+time a fix carries (its set's first spot) to its arrival at a subscriber (p50, p99) — two
+broker hops and the locator between. One core of this 2-core machine each for the cameras
+and a locator (two zones share the second core).
+
+Prints a table; writes benchmarks/out/mqtt.json.
+
+    python benchmarks/mqtt.py [--cameras 32] [--seconds 20]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import _common  # noqa: F401  (one-core setup before numpy)
+import numpy as np
+from _common import table, write_json
+
+from vlpcal.deployment import Deployment, save
+from vlpcal.geometry import paper_camera
+from vlpcal.sim.broker import Broker
+from vlpcal.sim.streams import Timing, capture_times
+
+FPS = 50.0
+SPEED = 1.0
+
+
+def site(n: int):
+    """``n`` cameras in a grid, the room around them, two zones (west and east halves, the
+    cameras that see across the middle in both), and a loop for the robot."""
+    cols = int(np.ceil(np.sqrt(2 * n)))
+    rows = int(np.ceil(n / cols))
+    cams = [paper_camera(f"C{k + 1:02d}", (1.2 * (k % cols) + 1.2, 0.9 * (k // cols) + 0.9, 2.3))
+            for k in range(n)]
+    w, h = 1.2 * cols + 1.2, 0.9 * rows + 0.9
+    mid = w / 2
+    reach = 1.25  # a camera sees 1.2 m either side of it across the rows
+    west = [c.id for c in cams if c.position[0] - reach < mid]
+    east = [c.id for c in cams if c.position[0] + reach > mid]
+    zones = [{"id": "west", "polygon": [[0, 0], [mid, 0], [mid, h], [0, h]], "cameras": west},
+             {"id": "east", "polygon": [[mid, 0], [w, 0], [w, h], [mid, h]], "cameras": east}]
+    room = [[0, 0], [w, 0], [w, h], [0, h]]
+    dep = Deployment(f"grid-{n}", 2.3, room, cams, [], {"zones": zones})
+
+    def path(t):
+        a = 2 * np.pi * SPEED * np.asarray(t, float) / (2 * (w + h) * 0.6)
+        return np.stack([w / 2 + 0.4 * (w - 1.2) * np.cos(a), h / 2 + 0.4 * (h - 0.9)
+                         * np.sin(a), np.full(np.shape(a), 0.15)], axis=-1)
+
+    return dep, path
+
+
+def schedule(dep, path, seconds: float, seed: int) -> list:
+    """Every camera's every frame: (t, camera id, message)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for cam in dep.cameras:
+        t = capture_times(Timing(fps=FPS, jitter=0.0005, drop=0.0), seconds, rng)
+        uv, _, inside = cam.project(path(t), margin=2.0)
+        uv = uv + rng.normal(0, 0.05, uv.shape)
+        for tt, p, ok in zip(t, uv, inside):
+            out.append((float(tt), cam.id, (float(p[0]), float(p[1])) if ok else None))
+    return sorted(out)
+
+
+def run(broker, dep_path, events, zones: list, seconds: float) -> dict:
+    import paho.mqtt.client as mqtt
+
+    got, lock = [], threading.Lock()
+    listen = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+    listen.on_connect = lambda c, *a: c.subscribe("out/fixes/#", qos=0)
+
+    def on_message(c, u, m):
+        now = time.time()
+        with lock:
+            got.append((now, json.loads(m.payload)))
+
+    listen.on_message = on_message
+    listen.connect("127.0.0.1", broker.port)
+    listen.loop_start()
+    procs = []
+    for z in zones:
+        cmd = [sys.executable, "-m", "vlpcal", "locate", "-d", str(dep_path), "--spots",
+               broker.url("site"), "--publish", broker.url("out"), "--duration",
+               str(seconds + 3), "--out", str(dep_path.parent / f"fixes-{z or 'all'}-"
+                                                   f"{len(zones)}.csv")]
+        procs.append(subprocess.Popen(cmd + (["--zone", z] if z else []),
+                                      stderr=subprocess.PIPE, text=True))
+    time.sleep(2.0)  # subscribed
+    cam = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+    cam.connect("127.0.0.1", broker.port)
+    cam.loop_start()
+    start_mono, start_utc = time.monotonic() + 0.2, time.time() + 0.2
+    late = []
+    for t, cid, spot in events:
+        wait = start_mono + t - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        late.append(time.monotonic() - start_mono - t)
+        doc = {"t": round(start_utc + t, 6)}
+        if spot:
+            doc.update(u=round(spot[0], 4), v=round(spot[1], 4))
+        cam.publish(f"site/spots/{cid}", json.dumps(doc, separators=(",", ":")))
+    cam.disconnect()
+    cam.loop_stop()
+    received = 0
+    published = 0
+    for p in procs:
+        _, err = p.communicate(timeout=120)
+        m = re.search(r"spots: (\d+) messages", err)
+        received += int(m.group(1)) if m else 0
+        m = re.search(r"published (\d+) messages", err)
+        published += int(m.group(1)) if m else 0
+        if p.returncode != 0:
+            raise RuntimeError(err)
+    time.sleep(0.5)
+    listen.disconnect()
+    listen.loop_stop()
+    placed = [(now, msg) for now, msg in got if msg["x"] is not None]
+    lat = np.array([now - msg["t"] for now, msg in placed]) * 1000
+    sent_spots = len(events) * (len(zones) if zones[0] else 1)
+    want = sum(1 for _, cid, _ in events for z in zones
+               if z is None or cid in {c for zz in json.loads(dep_path.with_suffix(".json")
+                                                                .read_text())
+                                        if zz["id"] == z for c in zz["cameras"]})
+    return {"locators": len(zones), "cameras": len({cid for _, cid, _ in events}),
+            "spot_messages": len(events), "spots_expected": want, "spots_received": received,
+            "spots_lost": want - received, "fixes_published": published,
+            "fixes_received": len(got), "fixes_lost": published - len(got),
+            "fixes_per_s": len(placed) / seconds,
+            "latency_p50_ms": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
+            "latency_p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+            "latency_p90_ms": float(np.percentile(lat, 90)) if len(lat) else float("nan"),
+            "latency_max_ms": float(lat.max()) if len(lat) else float("nan"),
+            "cameras_late_p99_ms": float(np.percentile(late, 99) * 1000),
+            "sent_spots": sent_spots}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cameras", type=int, default=32)
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    dep, path = site(args.cameras)
+    events = schedule(dep, path, args.seconds, args.seed)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        save(dep, tmp / "site.yaml")
+        (tmp / "site.json").write_text(json.dumps(dep.extra["zones"]))
+        broker = Broker(tmp)
+        try:
+            rows.append(run(broker, tmp / "site.yaml", events, [None], args.seconds))
+            rows.append(run(broker, tmp / "site.yaml", events, ["west", "east"],
+                            args.seconds))
+        finally:
+            broker.stop()
+    print(f"{args.cameras} cameras at {FPS:g} fps of spots ({len(events)} messages in "
+          f"{args.seconds:g} s) through one Mosquitto; latency: a fix's capture time (its set's "
+          "first spot) to its arrival at a subscriber")
+    print(table(rows, [("locators", "locators", "d"), ("spots_expected", "spots to them", "d"),
+                       ("spots_received", "spots got", "d"), ("spots_lost", "spots lost", "d"),
+                       ("fixes_published", "fixes published", "d"),
+                       ("fixes_received", "fixes received", "d"),
+                       ("fixes_lost", "fixes lost", "d"), ("fixes_per_s", "fixes/s", ".1f"),
+                       ("latency_p50_ms", "p50 ms", ".1f"), ("latency_p99_ms", "p99 ms", ".1f"),
+                       ("cameras_late_p99_ms", "cameras late p99 ms", ".1f")]))
+    ok = all(r["spots_lost"] == 0 and r["fixes_lost"] == 0 and r["latency_p99_ms"] <= 20
+             for r in rows)
+    print(f"no message lost and p99 ≤ 20 ms: {'yes' if ok else 'NO'}")
+    out = write_json("mqtt", {"cameras": args.cameras, "fps": FPS, "seconds": args.seconds,
+                              "rows": rows})
+    print(f"wrote {out}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
