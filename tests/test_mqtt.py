@@ -47,10 +47,13 @@ def test_urls_are_read_and_wrong_ones_are_one_line(monkeypatch):
     monkeypatch.setenv("VLPCAL_MQTT_PASSWORD", "fromenv")
     assert parse_url("mqtt://u@h/p").password == "fromenv"
     for bad in ("http://h/p", "mqtt:///p", "mqtt://h", "mqtt://h/", "mqtt://h/a b",
-                "mqtt://h:99999/p", "mqtt://u:secret@h:x/p"):
+                "mqtt://h:99999/p", "mqtt://u:secret@h:x/p", "mqtt://h:0/p", "mqtt://h/p#",
+                "mqtt://h/p?x=1", "mqtt://al:se/cret@h/p", "mqtt://al:se#cret@h/p",
+                "mqtt://al:p@ss:w/secret@h/p", "mqtt://al:secret@[::1/p"):
         with pytest.raises(MqttError) as e:
             parse_url(bad)
-        assert "secret" not in str(e.value) and "\n" not in str(e.value)
+        assert "secret" not in str(e.value) and "cret" not in str(e.value), e.value
+        assert "\n" not in str(e.value)
 
 
 def test_spot_messages_are_read_or_counted_bad():
@@ -58,6 +61,10 @@ def test_spot_messages_are_read_or_counted_bad():
     assert _spots_of(b'[{"t": 1, "u": 1, "v": 2}, {"t": 1, "u": 3, "v": 4}]')[1] == [
         (1.0, 2.0), (3.0, 4.0)]
     assert _spots_of(b'{"t": 2.5}') == (2.5, [])
+    for bad in (b'{"t": "179", "u": 1, "v": 1}', b'{"t": true, "u": 1, "v": 1}',
+                b'{"t": 1e308, "u": 1, "v": 1}', b'{"t": -5, "u": 1, "v": 1}', b'{"t": 0}',
+                b'{"t": 1, "u": 1e400, "v": 1}', b'{"t": 1, "u": 1, "v": 1, "x": 2}'):
+        assert _spots_of(bad) is None, bad
     for bad in (b"", b"{", b'{"u": 1}', b'{"t": "x", "u": 1, "v": 1}', b'{"t": NaN, "u": 1, '
                 b'"v": 1}', b"[" * 5000 + b"]" * 5000, b'[]', b'"text"', b"x" * 5000):
         assert _spots_of(bad) is None
@@ -104,6 +111,7 @@ def test_the_broker_restarted_mid_run_loses_nothing_it_could_hold(broker):
     while (pub.held or len(listen.on("fixes/L1")) < 20) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert pub.held == 0 and pub.reconnects >= 1 and pub.lost == 0
+    assert pub.sent == 30  # each delivered once, whatever was sent again
     got = [m["t"] for m in listen.on("fixes/L1")]
     assert got == [float(i) for i in range(10, 30)], got
     pub.close()
@@ -147,6 +155,21 @@ def test_published_fixes_equal_the_csv_of_the_same_run(broker, tmp_path):
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "nope" not in res.stderr and not (tmp_path / "g.csv").exists()
+    # the CA file is an input: never overwritten by --out
+    (tmp_path / "ca.pem").write_text("not a certificate")
+    res = subprocess.run(run + ["locate", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/frames"), "--out", str(tmp_path / "ca.pem"),
+                                "--publish", "mqtts://127.0.0.1:1/lab", "--ca-file",
+                                str(tmp_path / "ca.pem")], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 2 and (tmp_path / "ca.pem").read_text() == "not a certificate"
+    res = subprocess.run(run + ["locate", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/frames"), "--out", str(tmp_path / "h.csv"),
+                                "--publish", "mqtts://127.0.0.1:1/lab", "--ca-file",
+                                str(tmp_path / "ca.pem")], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 2 and "not a CA certificate" in res.stderr, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and not (tmp_path / "h.csv").exists()
 
 
 def test_track_publishes_its_updates_and_a_wrong_password_is_one_line(auth_broker, tmp_path):

@@ -28,6 +28,10 @@ OPTIONAL_BLOCKS = ("detector", "fusion", "corrections", "uncertainty", "leds", "
                    "provenance")
 DETECTOR_SETTINGS = tuple(DetectorSettings.__dataclass_fields__)
 DEFAULT_FUSION = "robust"
+#: a position further than this many of its predicted errors, plus :data:`ROOM_SLACK` of the
+#: ceiling height, under the floor, over the ceiling or beyond the walls is not the LED
+PLAUSIBLE_SIGMAS = 5.0
+ROOM_SLACK = 0.02
 #: px, the spot noise behind a fix's predicted uncertainty when the file states none (the blob
 #: detector's RMS error per axis on simulated frames is ~0.04 px; benchmarks/detectors.py)
 DEFAULT_PIXEL_NOISE = 0.05
@@ -132,6 +136,26 @@ class Deployment:
         if fusion:
             extra["fusion"] = fusion
         return replace(self, cameras=[c for c in self.cameras if c.id in keep], extra=extra)
+
+    def outside(self, X, sigma):
+        """Positions ``X`` (N×3) that cannot be the LED: under the floor, over the ceiling or
+        beyond the room's walls by more than :data:`PLAUSIBLE_SIGMAS` of their own predicted
+        error ``sigma`` (N) and :data:`ROOM_SLACK` of the ceiling height."""
+        import numpy as np
+        import shapely
+
+        X = np.atleast_2d(np.asarray(X, float))
+        sigma = np.broadcast_to(np.asarray(sigma, float), len(X))
+        fixed = np.isfinite(X).all(axis=1)
+        if not fixed.any():
+            return fixed
+        slack = PLAUSIBLE_SIGMAS * np.where(np.isfinite(sigma), sigma, 0.0) \
+            + ROOM_SLACK * self.ceiling_height
+        z = np.where(fixed, X[:, 2], 0.0)
+        out = (z < -slack) | (z > self.ceiling_height + slack)
+        pts = shapely.points(np.where(fixed[:, None], X[:, :2], 0.0))
+        away = shapely.distance(shapely.Polygon(self.room), pts)
+        return fixed & (out | (away > slack))
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:
@@ -397,6 +421,8 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
 
 
 ZONE_KEYS = ("id", "polygon", "cameras")
+#: a zone's floor polygon has at most this many points
+MAX_ZONE_POINTS = 1000
 
 
 def _check_zones(value, camera_ids: set) -> None:
@@ -421,6 +447,9 @@ def _check_zones(value, camera_ids: set) -> None:
         if str(z["id"]) in seen:
             raise DeploymentError(f"zones: id {z['id']} given twice (expected each zone once)")
         seen.add(str(z["id"]))
+        if isinstance(z["polygon"], list) and len(z["polygon"]) > MAX_ZONE_POINTS:
+            raise DeploymentError(f"{where}.polygon: expected at most {MAX_ZONE_POINTS} points, "
+                                  f"got {len(z['polygon'])}")
         _polygon(z["polygon"], f"{where}.polygon")
         ids = z["cameras"]
         if not isinstance(ids, list) or len(set(map(str, ids))) < 2:

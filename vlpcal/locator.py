@@ -25,11 +25,6 @@ from .triangulation import predicted_rms_error
 #: per-camera reason when no fix was possible
 FIX_STATUSES = ("ok", "one_camera", "degenerate", "corrupt_frame", "wrong_size", "too_dim",
                 "at_edge", "no_spot", "no_frames", "inconsistent", "outside_room")
-#: a fix further than this many of its predicted errors, plus :data:`ROOM_SLACK` of the ceiling
-#: height (what the prediction at the assumed spot noise leaves out: the calibration's own
-#: error), under the floor, over the ceiling or beyond the walls is no fix (``outside_room``)
-PLAUSIBLE_SIGMAS = 5.0
-ROOM_SLACK = 0.02
 #: per-camera statuses: ``ok`` or a detection reason (``no_spot``, ``too_dim``, ``at_edge``,
 #: ``corrupt_frame``, ``wrong_size``, ``missing``), or ``dropped`` (robust fusion rejected it)
 
@@ -116,9 +111,6 @@ class Locator:
         self.max_residual = deployment.max_residual
         self.region_map = deployment.region_map
         self.pixel_noise = deployment.pixel_noise
-        import shapely
-
-        self._room = shapely.Polygon(deployment.room)
         #: m: the room's size (its larger side or the ceiling height), against which a fix's
         #: predicted error says whether it is a position at all
         self._size = deployment.size
@@ -193,21 +185,8 @@ class Locator:
                         camera_status)
 
     def _outside(self, X, sigma) -> np.ndarray:
-        """Fixes that cannot be the LED: under the floor, over the ceiling or beyond the
-        room's walls by more than :data:`PLAUSIBLE_SIGMAS` of their own predicted error and
-        :data:`ROOM_SLACK` of the ceiling height."""
-        import shapely
-
-        fixed = np.isfinite(X).all(axis=1)
-        if not fixed.any():
-            return fixed
-        slack = PLAUSIBLE_SIGMAS * np.where(np.isfinite(sigma), sigma, 0.0) \
-            + ROOM_SLACK * self.deployment.ceiling_height
-        z = np.where(fixed, X[:, 2], 0.0)
-        out = (z < -slack) | (z > self.deployment.ceiling_height + slack)
-        pts = shapely.points(np.where(fixed[:, None], X[:, :2], 0.0))
-        away = shapely.distance(self._room, pts)
-        return fixed & (out | (away > slack))
+        """Fixes that cannot be the LED (:meth:`Deployment.outside`)."""
+        return self.deployment.outside(X, sigma)
 
     def unknown_cameras(self, framesets) -> Counter:
         """How often each camera id the deployment does not know appears in ``framesets``."""
@@ -231,6 +210,7 @@ class FixWriter:
         self.columns = ROW_COLUMNS + tuple(extra_columns)
         self.path = path
         self._set = None
+        self._rows = 0
         if path == "-":
             self._f = sys.stdout
         elif live:
@@ -263,6 +243,7 @@ class FixWriter:
 
         self._start()
         for fix in fixes:
+            self._rows += 1
             row = {**fix.row(), **(extra or {})}
             if self.fmt == "csv":
                 self._csv.writerow({k: spreadsheet_safe(v) for k, v in row.items()})
@@ -295,11 +276,18 @@ class FixWriter:
             except OSError:
                 pass
             self._set.discard()
-        elif self._f is not None and self.path != "-":  # live: its whole rows stay
+        elif self._f is not None and self.path != "-":  # live: its whole rows stay …
             try:
                 self._f.close()
             except OSError:
                 pass
+            if not self._rows:  # … and a file of no rows goes
+                import os
+
+                try:
+                    os.unlink(self.path)
+                except OSError:
+                    pass
 
 
 def open_live(path):

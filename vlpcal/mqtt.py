@@ -64,6 +64,11 @@ def parse_url(url: str) -> Target:
     except ValueError as e:
         raise MqttError(f"{_safe(url)}: not an MQTT URL ({e}); expected "
                         "mqtt://[user[:password]@]host[:port]/prefix") from None
+    if parts.query or parts.fragment or "#" in url or "?" in url:
+        raise MqttError(f"{_safe(url)}: expected no query or fragment (? #) in an MQTT URL; a "
+                        "password with such characters goes in VLPCAL_MQTT_PASSWORD")
+    if port is not None and not 1 <= port <= 65535:
+        raise MqttError(f"{_safe(url)}: expected a port from 1 to 65535")
     if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
         raise MqttError(f"{_safe(url)}: expected mqtt://[user[:password]@]host[:port]/prefix "
                         "(or mqtts:// for TLS)")
@@ -79,16 +84,14 @@ def parse_url(url: str) -> Target:
 
 
 def _safe(url: str) -> str:
-    """``url`` as a message may show it: its password replaced, cut short, one line."""
+    """``url`` as a message may show it: whatever stands before its last ``@`` (who, and a
+    password, however odd its characters) replaced, cut short, one line."""
+    import re
+
     from .reading import one_line
 
-    try:
-        p = urlsplit(url)
-        if p.password is not None:
-            url = url.replace(f":{p.password}@", ":***@", 1)
-    except ValueError:
-        pass
-    return one_line(url, 120)
+    return one_line(re.sub(r"^([A-Za-z][A-Za-z0-9+.-]*://)?.*@", lambda m: (m.group(1) or "")
+                           + "***@", url, flags=re.S), 120)
 
 
 def _client(target: Target, client_id: str, ca_file=None):
@@ -99,7 +102,13 @@ def _client(target: Target, client_id: str, ca_file=None):
     if target.user is not None:
         c.username_pw_set(target.user, target.password)
     if target.tls:
-        c.tls_set(ca_certs=ca_file)
+        import ssl
+
+        try:
+            c.tls_set(ca_certs=ca_file)
+        except (ssl.SSLError, OSError, ValueError) as e:
+            raise MqttError(f"--ca-file {ca_file}: not a CA certificate OpenSSL can read "
+                            f"({getattr(e, 'reason', None) or e})") from None
     c.reconnect_delay_set(min_delay=1, max_delay=30)
     return c
 
@@ -122,7 +131,8 @@ def _connect(client, target: Target, connected: threading.Event, refused: list,
     if not connected.is_set():
         client.loop_stop()
         raise MqttError(f"{target.shown()}: no answer from the broker in {timeout:g} s (is it "
-                        "running, and is the host and port right?)")
+                        "running, are the host and port right, and does it speak TLS when the "
+                        "URL is mqtts:// — and its certificate pass --ca-file?)")
 
 
 class Publisher:
@@ -137,8 +147,9 @@ class Publisher:
         self._buffer: deque = deque()
         self._limit = buffer
         self._lock = threading.Lock()
-        self.sent = 0
-        self.lost = 0
+        self.sent = 0  #: messages delivered (QoS 1, 2: acknowledged by the broker)
+        self.lost = 0  #: messages never delivered (the buffer overflowed, or at the end)
+        self.unsent = 0  #: of those, the ones still waiting when the run ended
         self.reconnects = 0
         self._connected = threading.Event()
         self._refused: list = []
@@ -182,9 +193,13 @@ class Publisher:
         self._connected.clear()
 
     def _on_publish(self, client, userdata, mid, reason_code=None, properties=None):
+        if not self.qos:
+            return
         with self._ilock:
             if self._inflight.pop(mid, None) is None:
                 self._acked.add(mid)
+            else:
+                self.sent += 1  # QoS 1 or 2: delivered once the broker says so
 
     def _flush(self) -> None:
         while self._connected.is_set():
@@ -200,9 +215,10 @@ class Publisher:
             with self._ilock:  # the acknowledgement may have come before publish() returned
                 if info.mid in self._acked:
                     self._acked.discard(info.mid)
+                    self.sent += 1
                 else:
                     self._inflight[info.mid] = (topic, payload, retain)
-        if info.rc == 0:
+        elif info.rc == 0:
             self.sent += 1
         else:  # the connection went between the check and the send: keep it for later
             self._hold(topic, payload, retain)
@@ -245,9 +261,13 @@ class Publisher:
             if self._connected.is_set():
                 self._flush()
             time.sleep(0.01)
-        with self._lock:
-            self.lost += len(self._buffer)
+        while self._inflight and self._connected.is_set() and time.monotonic() < deadline:
+            time.sleep(0.01)  # the last acknowledgements
+        with self._lock, self._ilock:
+            self.unsent = len(self._buffer) + len(self._inflight)  # never delivered
+            self.lost += self.unsent
             self._buffer.clear()
+            self._inflight.clear()
         if self._connected.is_set():
             info = self.client.publish(self.topic("status"),
                                        json.dumps({**self._status, "state": "stopped",
@@ -293,9 +313,12 @@ class SpotSubscriber:
     (``bad``) and skipped, never raised."""
 
     def __init__(self, target: Target, camera_ids, ca_file=None, qos: int = 0,
-                 timeout: float = CONNECT_TIMEOUT):
+                 timeout: float = CONNECT_TIMEOUT, sizes: dict | None = None):
         self.target = target
         self.camera_ids = set(camera_ids)
+        self.sizes = sizes or {}  #: camera id → (width, height): a spot must be in the image
+        self.stale = 0
+        self.disconnects = 0
         self.bad = 0
         self.unknown = 0
         self.received = 0
@@ -307,7 +330,7 @@ class SpotSubscriber:
         self.client = _client(target, f"vlpcal-spots-{os.getpid()}-{time.time_ns()}", ca_file)
         self._qos = qos
         self.client.on_connect = self._on_connect
-        self.client.on_disconnect = lambda *a, **k: self._connected.clear()
+        self.client.on_disconnect = self._on_disconnect
         self.client.on_message = self._on_message
         _connect(self.client, target, self._connected, self._refused, timeout)
 
@@ -327,8 +350,13 @@ class SpotSubscriber:
         if cid not in self.camera_ids:
             self.unknown += 1
             return
+        if msg.retain:  # kept by the broker from before: not a frame of now
+            self.stale += 1
+            return
         spots = _spots_of(msg.payload)
-        if spots is None:
+        w, h = self.sizes.get(cid, (math.inf, math.inf))
+        if spots is None or not all(-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5
+                                    for u, v in spots[1]):
             self.bad += 1
             return
         t, uv = spots
@@ -337,6 +365,15 @@ class SpotSubscriber:
             self._queue.put_nowait((t, cid, uv))
         except queue.Full:
             self.dropped += 1
+
+    def _on_disconnect(self, *a, **k):
+        self._connected.clear()
+        self.disconnects += 1
+
+    @property
+    def waiting(self) -> int:
+        """Spots received and not yet taken (at the end: not located)."""
+        return self._queue.qsize()
 
     def get(self, timeout: float):
         """The next ``(t, camera_id, spots)``, or None after ``timeout`` s."""
@@ -350,6 +387,15 @@ class SpotSubscriber:
         self.client.loop_stop()
 
 
+#: s: a capture time (UTC) past this is no clock's
+MAX_TIME = 1e10
+
+
+def _number(x) -> bool:
+    """A JSON number (not a string, not true/false), finite."""
+    return type(x) in (int, float) and math.isfinite(x)
+
+
 def _spots_of(payload: bytes):
     """``(t, [(u, v), …])`` from a spot message, or None if it is not one."""
     if len(payload) > MAX_SPOT_MESSAGE:
@@ -359,23 +405,19 @@ def _spots_of(payload: bytes):
     except (ValueError, UnicodeDecodeError, RecursionError):
         return None
     if isinstance(doc, dict) and set(doc) == {"t"}:  # the camera saw no spot then
-        try:
-            t = float(doc["t"])
-        except (TypeError, ValueError, OverflowError):
-            return None
-        return (t, []) if math.isfinite(t) else None
+        return (float(doc["t"]), []) if _number(doc["t"]) and 0 < doc["t"] < MAX_TIME \
+            else None
     items = doc if isinstance(doc, list) else [doc]
     if not items or len(items) > 64:
         return None
     t, uv = None, []
     for it in items:
-        if not isinstance(it, dict):
+        if not isinstance(it, dict) or set(it) != {"t", "u", "v"}:
             return None
-        try:
-            tt, u, v = float(it["t"]), float(it["u"]), float(it["v"])
-        except (KeyError, TypeError, ValueError, OverflowError):
+        if not all(_number(it[k]) for k in ("t", "u", "v")):
             return None
-        if not all(map(math.isfinite, (tt, u, v))):
+        tt, u, v = float(it["t"]), float(it["u"]), float(it["v"])
+        if not (0 < tt < MAX_TIME and math.isfinite(u) and math.isfinite(v)):
             return None
         t = tt if t is None else t
         uv.append((u, v))

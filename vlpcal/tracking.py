@@ -239,7 +239,8 @@ class Tracker:
         # holds these rays already, and counted twice they would make the track overconfident)
         pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
         fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=pos)
-        if not (fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma):
+        if not (fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma
+                and self._plausible(fit, cov)):
             if tr.tentative:  # two LEDs' spots paired by chance: undone, its rays set free
                 tr.misfits += 1
                 if tr.misfits >= 2:
@@ -253,6 +254,14 @@ class Tracker:
         tr.fit, tr.fit_t = fit, t
         tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
         tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
+
+    def _plausible(self, fit, cov) -> bool:
+        """Whether a window's fit can be the LED: inside the room (the locator's rule,
+        :meth:`~vlpcal.deployment.Deployment.outside`) and no faster than three times
+        :data:`TOP_SPEED` (rays that barely cross can fit a point far off, flying)."""
+        sigma = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0)))
+        return bool(np.linalg.norm(fit[3:6]) <= 3 * TOP_SPEED
+                    and not self.deployment.outside(fit[:3], sigma)[0])
 
     def _predicted(self, k: int, t: float):
         """Each track's extrapolated spot in camera ``k`` at ``t`` (T×2 px, NaN: behind it) and
@@ -371,7 +380,8 @@ class Tracker:
             if len(cams) < 2:
                 break
             fit, resid, cov = self._solve(rays, t, guess=guess)
-            if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma:
+            if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma \
+                    and self._plausible(fit, cov):
                 break
             fit = cov = None
         fit_ok = fit is not None

@@ -149,8 +149,10 @@ def _publish_spots(profile, seed, url, speed, seconds) -> None:
         res = play_spots(target, events, say=lambda m: click.echo(m, err=True))
     except MqttError as e:
         raise UserError(f"--publish {e}") from None
+    unsent = len(events) - res["sent"]
     click.echo(f"published {res['sent']} spots (p99 {res['late_p99_ms']:.1f} ms behind "
-               "schedule)", err=True)
+               "schedule)" + (f"; {unsent} of the {len(events)} not sent (the broker went "
+                              "away)" if unsent else ""), err=True)
 
 
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,

@@ -79,7 +79,8 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     spots_target = parse_mqtt(spots_url, "--spots") if spots_url else None
     if out != "-":  # never over the deployment or the frames it reads
         out = str(_output_file(out, inputs=[p for p in (deployment_path, frames_dir,
-                                                         observations) if p], what="the fixes"))
+                                                         observations, ca_file) if p],
+                               what="the fixes"))
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
     live = bool(cameras) or bool(spots_url)
     publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path)
@@ -291,7 +292,8 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
     from ..mqtt import MqttError, SpotSubscriber
 
     try:
-        sub = SpotSubscriber(target, loc.camera_ids, ca_file)
+        sub = SpotSubscriber(target, loc.camera_ids, ca_file,
+                             sizes={c.id: (c.width, c.height) for c in loc.deployment.cameras})
     except MqttError as e:
         raise UserError(str(e)) from None
     say(f"listening for spots on {target.shown()}/spots/+")
@@ -345,5 +347,10 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
     notes.append(f"spots: {sub.received} messages"
                  + (f", {sub.bad} not spots (skipped)" if sub.bad else "")
                  + (f", {sub.unknown} of cameras not in the deployment" if sub.unknown else "")
-                 + (f", {sub.dropped} dropped (the locator fell behind)" if sub.dropped else ""))
+                 + (f", {sub.stale} retained from before (skipped)" if sub.stale else "")
+                 + (f", {sub.dropped} dropped (the locator fell behind)" if sub.dropped else "")
+                 + (f", {sub.waiting} not located when the run ended (the locator fell behind)"
+                    if sub.waiting else "")
+                 + (f"; the broker went away {sub.disconnects} time(s)" if sub.disconnects
+                    else ""))
     return n

@@ -60,8 +60,14 @@ def led_of(dep) -> str:
 
 
 def publisher_summary(pub) -> str:
-    held = f"; {pub.lost} lost (the broker away longer than the buffer holds)" if pub.lost \
-        else ""
+    parts = []
+    if pub.lost - pub.unsent:
+        parts.append(f"{pub.lost - pub.unsent} lost (the broker away longer than the buffer "
+                     "holds)")
+    if pub.unsent:
+        parts.append(f"{pub.unsent} never delivered (the broker away, or not acknowledging, "
+                     "when the run ended)")
+    held = "".join(f"; {p}" for p in parts)
     again = f"; reconnected {pub.reconnects} time{'s' if pub.reconnects != 1 else ''}" \
         if pub.reconnects else ""
     return f"published {pub.sent} messages (fixes or track updates) to {pub.target.shown()}"\

@@ -53,6 +53,8 @@ def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, publi
     dep = _load_deployment(deployment_path)
     if bool(frames_dir) == bool(cameras):
         raise UserError("give either --frames DIR or --camera ID=SOURCE … (one per camera)")
+    if ca_file:  # what the tracks must never overwrite
+        _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
     try:
         _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet,
