@@ -70,9 +70,18 @@ def test_spot_messages_are_read_or_counted_bad():
         assert _spots_of(bad) is None
 
 
-def test_publisher_sends_fixes_status_and_its_will(broker):
+def test_publisher_sends_fixes_status_and_its_will(broker, monkeypatch):
+    import vlpcal.mqtt
+
+    monkeypatch.setattr(vlpcal.mqtt, "STATUS_EVERY", 0.1)
     listen = Listener(broker.url())
     pub = Publisher(parse_url(broker.url()), {"deployment": "d", "hash": "abc"})
+    for i in range(5):
+        pub.publish("L2", {"t": float(i), "cameras": "C1+C3"})
+        time.sleep(0.04)
+    time.sleep(0.2)
+    live = [m for m in listen.on("status") if "rate_hz" in m]
+    assert live and live[-1]["cameras_alive"] == ["C1", "C3"] and live[-1]["rate_hz"] > 0
     for i in range(20):
         pub.publish("L1", {"t": float(i), "x": 0.1 * i})
     pub.status(cameras_alive=["C1", "C2"], rate_hz=30.0)

@@ -2,12 +2,12 @@
 
 ``mqtt://[user[:password]@]host[:port]/prefix`` (``mqtts://`` for TLS) names a broker and a topic
 prefix. A :class:`Publisher` sends one JSON message per fix or track update on
-``prefix/fixes/<led>``, keeps a retained ``prefix/status`` (the deployment, the cameras alive, the
-rate) and leaves a last will there (``"state": "offline"``) for when the process dies. While the
-broker is away it reconnects with backoff and holds messages in a bounded buffer; what the buffer
-cannot hold is counted as lost and said. A :class:`SpotSubscriber` reads the spots cameras publish
-on ``prefix/spots/<camera_id>`` (``{"t": …, "u": …, "v": …}``, or a list of such) for the
-locator. paho-mqtt is the client; it is imported only when MQTT is used.
+``prefix/fixes/<led>``, keeps a retained ``prefix/status`` (the deployment, the cameras alive,
+the rate, updated every few seconds) and leaves a last will there (``"state": "offline"``) for
+when the process dies. While the broker is away it reconnects with backoff and holds messages
+in a bounded buffer; what the buffer cannot hold is counted as lost and said. A
+:class:`SpotSubscriber` reads the spots cameras publish on ``prefix/spots/<camera_id>``
+(``{"t": …, "u": …, "v": …}``, or a list of such) for the locator. paho-mqtt is the client; it is imported only when MQTT is used.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ PASSWORD_ENV = "VLPCAL_MQTT_PASSWORD"
 BUFFER = 100_000
 #: s to wait for the broker's answer when connecting first
 CONNECT_TIMEOUT = 10.0
+#: s between updates of the retained status (rate, cameras alive)
+STATUS_EVERY = 5.0
 #: a spot message's size, at most (bytes): a few spots of one frame
 MAX_SPOT_MESSAGE = 4096
 
@@ -147,6 +149,7 @@ class Publisher:
         self._buffer: deque = deque()
         self._limit = buffer
         self._lock = threading.Lock()
+        self._count, self._alive, self._since = 0, set(), time.monotonic()
         self.sent = 0  #: messages delivered (QoS 1, 2: acknowledged by the broker)
         self.lost = 0  #: messages never delivered (the buffer overflowed, or at the end)
         self.unsent = 0  #: of those, the ones still waiting when the run ended
@@ -231,7 +234,15 @@ class Publisher:
                 self.lost += 1
 
     def publish(self, led: str, message: dict) -> None:
-        """One fix or track update on ``prefix/fixes/<led>``."""
+        """One fix or track update on ``prefix/fixes/<led>``; every :data:`STATUS_EVERY` s the
+        retained status gains the rate and the cameras that placed the LED since."""
+        self._count += 1
+        self._alive.update(c for c in str(message.get("cameras") or "").split("+") if c)
+        now = time.monotonic()
+        if now - self._since >= STATUS_EVERY:
+            self.status(rate_hz=round(self._count / (now - self._since), 2),
+                        cameras_alive=sorted(self._alive))
+            self._count, self._alive, self._since = 0, set(), now
         payload = json.dumps(message, allow_nan=False, separators=(",", ":"))
         topic = self.topic("fixes", led)
         if self._connected.is_set() and not self._buffer:
