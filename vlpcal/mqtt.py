@@ -7,7 +7,8 @@ the rate, updated every few seconds) and leaves a last will there (``"state": "o
 when the process dies. While the broker is away it reconnects with backoff and holds messages
 in a bounded buffer; what the buffer cannot hold is counted as lost and said. A
 :class:`SpotSubscriber` reads the spots cameras publish on ``prefix/spots/<camera_id>``
-(``{"t": …, "u": …, "v": …}``, or a list of such) for the locator. paho-mqtt is the client; it is imported only when MQTT is used.
+(``{"t": …, "u": …, "v": …}``, or a list of such) for the locator. paho-mqtt is the client;
+it is imported only when MQTT is used.
 """
 
 from __future__ import annotations
