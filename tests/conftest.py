@@ -42,3 +42,16 @@ def auth_broker(tmp_path):
     b = Broker(tmp_path, users={"robot": "s3cret"})
     yield b
     b.stop()
+
+
+@pytest.fixture
+def tls_broker(tmp_path):
+    _need_mosquitto()
+    import shutil
+
+    if not shutil.which("openssl"):
+        pytest.skip("openssl is not installed (it makes the test's certificates)")
+    (tmp_path / "tls").mkdir()
+    b = Broker(tmp_path / "tls", tls=True)
+    yield b
+    b.stop()

@@ -13,7 +13,7 @@ from vlpcal.mqtt import MqttError, Publisher, _spots_of, parse_url
 class Listener:
     """A plain paho subscriber collecting every message under ``prefix/#``."""
 
-    def __init__(self, url):
+    def __init__(self, url, ca=None):
         import paho.mqtt.client as mqtt
 
         t = parse_url(url)
@@ -22,6 +22,8 @@ class Listener:
         self.c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
         if t.user:
             self.c.username_pw_set(t.user, t.password)
+        if t.tls:
+            self.c.tls_set(ca_certs=str(ca))
         self.c.on_connect = lambda c, *a: (c.subscribe(f"{t.prefix}/#", qos=1),
                                            self.ready.set())
         self.c.on_message = lambda c, u, m: self.messages.append(
@@ -337,3 +339,38 @@ def test_two_zone_locators_give_the_site_locators_fixes_and_keep_the_leds_id(bro
     site_rows = sum(1 for _ in csv.DictReader(open(tmp_path / "all.csv")))  # failed ones too
     assert len(listen.on("fixes/L1")) == site_rows + len(west) + len(east)
     listen.close()
+
+
+def test_fixes_over_tls_with_the_brokers_ca_and_refused_with_another(tls_broker, tmp_path):
+    """mqtts:// with --ca-file: published over TLS when the broker's certificate is the CA's;
+    a CA that did not sign it is one line, exit 2, nothing written."""
+    import subprocess
+    import sys
+
+    from vlpcal.sim.broker import make_certificates
+
+    run = [sys.executable, "-m", "vlpcal"]
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--out",
+                                str(tmp_path / "sim"), "--test-points", "20"],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    url = tls_broker.url("lab")
+    assert url.startswith("mqtts://")
+    listen = Listener(url, ca=tls_broker.ca)
+    res = subprocess.run(run + ["locate", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/frames"), "--out", str(tmp_path / "f.csv"),
+                                "--publish", url, "--ca-file", str(tls_broker.ca)],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    time.sleep(0.5)
+    assert len(listen.on("fixes/L1")) == 20
+    listen.close()
+    (tmp_path / "other").mkdir()
+    other = make_certificates(tmp_path / "other")
+    res = subprocess.run(run + ["locate", "-d", str(tmp_path / "sim/truth.yaml"), "--frames",
+                                str(tmp_path / "sim/frames"), "--out", str(tmp_path / "g.csv"),
+                                "--publish", url, "--ca-file", str(other)],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert "certificate does not pass --ca-file" in res.stderr
+    assert not (tmp_path / "g.csv").exists()

@@ -116,10 +116,34 @@ def _client(target: Target, client_id: str, ca_file=None):
     return c
 
 
+def _check_tls(target: Target, ca_file, timeout: float) -> None:
+    """A TLS handshake with the broker before the client's: a certificate that does not pass
+    ``ca_file`` (or the system's CAs), or a broker that does not speak TLS, said as such."""
+    import socket
+    import ssl
+
+    ctx = ssl.create_default_context(cafile=ca_file)
+    try:
+        with socket.create_connection((target.host, target.port), timeout=timeout) as raw:
+            with ctx.wrap_socket(raw, server_hostname=target.host):
+                pass
+    except ssl.SSLCertVerificationError as e:
+        raise MqttError(f"{target.shown()}: the broker's certificate does not pass "
+                        f"{'--ca-file ' + str(ca_file) if ca_file else 'the system CAs'} "
+                        f"({e.verify_message})") from None
+    except ssl.SSLError as e:
+        raise MqttError(f"{target.shown()}: no TLS handshake ({e.reason or e}): does the "
+                        "broker speak TLS on this port?") from None
+    except OSError as e:
+        raise MqttError(f"{target.shown()}: cannot connect ({e.strerror or e})") from None
+
+
 def _connect(client, target: Target, connected: threading.Event, refused: list,
-             timeout: float) -> None:
+             timeout: float, ca_file=None) -> None:
     """Start the client's loop and wait for the broker's first answer; a refusal (a wrong
     password) or no answer is an :class:`MqttError`."""
+    if target.tls:
+        _check_tls(target, ca_file, timeout)
     try:
         client.connect_async(target.host, target.port, keepalive=30)
     except (OSError, ValueError) as e:
@@ -170,7 +194,7 @@ class Publisher:
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_publish = self._on_publish
-        _connect(self.client, target, self._connected, self._refused, timeout)
+        _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
         self.status()
 
     def topic(self, *parts: str) -> str:
@@ -344,7 +368,7 @@ class SpotSubscriber:
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_message = self._on_message
-        _connect(self.client, target, self._connected, self._refused, timeout)
+        _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
 
     def _on_connect(self, client, userdata, flags, reason_code, properties=None):
         if reason_code.is_failure:

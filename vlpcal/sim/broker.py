@@ -1,20 +1,39 @@
 """A real Mosquitto for tests and benchmarks (issue 17: no mock broker): Debian's ``mosquitto``
-started on 127.0.0.1 at a free port, optionally with a password file."""
+started on 127.0.0.1 at a free port, optionally with a password file or TLS."""
 
 from __future__ import annotations
+
+import shutil
+import socket
+import subprocess
+from pathlib import Path
+
+
+def make_certificates(folder) -> Path:
+    """A CA and a server certificate for 127.0.0.1 made with ``openssl`` in ``folder``
+    (``ca.pem``, ``server.pem``, ``server.key``); returns the CA's path."""
+    folder = Path(folder)
+
+    def run(*args):
+        subprocess.run(["openssl", *args], check=True, capture_output=True, cwd=folder)
+
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj", "/CN=vlpcal-ca",
+        "-keyout", "ca.key", "-out", "ca.pem")
+    run("req", "-newkey", "rsa:2048", "-nodes", "-subj", "/CN=127.0.0.1", "-keyout",
+        "server.key", "-out", "server.csr")
+    (folder / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
+    run("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+        "-CAcreateserial", "-days", "2", "-extfile", "san.ext", "-out", "server.pem")
+    return folder / "ca.pem"
 
 
 class Broker:
     """A real Mosquitto on 127.0.0.1 at a free port (issue 17: no mock broker), optionally with
-    a password file; :meth:`restart` stops it and starts it again on the same port."""
+    a password file or TLS (certificates from :func:`make_certificates`; ``self.ca``);
+    :meth:`restart` stops it and starts it again on the same port."""
 
-    def __init__(self, folder, users: dict | None = None):
-        from pathlib import Path
-
+    def __init__(self, folder, users: dict | None = None, tls: bool = False):
         folder = Path(folder)
-        import shutil
-        import socket
-        import subprocess
 
         exe = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
         self.exe, self.folder = exe, folder
@@ -27,6 +46,11 @@ class Broker:
                 f"log_dest file {folder / 'mosquitto.log'}"]
         if os.geteuid() == 0:  # as root (CI) it would drop to a user who cannot read tmp_path
             conf.append("user root")
+        self.ca = None
+        if tls:
+            self.ca = make_certificates(folder)
+            conf += [f"cafile {self.ca}", f"certfile {folder / 'server.pem'}",
+                     f"keyfile {folder / 'server.key'}"]
         if users:
             pw = folder / "passwords"
             for i, (user, password) in enumerate(users.items()):
@@ -71,4 +95,4 @@ class Broker:
 
     def url(self, prefix: str = "site", user: str | None = None, password: str | None = None):
         who = f"{user}:{password}@" if user else ""
-        return f"mqtt://{who}127.0.0.1:{self.port}/{prefix}"
+        return f"{'mqtts' if self.ca else 'mqtt'}://{who}127.0.0.1:{self.port}/{prefix}"
