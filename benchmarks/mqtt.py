@@ -9,9 +9,10 @@ schedule. ``vlpcal locate --spots … --publish …`` (one process; then ``--zon
 ``--zone east``, the border cameras in both) locates and publishes; a subscriber in this process
 records when each fix arrives. Figures: spot messages the locators got against those sent,
 fixes published against received (lost), sustained fixes/s, and the latency from the capture
-time a fix carries (its set's first spot) to its arrival at a subscriber (p50, p99) — two
-broker hops and the locator between. One core of this 2-core machine each for the cameras
-and a locator (two zones share the second core).
+time a fix carries (its spots' mean capture time, where a fix of spots of different moments
+stands) to its arrival at a subscriber (p50, p99) — two broker hops and the locator between.
+One core of this 2-core machine each for the cameras and a locator (two zones share the second
+core).
 
 Prints a table; writes benchmarks/out/mqtt.json.
 
@@ -175,8 +176,8 @@ def main(argv=None) -> int:
         finally:
             broker.stop()
     print(f"{args.cameras} cameras at {FPS:g} fps of spots ({len(events)} messages in "
-          f"{args.seconds:g} s) through one Mosquitto; latency: a fix's capture time (its set's "
-          "first spot) to its arrival at a subscriber")
+          f"{args.seconds:g} s) through one Mosquitto; latency: a fix's capture time (its spots' "
+          "mean) to its arrival at a subscriber")
     print(table(rows, [("locators", "locators", "d"), ("spots_expected", "spots to them", "d"),
                        ("spots_received", "spots got", "d"), ("spots_lost", "spots lost", "d"),
                        ("fixes_published", "fixes published", "d"),

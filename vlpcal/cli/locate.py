@@ -314,8 +314,10 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
                 uv[index[cid], 0] = spots[0]
         fixes = loc.locate_pixels(uv, frame_ids=[f"{n:06d}"])
         statuses.update(fixes.counts())
-        # the set's time: its first spot's capture (a camera that saw nothing tells no time)
-        when = min((times[c] for c, spots in pending.items() if spots), default=first)
+        # the set's time: its spots' mean capture time, where a fix of spots taken at
+        # different moments stands (a camera that saw nothing tells no time)
+        seen_at = [times[c] for c, spots in pending.items() if spots]
+        when = sum(seen_at) / len(seen_at) if seen_at else first
         writer.write(fixes, {"t_s": round(when, 6)})
         n += 1
         pending, first = {}, None
