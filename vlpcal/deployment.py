@@ -425,28 +425,37 @@ ZONE_KEYS = ("id", "polygon", "cameras")
 MAX_ZONE_POINTS = 1000
 
 
+def _records(value, block: str, keys: tuple, noun: str, most: int | None = None):
+    """A block that is a list of records with ids (``leds:``, ``zones:``): ``(where, record)``
+    for each, its keys and id checked and each id given once."""
+    if not isinstance(value, list) or not value or (most is not None and len(value) > most):
+        count = f"1 to {most} " if most is not None else ""
+        raise DeploymentError(f"{block}: expected a list of {count}{{{', '.join(keys)}}}, got "
+                              f"{shown(value)}")
+    seen = set()
+    for i, d in enumerate(value):
+        where = f"{block}[{i}]"
+        _mapping(d, where)
+        unknown = sorted(set(map(str, d)) - set(keys))
+        if unknown:
+            raise DeploymentError(f"{where}.{unknown[0]}: unknown key (expected "
+                                  f"{', '.join(keys)})")
+        for key in keys:
+            if key not in d:
+                raise DeploymentError(f"{where}.{key}: missing (expected {', '.join(keys)})")
+        if not is_id(d["id"]):
+            raise DeploymentError(f"{where}.id: expected {ID_RULE}, got {shown(d['id'])}")
+        if str(d["id"]) in seen:
+            raise DeploymentError(f"{block}: id {d['id']} given twice (expected each {noun} "
+                                  "once)")
+        seen.add(str(d["id"]))
+        yield where, d
+
+
 def _check_zones(value, camera_ids: set) -> None:
     """``zones:`` a list of ``{id, polygon, cameras}``: a site split among locator processes
     (issue 17); a camera on a border belongs to both zones."""
-    if not isinstance(value, list) or not value:
-        raise DeploymentError(f"zones: expected a list of {{id, polygon, cameras}}, got "
-                              f"{shown(value)}")
-    seen = set()
-    for i, z in enumerate(value):
-        where = f"zones[{i}]"
-        _mapping(z, where)
-        unknown = sorted(set(map(str, z)) - set(ZONE_KEYS))
-        if unknown:
-            raise DeploymentError(f"{where}.{unknown[0]}: unknown key (expected "
-                                  f"{', '.join(ZONE_KEYS)})")
-        for key in ZONE_KEYS:
-            if key not in z:
-                raise DeploymentError(f"{where}.{key}: missing (expected {', '.join(ZONE_KEYS)})")
-        if not is_id(z["id"]):
-            raise DeploymentError(f"{where}.id: expected {ID_RULE}, got {shown(z['id'])}")
-        if str(z["id"]) in seen:
-            raise DeploymentError(f"zones: id {z['id']} given twice (expected each zone once)")
-        seen.add(str(z["id"]))
+    for where, z in _records(value, "zones", ZONE_KEYS, "zone"):
         if isinstance(z["polygon"], list) and len(z["polygon"]) > MAX_ZONE_POINTS:
             raise DeploymentError(f"{where}.polygon: expected at most {MAX_ZONE_POINTS} points, "
                                   f"got {len(z['polygon'])}")
@@ -467,22 +476,8 @@ MAX_LEDS = 64
 
 def _check_leds(value) -> None:
     """``leds:`` a list of ``{id, pattern, bit_rate}``: the LEDs' blink codes (issue 16)."""
-    if not isinstance(value, list) or not value or len(value) > MAX_LEDS:
-        raise DeploymentError(f"leds: expected a list of 1 to {MAX_LEDS} {{id, pattern, "
-                              f"bit_rate}}, got {shown(value)}")
     codes = []
-    for i, d in enumerate(value):
-        where = f"leds[{i}]"
-        _mapping(d, where)
-        unknown = sorted(set(map(str, d)) - set(LED_KEYS))
-        if unknown:
-            raise DeploymentError(f"{where}.{unknown[0]}: unknown key (expected "
-                                  f"{', '.join(LED_KEYS)})")
-        for key in LED_KEYS:
-            if key not in d:
-                raise DeploymentError(f"{where}.{key}: missing (expected {', '.join(LED_KEYS)})")
-        if not is_id(d["id"]):
-            raise DeploymentError(f"{where}.id: expected {ID_RULE}, got {shown(d['id'])}")
+    for where, d in _records(value, "leds", LED_KEYS, "LED", MAX_LEDS):
         if not isinstance(d["pattern"], str):
             raise DeploymentError(f"{where}.pattern: expected a quoted string of 0 and 1, got "
                                   f"{shown(d['pattern'])} (YAML reads an unquoted 0101 as a "
@@ -492,10 +487,6 @@ def _check_leds(value) -> None:
             raise DeploymentError(f"{where}.bit_rate: expected bits per second up to 10000, got "
                                   f"{shown(d['bit_rate'])}")
         codes.append(BlinkCode(str(d["id"]), d["pattern"], float(rate)))
-    ids = [c.led for c in codes]
-    if len(set(ids)) < len(ids):
-        dup = next(x for x in ids if ids.count(x) > 1)
-        raise DeploymentError(f"leds: id {dup} given twice (expected each LED once)")
     wrong = check_codes(codes)
     if wrong:
         raise DeploymentError(f"leds: {wrong}")
