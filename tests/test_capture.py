@@ -20,6 +20,7 @@ from click.testing import CliRunner
 from vlpcal import deployment
 from vlpcal.cli import main
 from vlpcal.datasets import SurveyAppender, read_points, read_survey_bundle, write_truth_csv
+from vlpcal.sim.mjpeg import mjpeg_head, mjpeg_part
 from vlpcal.sim.profiles import get_profile
 from vlpcal.sim.scene import make_scene, render_scene
 from vlpcal.sim.writers import deployment_of
@@ -52,9 +53,7 @@ class Rig:
                 if cid in dead:
                     self.send_error(503)
                     return
-                self.send_response(200)
-                self.send_header("Content-Type", "multipart/x-mixed-replace;boundary=frame")
-                self.end_headers()
+                mjpeg_head(self)
                 try:
                     for i in range(10**9):
                         if cid in die and i >= die[cid]:
@@ -64,9 +63,7 @@ class Rig:
                             self.connection.shutdown(2)  # the camera drops off
                             return
                         jpg = rig.frame(cid, i % VARIANTS)
-                        self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\n"
-                                         + f"Content-Length: {len(jpg)}\r\n\r\n".encode()
-                                         + jpg + b"\r\n")
+                        self.wfile.write(mjpeg_part(jpg))
                         self.wfile.flush()
                         time.sleep(1.0 / rig.fps)
                 except (BrokenPipeError, ConnectionResetError, OSError):

@@ -12,6 +12,7 @@ import pytest
 
 from vlpcal import deployment
 from vlpcal.live import LiveGrouper, mjpeg_frames
+from vlpcal.sim.mjpeg import mjpeg_head, mjpeg_part
 from vlpcal.sim.profiles import get_profile
 from vlpcal.sim.scene import make_scene, render_scene
 from vlpcal.sim.writers import deployment_of
@@ -35,17 +36,13 @@ class Streams:
                 if jpegs is None:
                     self.send_error(404)
                     return
-                self.send_response(200)
-                self.send_header("Content-Type", "multipart/x-mixed-replace;boundary=frame")
-                self.end_headers()
+                mjpeg_head(self)
                 try:
                     for i, jpg in enumerate(jpegs):
                         if outer.stop_after is not None and i >= outer.stop_after:
                             self.connection.shutdown(2)  # the camera dies mid-stream
                             return
-                        self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\n"
-                                         + f"Content-Length: {len(jpg)}\r\n\r\n".encode()
-                                         + jpg + b"\r\n")
+                        self.wfile.write(mjpeg_part(jpg))
                         self.wfile.flush()
                         time.sleep(1.0 / fps)
                 except (BrokenPipeError, ConnectionResetError, OSError):

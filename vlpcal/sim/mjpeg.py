@@ -16,6 +16,21 @@ from pathlib import Path
 import numpy as np
 
 
+def mjpeg_head(handler) -> None:
+    """Answer an HTTP request as an MJPEG camera does: 200, ``multipart/x-mixed-replace``."""
+    handler.send_response(200)
+    handler.send_header("Content-Type", "multipart/x-mixed-replace;boundary=frame")
+    handler.end_headers()
+
+
+def mjpeg_part(jpg: bytes, stamp: str | None = None) -> bytes:
+    """One part of an MJPEG stream: the JPEG with its length, and ``X-Timestamp`` if given."""
+    head = f"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: {len(jpg)}\r\n"
+    if stamp is not None:
+        head += f"X-Timestamp: {stamp}\r\n"
+    return (head + "\r\n").encode() + jpg + b"\r\n"
+
+
 class StreamServer:
     """Serve the frames folder ``root`` live. ``latency``: s, the smallest network delay;
     ``latency_jitter``: s, the mean of an exponential delay on top (per frame); ``start``: s
@@ -53,9 +68,7 @@ class StreamServer:
                 if items is None:
                     self.send_error(404)
                     return
-                self.send_response(200)
-                self.send_header("Content-Type", "multipart/x-mixed-replace;boundary=frame")
-                self.end_headers()
+                mjpeg_head(self)
                 try:
                     for at, stamp, path in items:
                         wait = outer.t0 + at - time.monotonic()
@@ -63,11 +76,7 @@ class StreamServer:
                             continue  # connected late: that moment has passed
                         if wait > 0:
                             time.sleep(wait)
-                        jpg = path.read_bytes()
-                        self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\n"
-                                         + f"Content-Length: {len(jpg)}\r\n".encode()
-                                         + f"X-Timestamp: {stamp}\r\n\r\n".encode()
-                                         + jpg + b"\r\n")
+                        self.wfile.write(mjpeg_part(path.read_bytes(), stamp))
                         self.wfile.flush()
                 except (BrokenPipeError, ConnectionResetError, OSError):
                     pass
