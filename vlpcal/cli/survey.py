@@ -494,7 +494,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     out = _output_file(out, inputs=(deployment_path, survey_path)
                        + ((test_path,) if test_path else ()),
                        beside=(".report.json", ".png"))
-    test = _read_test_points(dep, test_path, survey_path) if test_path else None
+    test = _read_test_points(dep, test_path, survey_path, bundle) if test_path else None
     uv, notes = survey_spots(dep, bundle)
     for note in notes:
         click.echo(note, err=True)
@@ -538,9 +538,9 @@ def _write_or_refuse(out, result, notes, survey_path, header):
                         "written") from None
 
 
-def _read_test_points(dep, test_path, survey_path):
-    """``--test-points``: a bundle of measured points the calibration never sees; (ids, X,
-    spots)."""
+def _read_test_points(dep, test_path, survey_path, survey):
+    """``--test-points``: a bundle of measured points the calibration never sees (none of
+    ``survey``'s, the bundle read already); (ids, X, spots)."""
     from pathlib import Path
 
     from ..datasets import DatasetError, read_survey_bundle
@@ -560,15 +560,12 @@ def _read_test_points(dep, test_path, survey_path):
         raise UserError(f"{test_path}: none of its cameras ({', '.join(tb.camera_ids()[:6])}) "
                         "is in the deployment (expected its camera ids)")
     _check_survey_positions(test_path, dep, tb.xyz, tb.point_ids)
-    try:
-        survey = read_survey_bundle(survey_path)
-    except DatasetError:
-        survey = None  # the survey's own error is said where it is read
-    if survey is not None and len(survey.xyz):
+    if len(survey.xyz):
         import numpy as np
+        from scipy.spatial import cKDTree
 
         same = sorted(set(tb.point_ids) & set(survey.point_ids))
-        gap = np.linalg.norm(tb.xyz[:, None] - survey.xyz[None], axis=2).min(axis=1)
+        gap = cKDTree(survey.xyz).query(tb.xyz)[0]  # each test point's nearest reference
         spread = float(np.ptp(survey.xyz, axis=0).max()) or 1.0
         at = [p for p, g in zip(tb.point_ids, gap) if g <= 1e-6 * spread]
         if same or at:
