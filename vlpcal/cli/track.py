@@ -182,11 +182,16 @@ def _write_tracks(out, rows, utc: float = 0.0) -> None:
         with open(tmp, "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(TRACK_COLUMNS)
-            for r in rows:
-                row = r.row()
-                if utc:
-                    row[0] = f"{r.t + utc:.6f}"
-                w.writerow(row)
+            w.writerows(_utc_row(r, utc) for r in rows)
+
+
+def _utc_row(update, utc: float) -> list:
+    """A track update's CSV row, its time moved by ``utc`` s (live: the host's monotonic clock
+    to UTC)."""
+    row = update.row()
+    if utc:
+        row[0] = f"{update.t + utc:.6f}"
+    return row
 
 
 def _summary(rows) -> str:
@@ -277,10 +282,7 @@ class _LiveTracks:
         self.f.flush()
 
     def write(self, rows) -> None:
-        for r in rows:
-            row = r.row()
-            row[0] = f"{r.t + self.utc:.6f}"
-            self.w.writerow(row)
+        self.w.writerows(_utc_row(r, self.utc) for r in rows)
         self.f.flush()
 
     def close(self) -> None:

@@ -3,9 +3,11 @@ started on 127.0.0.1 at a free port, optionally with a password file or TLS."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import socket
 import subprocess
+import time
 from pathlib import Path
 
 
@@ -40,8 +42,6 @@ class Broker:
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             self.port = s.getsockname()[1]
-        import os
-
         conf = [f"listener {self.port} 127.0.0.1", "persistence false",
                 f"log_dest file {folder / 'mosquitto.log'}"]
         if os.geteuid() == 0:  # as root (CI) it would drop to a user who cannot read tmp_path
@@ -66,10 +66,6 @@ class Broker:
         self.start()
 
     def start(self) -> None:
-        import socket
-        import subprocess
-        import time
-
         self.proc = subprocess.Popen([self.exe, "-c", str(self.folder / "mosquitto.conf")],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 10
@@ -87,8 +83,6 @@ class Broker:
             self.proc.wait(timeout=10)
 
     def restart(self, pause: float = 0.0) -> None:
-        import time
-
         self.stop()
         time.sleep(pause)
         self.start()
