@@ -135,7 +135,8 @@ class Deployment:
         fusion = {k: v for k, v in self.extra.get("fusion", {}).items() if k != "region_map"}
         if fusion:
             extra["fusion"] = fusion
-        return replace(self, cameras=[c for c in self.cameras if c.id in keep], extra=extra)
+        return replace(self, name=f"{self.name}, zone {zone_id}",
+                       cameras=[c for c in self.cameras if c.id in keep], extra=extra)
 
     def outside(self, X, sigma):
         """Positions ``X`` (N×3) that cannot be the LED: under the floor, over the ceiling or

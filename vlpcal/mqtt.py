@@ -354,7 +354,8 @@ class SpotSubscriber:
         self.camera_ids = set(camera_ids)
         self.sizes = sizes or {}  #: camera id → (width, height): a spot must be in the image
         self.stale = 0
-        self.disconnects = 0
+        self.disconnects = 0  #: times the broker went away (not counting our own disconnect)
+        self._closing = False
         self.bad = 0
         self.unknown = 0
         self.received = 0
@@ -404,7 +405,8 @@ class SpotSubscriber:
 
     def _on_disconnect(self, *a, **k):
         self._connected.clear()
-        self.disconnects += 1
+        if not self._closing:  # the broker went away, not our own goodbye
+            self.disconnects += 1
 
     @property
     def waiting(self) -> int:
@@ -419,6 +421,7 @@ class SpotSubscriber:
             return None
 
     def close(self) -> None:
+        self._closing = True
         self.client.disconnect()
         self.client.loop_stop()
 
