@@ -8,7 +8,13 @@ a robot's path. Measured on one core, best of several runs:
   predicted uncertainty), µs per fix;
 - Python API, one set at a time: ``Locator.locate``;
 - ``vlpcal locate --frames DIR --out fixes.csv``: a fresh process on the folder, wall time
-  including start-up, reading the files and writing the CSV (fixes/s).
+  including start-up, reading the files and writing the CSV (fixes/s), best of several runs;
+  and the same process on a folder of two sets (its start-up alone). It runs as an installed
+  package does, its bytecode cached (a machine that sets PYTHONDONTWRITEBYTECODE, as the one
+  the figures come from does, would recompile vlpcal at every start: ~70 ms).
+
+Targets (issue 16): ``locate_batch`` within 1.3 × the decode floor, ``vlpcal locate --frames``
+within 2 ×.
 
 Writes benchmarks/out/locator.json.
 
@@ -18,6 +24,7 @@ Writes benchmarks/out/locator.json.
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -72,16 +79,28 @@ def main(argv=None) -> int:
         write_frames_folder(tmp / "frames", ids, frames)
         dep = tmp / "truth.yaml"
         deployment.save(deployment_of(scene, "true"), dep)
-        cmd = [sys.executable, "-m", "vlpcal", "locate", "-d", str(dep), "--frames",
-               str(tmp / "frames"), "--out", str(tmp / "fixes.csv"), "-q"]
-        walls = []
-        for _ in range(3):
+        write_frames_folder(tmp / "two", ids[:2], {c: f[:2] for c, f in frames.items()})
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+        env["PYTHONPYCACHEPREFIX"] = str(tmp / "pycache")
+
+        def cli(folder: str) -> float:
+            (tmp / "fixes.csv").unlink(missing_ok=True)
             t0 = time.perf_counter()
-            subprocess.run(cmd, check=True)
-            walls.append(time.perf_counter() - t0)
+            subprocess.run([sys.executable, "-m", "vlpcal", "locate", "-d", str(dep),
+                            "--frames", str(tmp / folder), "--out", str(tmp / "fixes.csv"),
+                            "-q"], check=True, env=env)
+            return time.perf_counter() - t0
+
+        cli("two")  # the bytecode cache filled, as an install does
+        walls, starts = [], []
+        for _ in range(5):
+            starts.append(cli("two"))
+            walls.append(cli("frames"))
         cli_rate = args.sets / min(walls)
+        start_s = min(starts)
         rows_written = sum(1 for _ in open(tmp / "fixes.csv")) - 1
 
+    marginal = (args.sets / cli_rate - start_s) / args.sets * 1e6
     rows = [
         {"what": "JPEG decode floor (3 × cv2.imdecode gray)", "us": decode, "ratio": 1.0},
         {"what": "Locator.locate_batch (decode+detect+fuse)", "us": batch,
@@ -89,18 +108,27 @@ def main(argv=None) -> int:
         {"what": "Locator.locate, one set at a time", "us": single, "ratio": single / decode},
         {"what": "vlpcal locate --frames (process, files, CSV)", "us": 1e6 / cli_rate,
          "ratio": 1e6 / cli_rate / decode},
+        {"what": "  of which its start-up (a 2-set folder), per set", "us": start_s * 1e6
+         / args.sets, "ratio": start_s * 1e6 / args.sets / decode},
+        {"what": "  the rest: each set's files, fix and row", "us": marginal,
+         "ratio": marginal / decode},
         {"what": "the paper, embedded device", "us": PAPER_US, "ratio": PAPER_US / decode},
     ]
     print(f"\n{args.sets} fix sets, 3 cameras, one core; {fixed:.1%} fixed, mean error "
           f"{np.nanmean(err) * 1000:.2f} mm (true cameras)")
     print(table(rows, [("what", "", ""), ("us", "µs per fix", ",.1f"),
                        ("ratio", "× decode floor", ".2f")]))
-    api_ok = batch <= 1.5 * decode
-    cli_ok = cli_rate >= 3000
-    print(f"\nPython API: {batch / decode:.2f} × the decode floor "
-          f"({'meets' if api_ok else 'MISSES'} ≤ 1.5×); vlpcal locate: {cli_rate:,.0f} fixes/s "
-          f"({'meets' if cli_ok else 'MISSES'} ≥ 3000/s; {rows_written} rows written)")
+    cli_ratio = 1e6 / cli_rate / decode
+    api_ok, cli_ok = batch <= 1.3 * decode, cli_ratio <= 2.0
+    print(f"\nLocator.locate_batch: {batch / decode:.2f} × the decode floor "
+          f"({'meets' if api_ok else 'MISSES'} ≤ 1.3×); vlpcal locate --frames: "
+          f"{cli_ratio:.2f} × ({'meets' if cli_ok else 'MISSES'} ≤ 2×; {cli_rate:,.0f} "
+          f"fixes/s, start-up {start_s * 1000:.0f} ms, {rows_written} rows written; "
+          f"past its start-up {marginal / decode:.2f} ×)")
     out = write_json("locator", {"sets": args.sets, "rows": rows, "cli_fixes_per_s": cli_rate,
+                                 "cli_start_s": start_s, "batch_vs_decode": batch / decode,
+                                 "cli_vs_decode": cli_ratio,
+                                 "cli_past_start_vs_decode": marginal / decode,
                                  "fixed": fixed, "mean_error_m": float(np.nanmean(err))})
     print(f"wrote {out}")
     return 0 if api_ok and cli_ok else 1

@@ -53,3 +53,21 @@ def test_show_prints_what_a_deployment_holds():
     assert "held-out mean 3D error" in cal.output
     missing = CliRunner().invoke(main, ["show", "no-such.yaml"])
     assert missing.exit_code == 2 and len(missing.output.strip().splitlines()) == 1
+
+
+def test_every_command_is_loaded_on_demand_from_its_module():
+    """The group imports a command's module when the command is asked for: every module's
+    commands are in the table, and the table names no command that is not there."""
+    import importlib
+
+    import click
+
+    from vlpcal.cli import common
+
+    for module in set(common.COMMANDS.values()):
+        importlib.import_module(f"vlpcal.cli.{module}")
+    assert set(common.main.commands) == set(common.COMMANDS)
+    for name, module in common.COMMANDS.items():
+        assert common.main.commands[name].callback.__module__ == f"vlpcal.cli.{module}"
+    ctx = click.Context(common.main)
+    assert common.main.list_commands(ctx) == sorted(common.COMMANDS)

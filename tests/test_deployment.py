@@ -164,3 +164,23 @@ def test_json_schema_accepts_the_examples_and_rejects_structural_errors(tmp_path
         doc = next(d for c, d, _ in MALFORMED if c == case)
         with pytest.raises(jsonschema.ValidationError):
             jsonschema.validate(doc, schema)
+
+
+def test_one_point_fast_path_of_outside_agrees_with_the_polygon(rng):
+    """A single position (the tracker's question, a frame at a time) is judged without
+    shapely when it is surely inside; the answer is the same as for the same point in a batch,
+    in an L-shaped room, on and off its outline, under the floor and over the ceiling."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    dep = replace(deployment.from_dict(GOOD),
+                  room=[[0, 0], [4, 0], [4, 2], [2, 2], [2, 3], [0, 3]])
+    X = np.c_[rng.uniform(-0.5, 4.5, 3000), rng.uniform(-0.5, 3.5, 3000),
+              rng.uniform(-0.5, dep.ceiling_height + 0.5, 3000)]
+    X[:40, :2] = [[2, 2.5]] * 20 + [[4, 1]] * 20  # on the outline
+    sigma = np.full(len(X), 1e-4)
+    batch = dep.outside(X, sigma)
+    one = np.array([dep.outside(x, s)[0] for x, s in zip(X, sigma)])
+    assert (one == batch).all()
+    assert 0.1 < batch.mean() < 0.6

@@ -169,3 +169,37 @@ def test_colour_frames_of_any_dtype_are_converted_without_wrapping():
 def test_unknown_detector_is_a_clear_error():
     with pytest.raises(ValueError, match="unknown detector 'foo'"):
         detect_spot(np.zeros((10, 10)), "foo")
+
+
+def test_one_frame_path_equals_the_batch(rng):
+    """detect_frame (the live path, one frame a call) gives what detect_several gives for the
+    same frames: plain, saturated, beside a reflection, beside a wide lamp, at the edge, dim,
+    dark, several LEDs, a float frame, and frames that cannot be measured."""
+    from vlpcal.detection import MISSING, detect_frame, detect_several
+
+    n = 40
+    u, v = rng.uniform(3, 157, n), rng.uniform(3, 117, n)
+    frames = (jpeg_frames(u, v) + jpeg_frames(u, v, sim.SpotLook(1.0, 600.0))
+              + jpeg_frames(u, v, distractors=[(6, 4, sim.SpotLook(1.6, 70.0))])
+              + jpeg_frames(u, v, distractors=[(-40, 10, sim.SpotLook(4.0, 400.0))])
+              + jpeg_frames([0.2, 159.5, 80.0], [60.0, 3.0, 119.3])
+              + jpeg_frames([np.nan], [np.nan])
+              + [sim.render([80.0], [60.0], look=sim.SpotLook(0.9, 9.0),
+                            sensor=sim.Sensor(read_noise=0.3, shot_gain=0.0))[0]]
+              + [sim.render([70.3], [40.6])[0].astype(float)])
+    two = sim.render(rng.uniform(20, 130, 10), rng.uniform(20, 95, 10),
+                     distractors=[(20, 15, sim.SpotLook(1.0, 200.0))])
+    frames += [sim.encode_jpeg(f, 85) for f in two]
+    for k in (1, 3):
+        batch = detect_several(frames, k, shape=(120, 160))
+        for i, f in enumerate(frames):
+            one, why = detect_frame(f, k, shape=(120, 160))
+            assert why is None
+            np.testing.assert_allclose(one, batch[i], atol=1e-9, err_msg=f"frame {i}, k {k}")
+    assert np.isfinite(batch[-10:, :2]).all()  # two LEDs found in each of the last frames
+    good = frames[0]
+    assert detect_frame(good[: len(good) // 2])[1] == CORRUPT
+    assert detect_frame(b"not a jpeg")[1] == CORRUPT
+    assert detect_frame(good, shape=(240, 320))[1] == WRONG_SIZE
+    assert detect_frame(np.zeros((60, 80), np.uint8), shape=(120, 160))[1] == WRONG_SIZE
+    assert detect_frame(None)[1] == MISSING

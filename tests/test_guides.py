@@ -17,7 +17,9 @@ POINTS = str(ROOT / "surveys/paper-2024/survey/points.csv")
 
 
 def commands(group=main, prefix=()):
-    for name, cmd in group.commands.items():
+    ctx = click.Context(group)
+    for name in group.list_commands(ctx):  # loaded on demand, as the command line does
+        cmd = group.get_command(ctx, name)
         yield (*prefix, name), cmd
         if isinstance(cmd, click.Group):
             yield from commands(cmd, (*prefix, name))

@@ -42,6 +42,19 @@ def test_locate_batch_and_single_agree_and_hit_the_truth(site):
     assert 0 < one.sigma < 0.02
 
 
+def test_a_batch_rows_are_its_fixes_rows(site):
+    """FixBatch.rows (the folder writer's fast path) equals each Fix.row, for fixes of every
+    kind: ok, one camera, none, and cameras that sent nothing."""
+    scene, path, pts, frames = site
+    loc = Locator.from_file(path)
+    sets = [{c: frames[c][i] for c in frames} for i in range(len(pts))]
+    sets += [{"C1": frames["C1"][0]}, {}, {c: b"" for c in frames},
+             {c: frames[c][1] for c in ("C1", "C3")}]
+    batch = loc.locate_batch(sets, [f"s{i}" for i in range(len(sets))])
+    assert len(set(batch.status)) >= 3
+    assert batch.rows() == [fix.row() for fix in batch]
+
+
 def test_bad_camera_data_is_a_status_never_an_exception(site):
     scene, path, pts, frames = site
     loc = Locator.from_file(path)

@@ -66,8 +66,16 @@ def read_frame(path) -> bytes:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_FRAME_BYTES:
             return b""
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            return f.read(MAX_FRAME_BYTES + 1)[:MAX_FRAME_BYTES]
+        parts, left = [], MAX_FRAME_BYTES + 1
+        while left > 0:  # one read for a whole file, unless it grows while being read
+            want = min(st.st_size + 1, left) if not parts else left
+            part = os.read(fd, want)
+            parts.append(part)
+            left -= len(part)
+            if len(part) < want:  # a short read of a regular file: its end
+                break
+        data = parts[0] if len(parts) == 1 else b"".join(parts)
+        return data[:MAX_FRAME_BYTES]
     except OSError:
         return b""
     finally:
@@ -356,7 +364,7 @@ class FramesFolder:
     root: Path
     frame_ids: list[str]
     camera_ids: list[str]
-    files: dict  # (frame_id, camera_id) → Path
+    files: dict  # (frame_id, camera_id) → the file's path
 
     def frame(self, frame_id: str, camera_id: str) -> bytes | None:
         path = self.files.get((frame_id, camera_id))
@@ -384,12 +392,19 @@ def read_frames_folder(root) -> FramesFolder:
     if not root.is_dir():
         raise DatasetError(f"{root}: not a folder (expected <frame_id>/<camera_id>.jpg inside)")
     ids, cams, files = [], set(), {}
-    for d in root.iterdir():
-        if d.is_dir() and not d.name.startswith("."):
-            ids.append(_check_id(d.name, f"{d}: frame id"))
-            for f in d.glob("*.jpg"):
-                files[(d.name, _check_id(f.stem, f"{f}: camera id"))] = f
-                cams.add(f.stem)
+    with os.scandir(root) as folders:  # scandir: a folder of 10⁴ sets lists in tens of ms
+        for d in folders:
+            if not d.name.startswith(".") and d.is_dir():
+                if not is_id(d.name):  # (the message only for a bad one: 10⁴ are fine)
+                    _check_id(d.name, f"{root / d.name}: frame id")
+                ids.append(d.name)
+                with os.scandir(d.path) as inside:
+                    for f in inside:
+                        if f.name.endswith(".jpg"):
+                            cid = f.name[:-4]
+                            if cid not in cams:
+                                cams.add(_check_id(cid, f"{f.path}: camera id"))
+                            files[(d.name, cid)] = f.path
     if not files:
         hint = (" — it looks like a survey bundle (points.csv): that goes to vlpcal survey "
                 "calibrate --survey" if (root / "points.csv").is_file() else "")

@@ -146,6 +146,8 @@ class Deployment:
         import shapely
 
         X = np.atleast_2d(np.asarray(X, float))
+        if len(X) == 1 and self._surely_inside(*X[0].tolist()):  # one position, as a tracker
+            return np.zeros(1, bool)  # asks a frame at a time: no geometry library needed
         sigma = np.broadcast_to(np.asarray(sigma, float), len(X))
         fixed = np.isfinite(X).all(axis=1)
         if not fixed.any():
@@ -157,6 +159,20 @@ class Deployment:
         pts = shapely.points(np.where(fixed[:, None], X[:, :2], 0.0))
         away = shapely.distance(shapely.Polygon(self.room), pts)
         return fixed & (out | (away > slack))
+
+    def _surely_inside(self, x: float, y: float, z: float) -> bool:
+        """Whether a point lies between floor and ceiling and inside the room's outline (an
+        even–odd crossing count; a point on the outline may say no): such a point is never
+        :meth:`outside`, whatever its error."""
+        if not 0.0 <= z <= self.ceiling_height:
+            return False
+        inside = False
+        (x1, y1) = self.room[-1]
+        for x2, y2 in self.room:
+            if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
+                inside = not inside
+            x1, y1 = x2, y2
+        return inside
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:

@@ -93,6 +93,36 @@ class FixBatch:
     def __iter__(self):
         return (self[i] for i in range(len(self)))
 
+    def rows(self) -> list[dict]:
+        """``[fix.row() for fix in self]``, built over the batch at once (a fix's row costs
+        tens of µs one by one: a folder of thousands of sets spent more writing than locating).
+        Equal to it: tested."""
+        def nums(a, nd):  # Fix.row's rounding (Python's, which numpy's can differ from)
+            return [round(v, nd) if v - v == 0 else "" for v in a.tolist()]
+
+        ids = self.camera_ids
+        x, y, z = (nums(self.X[:, j], 5) for j in range(3))
+        sigma = nums(self.sigma, 5)
+        used = self.used.astype(bool)
+        with np.errstate(invalid="ignore"):
+            worst = np.where(used, self.residual, -np.inf).max(axis=0, initial=-np.inf)
+        residual = nums(worst, 3)
+        # the cameras and the per-camera statuses repeat: each pattern is joined once
+        joined: dict = {}
+        code = (used.T * (1 << np.arange(len(ids)))).sum(axis=1).tolist() if len(ids) else \
+            [0] * len(self)
+        cams = [joined.get(c) or joined.setdefault(c, "+".join(
+            i for k, i in enumerate(ids) if c >> k & 1)) for c in code]
+        status_text: dict = {}
+        per = list(zip(*self.camera_status.tolist())) if len(ids) else [()] * len(self)
+        statuses = [status_text.get(p) or status_text.setdefault(p, " ".join(
+            f"{c}:{st}" for c, st in zip(ids, p))) for p in per]
+        status = [str(st) for st in self.status.tolist()]
+        return [{"frame_id": f, "x": a, "y": b, "z": c, "status": st, "cameras": cm,
+                 "sigma_m": sg, "residual_px": r, "camera_status": cs}
+                for f, a, b, c, st, cm, sg, r, cs in zip(self.frame_ids, x, y, z, status, cams,
+                                                         sigma, residual, statuses)]
+
     def counts(self) -> Counter:
         return Counter(self.status.tolist())
 
@@ -242,9 +272,11 @@ class FixWriter:
         from .writing import spreadsheet_safe
 
         self._start()
-        for fix in fixes:
+        rows = fixes.rows() if isinstance(fixes, FixBatch) else (fix.row() for fix in fixes)
+        for row in rows:
             self._rows += 1
-            row = {**fix.row(), **(extra or {})}
+            if extra:
+                row = {**row, **extra}
             if self.fmt == "csv":
                 self._csv.writerow({k: spreadsheet_safe(v) for k, v in row.items()})
             else:

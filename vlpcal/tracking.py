@@ -37,7 +37,7 @@ import numpy as np
 
 from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode
 from .deployment import Deployment
-from .detection import detect_several
+from .detection import detect_frame
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -93,6 +93,9 @@ class _Ray:
     t: float
     camera: int
     xy: np.ndarray  #: undistorted normalised image coordinates
+    #: its two equations on the LED's position X, ``a @ X = y`` (see :meth:`Tracker._solve`)
+    a: np.ndarray = None
+    y: np.ndarray = None
 
 
 @dataclass
@@ -136,6 +139,7 @@ class Tracker:
         self._R = np.stack([c.R for c in self.cameras])
         self._C = np.stack([c.center for c in self.cameras])
         self._f = np.array([0.5 * (c.fx + c.fy) for c in self.cameras])
+        self._axis_c = np.einsum("ij,ij->i", self._R[:, 2], self._C)  #: R₂·C per camera
         self.tracks: list[_Track] = []
         self._pending: list[_Ray] = []
         self._next = 1
@@ -152,9 +156,9 @@ class Tracker:
         """A camera's frame (JPEG bytes or an image array) captured at ``t`` s: its spots are
         found and the tracks updated; returns the rows now complete."""
         cam = self.cameras[self._index[camera_id]]
-        uv = detect_several([frame], self.spots, self.deployment.detector,
-                            self.deployment.detector_settings, shape=(cam.height, cam.width))
-        return self.update_spots(camera_id, t, uv[0])
+        uv, _ = detect_frame(frame, self.spots, self.deployment.detector,
+                             self.deployment.detector_settings, shape=(cam.height, cam.width))
+        return self.update_spots(camera_id, t, uv)
 
     def update_spot(self, camera_id: str, t: float, uv) -> list[TrackUpdate]:
         """As :meth:`update`, from a spot already found (px; None: the camera saw no LED)."""
@@ -167,7 +171,7 @@ class Tracker:
         self._drop_lost(t, out)
         uvs = np.asarray(uvs, float).reshape(-1, 2)
         uvs = uvs[np.isfinite(uvs).all(axis=1)] - self._offset[k]
-        rays = [_Ray(t, k, xy) for xy in self.cameras[k].normalise(uvs)] if len(uvs) else []
+        rays = self._rays(k, t, uvs)
         claims = self._claim(k, t, uvs)
         for j, ray in enumerate(rays):
             track = claims.get(j)
@@ -181,6 +185,17 @@ class Tracker:
         if self.codes:
             self._blink(k, t, {id(tr) for tr in claims.values()})
         return out
+
+    def _rays(self, k: int, t: float, uvs) -> list[_Ray]:
+        """Camera ``k``'s spots (px) at ``t`` as rays, each with its two equations on the LED's
+        position, ``(R₀ − x R₂)·(X − C) = 0`` and ``(R₁ − y R₂)·(X − C) = 0``."""
+        if not len(uvs):
+            return []
+        xy = self.cameras[k].normalise(uvs)
+        R, C = self._R[k], self._C[k]
+        a = np.stack([R[0] - xy[:, :1] * R[2], R[1] - xy[:, 1:] * R[2]], axis=1)
+        y = a @ C
+        return [_Ray(t, k, xy[j], a[j], y[j]) for j in range(len(xy))]
 
     def finish(self) -> list[TrackUpdate]:
         """The rows still waiting for the rest of their window (the stream ended)."""
@@ -418,18 +433,17 @@ class Tracker:
         determine them."""
         if not rays:
             return None, np.inf, None
-        k = np.fromiter((r.camera for r in rays), int, len(rays))
-        xy = np.array([r.xy for r in rays])
-        tau = np.fromiter((r.t for r in rays), float, len(rays)) - t0
-        R = self._R[k]
-        rows = np.concatenate([R[:, 0] - xy[:, :1] * R[:, 2], R[:, 1] - xy[:, 1:] * R[:, 2]])
-        C = np.concatenate([self._C[k], self._C[k]])
-        axis = np.concatenate([R[:, 2], R[:, 2]])
-        ff = np.concatenate([self._f[k], self._f[k]]) / self.pixel_sigma
-        tt = np.concatenate([tau, tau])
-        A = rows if order == 0 else np.hstack([rows, rows * tt[:, None],
-                                              rows * (0.5 * tt * tt)[:, None]])
-        y = np.einsum("ij,ij->i", rows, C)
+        m = len(rays)
+        k = np.fromiter((r.camera for r in rays), int, m).repeat(2)
+        rows = np.concatenate([r.a for r in rays])  # 2m×3, each ray's two equations
+        y = np.concatenate([r.y for r in rays])
+        tt = (np.fromiter((r.t for r in rays), float, m) - t0).repeat(2)
+        axis, along, ff = self._R[k, 2], self._axis_c[k], self._f[k] / self.pixel_sigma
+        if order == 0:
+            A, P = rows, None
+        else:  # the position at each ray's time is P @ (a, b, c) per axis
+            P = tt[:, None] ** _POWERS * _HALF_SQUARE
+            A = (P[:, :, None] * rows[:, None, :]).reshape(2 * m, 9)
         D, b = np.zeros(A.shape[1]), np.zeros(A.shape[1])  # the priors, diagonal
         if order == 2:
             D[6:] = 1.0 / self.acceleration ** 2
@@ -440,45 +454,51 @@ class Tracker:
                 b[:3] += pos / s_pos ** 2
                 b[3:6] += vel / s_vel ** 2
         if guess is not None:
-            depth = np.einsum("ij,ij->i", axis, np.asarray(guess, float) - C)
-            if (depth <= 0).any():
+            depth = axis @ np.asarray(guess, float) - along
+            if not (depth > 0).all():
                 return None, np.inf, None
             w2 = (ff / depth) ** 2
             passes = 1
         else:
             w2, passes = np.ones(len(A)), 2
-        fit = N = None
+        fit = cov = None
         for _ in range(passes):
             Aw = A * w2[:, None]
             N = Aw.T @ A
-            N[np.diag_indices_from(N)] += D
-            fit = _solve_posed(N, Aw.T @ y + b)
+            N.flat[::len(N) + 1] += D
+            fit, cov = _solve_posed(N, Aw.T @ y + b)
             if fit is None:
                 return None, np.inf, None
-            X = fit[:3] + (fit[3:6] * tt[:, None] + 0.5 * fit[6:9] * (tt * tt)[:, None]
-                           if order == 2 else 0.0)
-            depth = np.einsum("ij,ij->i", axis, X - C)
-            if (depth <= 0).any():
+            if P is None:
+                depth = axis @ fit - along
+            else:  # the LED at each ray's time
+                depth = np.einsum("ij,ij->i", axis, P @ fit.reshape(3, 3)) - along
+            if not (depth > 0).all():
                 return None, np.inf, None
             if passes == 2:
                 w2 = (ff / depth) ** 2
         resid = (A @ fit - y) * np.sqrt(w2) * self.pixel_sigma
-        return fit, float(np.sqrt(np.mean(resid ** 2))), np.linalg.inv(N)
+        return fit, float(np.sqrt(resid @ resid / len(resid))), cov
+
+
+#: a ray's time τ → the factors (1, τ, τ²/2) of position, velocity and acceleration
+_POWERS, _HALF_SQUARE = np.arange(3.0), np.array([1.0, 1.0, 0.5])
 
 
 def _solve_posed(N, rhs):
-    """``N⁻¹ rhs`` when the normal matrix ``N`` determines every unknown, else None: its
-    Cholesky factor, with the unknowns scaled to unit information, has no pivot below 1e-6 of
-    the largest (a relative test: metres, seconds and pixels alike)."""
-    d = np.sqrt(np.diag(N))
+    """``(N⁻¹ rhs, N⁻¹)`` when the normal matrix ``N`` determines every unknown, else
+    ``(None, None)``: its Cholesky factor, with the unknowns scaled to unit information, has no
+    pivot below 1e-6 of the largest (a relative test: metres, seconds and pixels alike)."""
+    d = np.sqrt(N.diagonal())
     if not (d > 0).all():
-        return None
-    scaled = N / d[:, None] / d[None, :]
+        return None, None
+    dd = d[:, None] * d
+    scaled = N / dd
     try:
-        L = np.linalg.cholesky(scaled)
+        piv = np.linalg.cholesky(scaled).diagonal()
     except np.linalg.LinAlgError:
-        return None
-    piv = np.abs(np.diag(L))
+        return None, None
     if not piv.min() > 1e-6 * piv.max():
-        return None
-    return np.linalg.solve(scaled, rhs / d) / d
+        return None, None
+    cov = np.linalg.inv(scaled) / dd
+    return cov @ rhs, cov

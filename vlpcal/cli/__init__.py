@@ -12,9 +12,10 @@ calls the layers below.
 
 Heavy modules (cv2, scipy, matplotlib) are imported inside commands, so ``vlpcal --help``
 starts fast.
+
+Each command's module is imported when that command runs (:data:`.common.COMMANDS`).
 """
 
-from . import demo, interchange, locate, plan, show, survey, track  # noqa: F401  (registers)
 from .common import UserError, main
 
 __all__ = ["UserError", "main"]

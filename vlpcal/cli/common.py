@@ -36,9 +36,27 @@ def _stop_on_signals() -> None:
             signal.signal(getattr(signal, name), interrupt)
 
 
+#: each command → the module of :mod:`vlpcal.cli` that defines it, imported when the command
+#: is asked for: one command's start does not pay for every other's imports
+COMMANDS = {"demo": "demo", "simulate": "demo", "plan": "plan", "check": "plan",
+            "survey": "survey", "locate": "locate", "track": "track", "export": "interchange",
+            "import": "interchange", "show": "show"}
+
+
 class OneLineErrors(click.Group):
     """A wrong option value (a folder given for a file, a missing file) is a user's mistake
-    like any other: one line naming the option and where to look, not a usage block."""
+    like any other: one line naming the option and where to look, not a usage block.
+    Commands are loaded on demand (:data:`COMMANDS`)."""
+
+    def list_commands(self, ctx):
+        return sorted(set(COMMANDS) | set(self.commands))
+
+    def get_command(self, ctx, name):
+        if name not in self.commands and name in COMMANDS:
+            import importlib
+
+            importlib.import_module(f"{__package__}.{COMMANDS[name]}")
+        return self.commands.get(name)
 
     def invoke(self, ctx):
         import warnings

@@ -204,13 +204,9 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
                            hidden=quiet, show_pos=True) as bar:
         for s in range(0, len(ids), batch):
             chunk = ids[s:s + batch]
-            sets = []
-            for fid in chunk:
-                fs = {}
-                for cid in loc.camera_ids:
-                    if (fid, cid) in folder.files:  # unreadable: b"", a corrupt frame
-                        fs[cid] = folder.frame(fid, cid)
-                sets.append(fs)
+            # unreadable: b"", a corrupt frame
+            sets = [{cid: folder.frame(fid, cid) for cid in loc.camera_ids
+                     if (fid, cid) in folder.files} for fid in chunk]
             fixes = loc.locate_batch(sets, chunk)
             statuses.update(fixes.counts())
             writer.write(fixes)
