@@ -266,6 +266,61 @@ def test_spots_published_by_simulated_cameras_are_located(broker, tmp_path):
         np.median(off), np.median(np.abs(X[:, 2] - 0.15)))
 
 
+def test_track_follows_published_spots_at_once_and_publishes_each_row(broker, tmp_path):
+    """vlpcal track --spots --lag 0: each spot message's row as it comes (the window ending at
+    it), published and written; the rows follow a robot at 1 m/s (unsynchronised cameras, which
+    grouping by time cannot place within centimetres at that speed)."""
+    import csv
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.streams import robot_path
+    from vlpcal.sim.writers import write_deployments
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    write_deployments(scene, tmp_path)
+    listen = Listener(broker.url("out"))
+    run = [sys.executable, "-m", "vlpcal"]
+    trk = subprocess.Popen(run + ["track", "-d", str(tmp_path / "truth.yaml"), "--spots",
+                                  broker.url("lab"), "--out", str(tmp_path / "t.csv"),
+                                  "--duration", "6", "--lag", "0", "--publish",
+                                  broker.url("out")],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(1.5)  # subscribed
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--publish",
+                                broker.url("lab"), "--seconds", "3", "--robot-speed", "1"],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert "with the LED" in res.stderr
+    time.sleep(0.3)
+    assert trk.poll() is None
+    during = list(csv.DictReader(open(tmp_path / "t.csv")))
+    _, err = trk.communicate(timeout=60)
+    assert trk.returncode == 0, err
+    rows = list(csv.DictReader(open(tmp_path / "t.csv")))
+    assert len(during) > 30 and len(rows) >= len(during)  # written as they came
+    time.sleep(0.3)
+    got = listen.on("/fixes/T1") + [m for tp, m, _ in listen.messages
+                                    if "/fixes/" in tp and not tp.endswith("/T1")]
+    assert sorted((round(m["t"], 6), m["led"]) for m in got) == sorted(
+        (float(r["t"]), r["led"]) for r in rows)
+    listen.close()
+    ok = [r for r in rows if r["status"] == "ok"]
+    assert len(ok) > 0.8 * len(rows), err
+    X = np.array([[float(r[c]) for c in "xyz"] for r in ok])
+    curve = robot_path(scene, 1.0)(np.linspace(0, 60, 60001))
+    off = np.linalg.norm(X[:, None, :2] - curve[None, :, :2], axis=2).min(axis=1)
+    assert np.median(off) < 0.004 and np.median(np.abs(X[:, 2] - 0.15)) < 0.006, (
+        np.median(off), np.median(np.abs(X[:, 2] - 0.15)))
+    speed = np.linalg.norm([[float(r[c]) for c in ("vx", "vy")] for r in ok], axis=1)
+    assert abs(np.median(speed) - 1.0) < 0.2  # its velocity too
+    assert "spot messages" in err and "T1" in err
+
+
 def test_two_zone_locators_give_the_site_locators_fixes_and_keep_the_leds_id(broker,
                                                                                tmp_path):
     """A line of five cameras split into two zones (C2 and C3 on the border, in both): one

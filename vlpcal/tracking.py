@@ -8,7 +8,8 @@ quadratic — position, velocity, acceleration at the window's middle — fitted
 to every ray in the window, in pixels (the linear form of N-view triangulation, each ray's rows
 weighted by its pixels per metre). A frame's row is the fit of the window centred on its
 capture time, so it is written half a window after the frame arrives (:data:`WINDOW` frame
-periods in all).
+periods in all); with ``lag`` 0 the window ends at the frame and its row is written at once
+(real time, at a larger error).
 
 - a spot farther from the track's extrapolated position than :data:`GATE_SIGMAS` of its
   expected scatter is not the LED — a reflection, a lamp — and is not used;
@@ -128,8 +129,12 @@ class Tracker:
 
     def __init__(self, deployment: Deployment, period: float = 1 / 30,
                  acceleration: float = ACCELERATION, pixel_sigma: float = PIXEL_SIGMA,
-                 spots: int | None = None):
+                 spots: int | None = None, lag: float | None = None):
         self.deployment = deployment
+        #: s: how long after a frame's capture its row is written (None: half the window, the
+        #: smoothest; 0: at once, the window then ending at the frame — for robots that steer
+        #: by it, at a larger error)
+        self.lag = lag
         self.period, self.acceleration, self.pixel_sigma = period, acceleration, pixel_sigma
         self.cameras = list(deployment.cameras)
         self._index = {c.id: k for k, c in enumerate(self.cameras)}
@@ -184,6 +189,8 @@ class Tracker:
                 self._start(ray)
         if self.codes:
             self._blink(k, t, {id(tr) for tr in claims.values()})
+        if not self._lag:  # rows at once: this frame's too
+            out += self._due(t)
         return out
 
     def _rays(self, k: int, t: float, uvs) -> list[_Ray]:
@@ -210,14 +217,18 @@ class Tracker:
     def half(self) -> float:
         return 0.5 * WINDOW * self.period
 
+    @property
+    def _lag(self) -> float:
+        return self.half if self.lag is None else min(max(self.lag, 0.0), self.half)
+
     def _due(self, now: float) -> list[TrackUpdate]:
         """Rows whose window has passed by ``now``."""
         out = []
         for tr in self.tracks:
             if tr.tentative:  # its rows wait until it is confirmed
                 continue
-            ready = [t for t in tr.due if t <= now - self.half]
-            tr.due = [t for t in tr.due if t > now - self.half]
+            ready = [t for t in tr.due if t <= now - self._lag]
+            tr.due = [t for t in tr.due if t > now - self._lag]
             out += [self._row(tr, t) for t in ready]
             tr.rays = [r for r in tr.rays if r.t >= now - 4 * self.half]
         return sorted(out, key=lambda u: u.t)
@@ -390,7 +401,8 @@ class Tracker:
         cams: list = []
         guess = self._extrapolated(tr, t)[0]
         for reach in (self.half, 0.5 * self.half):  # a window the path does not fit: halved
-            rays = [r for r in tr.rays if abs(r.t - t) <= reach]
+            ahead = min(self._lag, reach)  # the window reaches this far past t (its lag)
+            rays = [r for r in tr.rays if t - 2 * reach + ahead <= r.t <= t + ahead]
             cams = sorted({r.camera for r in rays})
             if len(cams) < 2:
                 break

@@ -142,17 +142,19 @@ def _publish_spots(profile, seed, url, speed, seconds) -> None:
     target = parse_mqtt(url, "--publish")
     scene = make_scene(profile, seed)
     events = spot_schedule(scene, robot_path(scene, speed, seed=seed), seconds, seed=seed)
-    click.echo(f"{profile.name}: {len(scene.true)} cameras publishing {len(events)} spots of a "
-               f"robot at {speed:g} m/s over {seconds:g} s on {target.shown()}/spots/…",
-               err=True)
+    seen = sum(u == u for _, _, u, _ in events)
+    click.echo(f"{profile.name}: {len(scene.true)} cameras publishing {len(events)} frames' "
+               f"spots ({seen} with the LED) of a robot at {speed:g} m/s over {seconds:g} s on "
+               f"{target.shown()}/spots/…", err=True)
     try:
         res = play_spots(target, events, say=lambda m: click.echo(m, err=True))
     except MqttError as e:
         raise UserError(f"--publish {e}") from None
     unsent = len(events) - res["sent"]
-    click.echo(f"published {res['sent']} spots (p99 {res['late_p99_ms']:.1f} ms behind "
-               "schedule)" + (f"; {unsent} of the {len(events)} not sent (the broker went "
-                              "away)" if unsent else ""), err=True)
+    click.echo(f"published {res['sent']} spot messages, {res['spots']} with the LED (p99 "
+               f"{res['late_p99_ms']:.1f} ms behind schedule)"
+               + (f"; {unsent} of the {len(events)} not sent (the broker went away)"
+                  if unsent else ""), err=True)
 
 
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import click
 
 from .common import Finite, UserError, _load_deployment, _output_file, main
-from .mqtt import mqtt_options, open_publisher, publisher_summary
+from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary
 
 #: camera frames read and detected at once, at most — and at most this many bytes of them
 BLOCK, BLOCK_BYTES = 2048, 64 << 20
@@ -22,9 +22,16 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
               help="Live source per camera instead of --frames: an MJPEG URL (ESP32-CAM: "
                    "http://IP:81/stream; its X-Timestamp is used) or a video device. Repeat "
                    "for each camera.")
+@click.option("--spots", "spots_url", default=None, metavar="mqtt://…/PREFIX",
+              help="Instead of frames: the spots cameras publish on PREFIX/spots/<camera_id> "
+                   "({\"t\": capture time, UTC s, \"u\": px, \"v\": px}; docs/mqtt.md).")
 @click.option("--duration", type=Finite(0, 1e7, min_open=True), default=None,
               help="Live: stop after this many seconds.  [default: until Ctrl-C or every "
                    "camera stops]")
+@click.option("--lag", type=Finite(0, 60), default=None,
+              help="Seconds after a frame's capture its row is written: 0 writes each row as "
+                   "its frame comes (the window then ends at it: for a robot that steers by "
+                   "it, at a larger error).  [default: half the fit's window, the smoothest]")
 @click.option("--leds", "spots", type=click.IntRange(1, 64), default=None,
               help="The most LEDs in view (spots looked for in each frame).  [default: the "
                    "deployment's leds: block's count, else 1]")
@@ -34,8 +41,8 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
               help="The cameras' frame rate.  [default: from times.csv, the slowest camera's]")
 @mqtt_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
-def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, publish, qos, ca_file,
-          quiet):
+def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots, out, fps,
+          publish, qos, ca_file, quiet):
     """Track moving LEDs from cameras that are not synchronised.
 
     Each camera frame is a ray at its own capture time; the LED's path over a short window is
@@ -47,18 +54,20 @@ def track(deployment_path, frames_dir, cameras, duration, spots, out, fps, publi
 
     Example: vlpcal track -d deployment.yaml --frames streams/ --out tracks.csv
     """
-
-
-
     dep = _load_deployment(deployment_path)
-    if bool(frames_dir) == bool(cameras):
-        raise UserError("give either --frames DIR or --camera ID=SOURCE … (one per camera)")
+    if sum(map(bool, (frames_dir, cameras, spots_url))) != 1:
+        raise UserError("give one of --frames DIR, --camera ID=SOURCE … (one per camera) or "
+                        "--spots mqtt://…")
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
     try:
-        _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet,
-               publisher)
+        if spots_url:
+            _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"), ca_file,
+                         duration, lag, spots, out, fps, quiet, publisher)
+        else:
+            _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out, fps,
+                   quiet, publisher)
     finally:
         if publisher:
             publisher.close()
@@ -76,7 +85,7 @@ def _published(publisher, rows, utc: float = 0.0):
     return rows
 
 
-def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps, quiet,
+def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out, fps, quiet,
            publisher) -> None:
     import sys
 
@@ -86,7 +95,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps,
     from ..tracking import Tracker
 
     if cameras:
-        _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
+        _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
                     publisher)
         return
     if duration is not None:
@@ -117,7 +126,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, spots, out, fps,
     out = _output_file(out, inputs=(deployment_path, frames_dir, *held), what="the tracks")
     from ..detection import detect_several
 
-    tracker = Tracker(dep, period=1.0 / fps, spots=spots)
+    tracker = Tracker(dep, period=1.0 / fps, spots=spots, lag=lag)
     cams = {c.id: c for c in dep.cameras}
     rows = []
     missing = 0
@@ -201,7 +210,7 @@ def _summary(rows) -> str:
     return (f"{len(rows)} rows, {ok} placed by two cameras or more, tracks {shown or '–'}")
 
 
-def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
+def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
                 publisher=None) -> None:
     """``vlpcal track --camera …``: frames as they come, each at its capture time on the
     host's clock (X-Timestamp through each camera's clock estimate, else arrival), fed to
@@ -221,7 +230,7 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
 
     t_end = time.monotonic() + duration if duration else None
     frames = TimedFrames(sources, deadline=t_end, on_event=say)
-    tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots)
+    tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
     utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
     live = _LiveTracks(out, utc)  # row by row, flushed: a reader can follow it
     rows: list = []
@@ -259,6 +268,69 @@ def _track_live(dep, deployment_path, cameras, duration, spots, out, fps, quiet,
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
     say(f"{n} camera frames → {_summary(rows)} → {out}")
+
+
+def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, out, fps, quiet,
+                 publisher) -> None:
+    """``vlpcal track --spots mqtt://…``: the spots cameras publish, each at its capture time
+    (UTC s), fed to the tracker as they come; rows in UTC seconds. Each camera's message of a
+    frame without a spot (``{"t": …}``) tells the tracker that camera saw nothing then."""
+    import time
+
+    from ..mqtt import MqttError, SpotSubscriber
+    from ..tracking import Tracker
+
+    out = _output_file(out, inputs=(deployment_path,) + ((ca_file,) if ca_file else ()),
+                       what="the tracks")
+
+    def say(msg):
+        if not quiet:
+            click.echo(msg, err=True)
+
+    try:
+        sub = SpotSubscriber(target, [c.id for c in dep.cameras], ca_file,
+                             sizes={c.id: (c.width, c.height) for c in dep.cameras})
+    except MqttError as e:
+        raise UserError(f"--spots {e}") from None
+    say(f"listening for spots on {target.shown()}/spots/+")
+    tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
+    live = _LiveTracks(out, 0.0)
+    t_end = time.monotonic() + duration if duration else None
+    rows: list = []
+    n, last, gaps = 0, {}, {}
+    try:
+        while not (t_end and time.monotonic() > t_end):
+            got = sub.get(timeout=0.2)
+            if got is None:
+                continue
+            t, cid, uv = got
+            made = _published(publisher, tracker.update_spots(cid, t, uv))
+            live.write(made)
+            rows += made
+            n += 1
+            if cid in last and t > last[cid]:  # each camera's frame interval, a running mean
+                g = t - last[cid]  # (a gap of dropped frames counts at most thrice)
+                gaps[cid] = g if cid not in gaps else 0.9 * gaps[cid] + 0.1 * min(g, 3 * gaps[cid])
+            last[cid] = t
+            if fps is None and gaps and n % 50 == 0:  # the slowest camera's, once it shows
+                tracker.period = min(max(gaps.values()), 10.0)
+    except KeyboardInterrupt:
+        say("stopped (Ctrl-C): writing what was tracked")
+    finally:
+        sub.close()
+        made = _published(publisher, tracker.finish())
+        live.write(made)
+        rows += made
+        live.close()
+    if not n:
+        live.remove()
+        raise UserError(f"no spots on {target.shown()}/spots/+ from any camera of "
+                        f"{deployment_path}, nothing tracked")
+    say(f"{n} spot messages"
+        + (f", {sub.bad} not spots (skipped)" if sub.bad else "")
+        + (f", {sub.dropped} dropped (the tracker fell behind)" if sub.dropped else "")
+        + (f"; the broker went away {sub.disconnects} time(s)" if sub.disconnects else "")
+        + f" → {_summary(rows)} → {out}")
 
 
 class _LiveTracks:
