@@ -8,14 +8,13 @@ noise) where it sees the LED, else ``{"t": …}`` alone — one Python process p
 schedule. ``vlpcal locate --spots … --publish …`` (one process; then ``--zone west`` and
 ``--zone east``, the border cameras in both) locates and publishes; a subscriber in this process
 records when each fix arrives. Then ``vlpcal track --spots … --lag 0`` (one process), which
-writes each spot's row as it comes, its window ending at that spot. Figures: spot messages the locators got against those sent,
-fixes published against received (lost), sustained fixes/s, and the latency from the capture
-time a fix carries (its spots' mean capture time, where a fix of spots of different moments
-stands; a track row's, its newest spot's) to its arrival at a subscriber (p50, p99) — two
-broker hops and the locator between; and the 3D error of the fixes placed by two cameras or
-more against where the LED was at their time.
-One core of this 2-core machine each for the cameras and a locator (two zones share the second
-core).
+writes each spot's row as it comes, its window ending at that spot. Figures: spot messages the
+locators got against those sent, fixes published against received (lost), sustained fixes/s,
+the latency from the capture time a fix carries (its spots' mean capture time, where a fix of
+spots of different moments stands; a track row's, its newest spot's) to its arrival at a
+subscriber (p50, p99) — two broker hops and the locator between — and the 3D error of the fixes
+placed by two cameras or more against where the LED was at their time. One core of this 2-core
+machine each for the cameras and a locator (two zones share the second core).
 
 Prints a table; writes benchmarks/out/mqtt.json.
 

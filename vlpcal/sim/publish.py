@@ -77,4 +77,5 @@ def play_spots(target, events, qos: int = 0, say=lambda msg: None) -> dict:
         client.loop_stop()
     if not sent and events:
         raise MqttError(f"{target.shown()}: nothing could be published")
-    return {"sent": sent, "spots": spots, "late_p99_ms": float(np.percentile(late, 99) * 1000) if late else 0.0}
+    return {"sent": sent, "spots": spots,
+            "late_p99_ms": float(np.percentile(late, 99) * 1000) if late else 0.0}
