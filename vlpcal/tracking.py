@@ -155,6 +155,9 @@ class Tracker:
         dark = max((max(map(len, (c.pattern * 2).split("1"))) / c.bit_rate
                     for c in self.codes), default=0.0)
         self._lost = LOST_PERIODS * period + dark
+        # the room's outline, for the fits that are not surely inside it: made now, as its
+        # first use mid-stream would hold a live frame for the geometry library's import
+        deployment.outside(np.zeros((2, 3)), 0.0)
 
     # -- the interface ---------------------------------------------------------------------
     def update(self, camera_id: str, t: float, frame) -> list[TrackUpdate]:
