@@ -429,3 +429,35 @@ def test_fixes_over_tls_with_the_brokers_ca_and_refused_with_another(tls_broker,
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "certificate does not pass --ca-file" in res.stderr
     assert not (tmp_path / "g.csv").exists()
+
+
+def test_a_port_nobody_listens_on_is_one_line_at_once(tmp_path):
+    """A broker that is not there (connection refused) is said at once, not after the
+    connect timeout; one line, exit 2, nothing written."""
+    import socket
+    import subprocess
+    import sys
+
+    from vlpcal.mqtt import CONNECT_TIMEOUT
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    dep = tmp_path / "d.yaml"
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import write_deployments
+
+    write_deployments(make_scene(get_profile("paper-2024"), 0), tmp_path)
+    dep = tmp_path / "truth.yaml"
+    for cmd in (["locate", "-d", str(dep), "--spots", f"mqtt://127.0.0.1:{port}/lab"],
+                ["track", "-d", str(dep), "--spots", f"mqtt://127.0.0.1:{port}/lab"]):
+        t0 = time.monotonic()
+        res = subprocess.run([sys.executable, "-m", "vlpcal", *cmd, "--out",
+                              str(tmp_path / "out.csv")], capture_output=True, text=True,
+                             timeout=60)
+        assert res.returncode == 2, res.stderr
+        assert "cannot connect" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+        assert time.monotonic() - t0 < CONNECT_TIMEOUT / 2
+        assert not (tmp_path / "out.csv").exists()

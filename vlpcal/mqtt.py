@@ -144,6 +144,14 @@ def _connect(client, target: Target, connected: threading.Event, refused: list,
     password) or no answer is an :class:`MqttError`."""
     if target.tls:
         _check_tls(target, ca_file, timeout)
+    else:  # a port nobody listens on says so at once (the client would retry until timeout)
+        import socket
+
+        try:
+            socket.create_connection((target.host, target.port), timeout=timeout).close()
+        except OSError as e:
+            raise MqttError(f"{target.shown()}: cannot connect ({e.strerror or e}): is the "
+                            "broker running, and are the host and port right?") from None
     try:
         client.connect_async(target.host, target.port, keepalive=30)
     except (OSError, ValueError) as e:
