@@ -197,6 +197,22 @@ def test_one_frame_path_equals_the_batch(rng):
             assert why is None
             np.testing.assert_allclose(one, batch[i], atol=1e-9, err_msg=f"frame {i}, k {k}")
     assert np.isfinite(batch[-10:, :2]).all()  # two LEDs found in each of the last frames
+    # frames that cannot be measured, and odd k: the same answers and reasons as the batch
+    tiny = np.full((15, 200), 20, np.uint8)
+    tiny[7, 100] = 200
+    huge = bytearray(frames[0])
+    sof = huge.find(b"\xff\xc0")
+    huge[sof + 5:sof + 9] = (60000).to_bytes(2, "big") * 2
+    odd = [sim.encode_jpeg(tiny), sim.encode_jpeg(np.full((120, 1), 20, np.uint8)),
+           bytes(huge), sim.encode_jpeg(np.full((240, 320), 20, np.uint8))[:500],
+           sim.encode_jpeg(np.full((8, 8), 20, np.uint8)), frames[0]]
+    for f in odd:
+        for shape in (None, (120, 160), (8, 8)):
+            for k in (0, 1, 2.5):
+                one, why = detect_frame(f, k, shape=shape)
+                many, whys = detect_several([f], k, shape=shape, reasons=True)
+                np.testing.assert_allclose(one, many[0], atol=1e-9)
+                assert why == whys[0], (shape, k, why, whys)
     good = frames[0]
     assert detect_frame(good[: len(good) // 2])[1] == CORRUPT
     assert detect_frame(b"not a jpeg")[1] == CORRUPT

@@ -558,6 +558,31 @@ def test_a_fifo_or_a_device_among_the_frames_is_a_corrupt_frame(tmp_path):
     assert rss is not None and rss < 500
 
 
+def test_a_folder_that_cannot_be_listed_is_named_and_hidden_files_are_not_frames(tmp_path):
+    """A link that loops among the frame folders is one line naming it (not the output);
+    a Mac's ._C1.jpg beside C1.jpg is no camera; in an asynchronous folder, a camera folder
+    that cannot be entered makes its frames corrupt, not a traceback."""
+    frames = tmp_path / "frames"
+    (frames / "f1").mkdir(parents=True)
+    for cid in ("C1", "C2"):
+        (frames / "f1" / f"{cid}.jpg").write_bytes(_jpeg())
+    (frames / "f1" / "._C1.jpg").write_bytes(b"\0" * 4096)
+    out = tmp_path / "f.csv"
+    code, _, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", frames, "--out", out)
+    assert code == 0 and "._C1" not in out.read_text(), err
+    (frames / "loop").symlink_to("loop")
+    out.unlink()
+    code, _, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", frames, "--out", out)
+    assert code == 2 and len(err) == 1, err
+    assert "loop: cannot be read" in err[0] and "f.csv" not in err[0] and not out.exists()
+    from vlpcal.datasets import AsyncFrames
+
+    (tmp_path / "async").mkdir()
+    (tmp_path / "async" / "C2").symlink_to("C2")
+    folder = AsyncFrames(tmp_path / "async", [(0.0, "C2", "1")], ["C2"])
+    assert folder.frame("C2", "1") == b"" and folder.frame("C9", "1") is None
+
+
 # -- live sources that trickle, stall or never end -------------------------------------------------
 
 @pytest.fixture

@@ -65,7 +65,9 @@ def test_spot_messages_are_read_or_counted_bad():
     assert _spots_of(b'{"t": 2.5}') == (2.5, [])
     for bad in (b'{"t": "179", "u": 1, "v": 1}', b'{"t": true, "u": 1, "v": 1}',
                 b'{"t": 1e308, "u": 1, "v": 1}', b'{"t": -5, "u": 1, "v": 1}', b'{"t": 0}',
-                b'{"t": 1, "u": 1e400, "v": 1}', b'{"t": 1, "u": 1, "v": 1, "x": 2}'):
+                b'{"t": 1, "u": 1e400, "v": 1}', b'{"t": 1, "u": 1, "v": 1, "x": 2}',
+                b'{"t": 1' + b"0" * 400 + b', "u": 1, "v": 2}', b'{"t": 1' + b"0" * 400 + b"}",
+                b'[{"t": 1, "u": 1, "v": 2}, {"t": 2, "u": 3, "v": 4}]'):
         assert _spots_of(bad) is None, bad
     for bad in (b"", b"{", b'{"u": 1}', b'{"t": "x", "u": 1, "v": 1}', b'{"t": NaN, "u": 1, '
                 b'"v": 1}', b"[" * 5000 + b"]" * 5000, b'[]', b'"text"', b"x" * 5000):
@@ -319,6 +321,50 @@ def test_track_follows_published_spots_at_once_and_publishes_each_row(broker, tm
     speed = np.linalg.norm([[float(r[c]) for c in ("vx", "vy")] for r in ok], axis=1)
     assert abs(np.median(speed) - 1.0) < 0.2  # its velocity too
     assert "spot messages" in err and "T1" in err
+
+
+def test_track_spots_shrugs_off_hostile_messages(broker, tmp_path):
+    """A time of 400 digits, a capture an hour in the future, a frame of 64 spots, a list of
+    spots of two times: counted and skipped (or cut to the LEDs looked for); the spots that
+    follow are tracked as if they had not come."""
+    import subprocess
+    import sys
+
+    import paho.mqtt.client as mqtt
+
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import write_deployments
+
+    write_deployments(make_scene(get_profile("paper-2024"), 0), tmp_path)
+    run = [sys.executable, "-m", "vlpcal"]
+    trk = subprocess.Popen(run + ["track", "-d", str(tmp_path / "truth.yaml"), "--spots",
+                                  broker.url("lab"), "--out", str(tmp_path / "t.csv"),
+                                  "--duration", "5", "--lag", "0"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(1.5)
+    c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+    c.connect("127.0.0.1", broker.port)
+    c.loop_start()
+    now = time.time()
+    for payload in ('{"t": 1' + "0" * 400 + ', "u": 1, "v": 2}',
+                    json.dumps({"t": now + 3600, "u": 50, "v": 50}),
+                    json.dumps([{"t": now, "u": 5 + i, "v": 5 + i} for i in range(64)]),
+                    json.dumps([{"t": now, "u": 5, "v": 5}, {"t": now + 1, "u": 6, "v": 6}])):
+        c.publish("lab/spots/C1", payload).wait_for_publish()
+    c.disconnect()
+    c.loop_stop()
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--publish",
+                                broker.url("lab"), "--seconds", "2", "--robot-speed", "1"],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    _, err = trk.communicate(timeout=60)
+    assert trk.returncode == 0, err
+    assert "Traceback" not in err
+    assert "2 not spots (skipped)" in err and "1 captured in the future" in err, err
+    assert "1 held more spots than --leds 1" in err, err
+    rows = open(tmp_path / "t.csv").read().splitlines()
+    assert len(rows) > 30
 
 
 def test_two_zone_locators_give_the_site_locators_fixes_and_keep_the_leds_id(broker,

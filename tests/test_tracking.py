@@ -312,3 +312,35 @@ def test_track_refuses_times_that_are_not_seconds_and_says_which_frames_it_could
     res = CliRunner().invoke(cli, ["track", "-d", str(tmp_path / "d.yaml"), "--frames",
                                    str(tmp_path / "s"), "--out", str(tmp_path / "t.csv")])
     assert res.exit_code == 0 and "not whole JPEGs (not used)" in res.output, res.output
+
+
+def test_the_tracker_takes_no_nonsense(rng):
+    """A frame from long ago is counted late, not used; a frame of 64 spots is searched for
+    the tracker's own number; a lag or period that is no time is refused; the time a track
+    survives without a spot follows the frame period as it is learnt."""
+    dep = square_rig()
+    with pytest.raises(ValueError):
+        Tracker(dep, lag=float("nan"))
+    with pytest.raises(ValueError):
+        Tracker(dep, lag=-1.0)
+    for period in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError):
+            Tracker(dep, period=period)
+    path = circle(1.5)
+    events = streams(dep, path, 3.0, rng)
+    tr = Tracker(dep, period=1 / 30)
+    rows = []
+    for t, cid, uv in events:
+        rows += tr.update_spot(cid, t, uv)
+    before = len(rows)
+    assert tr.update_spot("C1", events[-1][0] - 5.0, events[-1][2]) == [] and tr.late == 1
+    junk = rng.uniform(10, 110, (64, 2))
+    t0 = events[-1][0]
+    tr.update_spots("C2", t0 + 0.01, junk)  # one spot of the 64 is looked at, as a frame's
+    assert len(tr.tracks) <= 2
+    rows += tr.finish()
+    assert all(r.t >= 0 for r in rows[before:])
+    slow = Tracker(dep, period=1 / 30)
+    lost = slow._lost
+    slow.period = 1 / 2
+    assert slow._lost == pytest.approx(lost * 15)

@@ -392,19 +392,25 @@ def read_frames_folder(root) -> FramesFolder:
     if not root.is_dir():
         raise DatasetError(f"{root}: not a folder (expected <frame_id>/<camera_id>.jpg inside)")
     ids, cams, files = [], set(), {}
-    with os.scandir(root) as folders:  # scandir: a folder of 10⁴ sets lists in tens of ms
-        for d in folders:
-            if not d.name.startswith(".") and d.is_dir():
-                if not is_id(d.name):  # (the message only for a bad one: 10⁴ are fine)
-                    _check_id(d.name, f"{root / d.name}: frame id")
-                ids.append(d.name)
-                with os.scandir(d.path) as inside:
-                    for f in inside:
-                        if f.name.endswith(".jpg"):
-                            cid = f.name[:-4]
-                            if cid not in cams:
-                                cams.add(_check_id(cid, f"{f.path}: camera id"))
-                            files[(d.name, cid)] = f.path
+    where = root
+    try:
+        with os.scandir(root) as folders:  # scandir: a folder of 10⁴ sets lists in tens of ms
+            for d in folders:
+                where = root / d.name
+                if not d.name.startswith(".") and d.is_dir():
+                    if not is_id(d.name):  # (the message only for a bad one: 10⁴ are fine)
+                        _check_id(d.name, f"{where}: frame id")
+                    ids.append(d.name)
+                    with os.scandir(d.path) as inside:
+                        for f in inside:  # hidden files (._C1.jpg of a Mac) are not frames
+                            if f.name.endswith(".jpg") and not f.name.startswith("."):
+                                cid = f.name[:-4]
+                                if cid not in cams:
+                                    cams.add(_check_id(cid, f"{f.path}: camera id"))
+                                files[(d.name, cid)] = f.path
+    except OSError as e:
+        raise DatasetError(f"{where}: cannot be read ({e.strerror or e}); expected a folder of "
+                           "<frame_id>/<camera_id>.jpg") from None
     if not files:
         hint = (" — it looks like a survey bundle (points.csv): that goes to vlpcal survey "
                 "calibrate --survey" if (root / "points.csv").is_file() else "")
@@ -430,8 +436,16 @@ class AsyncFrames:
     camera_ids: list
 
     def frame(self, camera_id: str, frame_no: str) -> bytes | None:
+        """The frame's bytes; None if there is no such file, ``b""`` (a corrupt frame) if it
+        cannot be read."""
         path = self.root / camera_id / f"{frame_no}.jpg"
-        return read_frame(path) if path.is_file() else None
+        try:
+            os.stat(path)
+        except FileNotFoundError:
+            return None
+        except OSError:
+            return b""
+        return read_frame(path)
 
 
 def read_async_frames(root) -> AsyncFrames:

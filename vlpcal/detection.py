@@ -689,6 +689,9 @@ def _to_stack(frames, shape=None):
     n = len(frames)
     codes = np.zeros(n, np.int8)
     want = tuple(shape) if shape is not None else None
+    if want is not None and min(want) < MIN_SIZE:  # no spot can be measured in so small an image
+        codes[:] = [_REASON_CODE[MISSING if f is None else CORRUPT] for f in frames]
+        return None, codes
     # with the size known, decoded frames go straight into the stack; else they are collected
     stack = np.empty((n, *want), np.uint8) if want is not None else None
     images = {}
@@ -899,24 +902,22 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
     hundreds does in numpy calls (~0.6 ms). ``blob`` is measured here step by step on the
     frame itself (:func:`_detect_blob`'s steps, equal to it to rounding: tested); the other
     detectors go through the batch."""
-    out = np.full((max(1, int(k)), 2), np.nan)
+    k = max(1, int(k))
+    out = np.full((k, 2), np.nan)
     if method != "blob":
         uv, why = detect_several([frame], k, method, settings, shape, reasons=True)
         return uv[0], why[0]
-    if frame is None:
-        return out, MISSING
-    if isinstance(frame, (bytes, bytearray, memoryview)):
-        frame = bytes(frame)
-        size = jpeg_size(frame)
-        if size is not None and shape is not None and size != tuple(shape):
-            return out, WRONG_SIZE
-        img = decode_gray(frame, shape)
-    else:
-        img = as_gray(frame)
-    if img is None:
-        return out, CORRUPT
-    if shape is not None and img.shape != tuple(shape):
-        return out, WRONG_SIZE
+    # decoded and checked as a batch's frames are (the same reasons for the same frames)
+    want = tuple(shape) if shape is not None else None
+    if want is not None and min(want) < MIN_SIZE:
+        return out, CORRUPT  # no spot can be measured in so small an image
+    codes, images = np.zeros(1, np.int8), {}
+    with _QuietStderr():
+        stack = _decode_into([frame], codes, want,
+                             np.empty((1, *want), np.uint8) if want else None, images)
+    if codes[0]:
+        return out, _CODE_REASON[int(codes[0])]
+    img = stack[0] if stack is not None else images[0]
     if img.dtype != np.uint8 or not img.flags.c_contiguous:
         uv = detect_several(img[None], k, method, settings)[0]  # a float frame: the batch
         return uv, None

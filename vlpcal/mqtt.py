@@ -391,6 +391,12 @@ class SpotSubscriber:
         self._connected.set()
 
     def _on_message(self, client, userdata, msg):
+        try:
+            self._take(msg)
+        except Exception:  # whatever a message holds, the client's thread goes on listening
+            self.bad += 1
+
+    def _take(self, msg):
         cid = msg.topic.rsplit("/", 1)[-1]
         if cid not in self.camera_ids:
             self.unknown += 1
@@ -439,8 +445,11 @@ MAX_TIME = 1e10
 
 
 def _number(x) -> bool:
-    """A JSON number (not a string, not true/false), finite."""
-    return type(x) in (int, float) and math.isfinite(x)
+    """A JSON number (not a string, not true/false), finite as a float (an integer of 400
+    digits is not)."""
+    if type(x) is int:
+        return abs(x) < 2 ** 1023
+    return type(x) is float and math.isfinite(x)
 
 
 def _spots_of(payload: bytes):
@@ -466,6 +475,8 @@ def _spots_of(payload: bytes):
         tt, u, v = float(it["t"]), float(it["u"]), float(it["v"])
         if not (0 < tt < MAX_TIME and math.isfinite(u) and math.isfinite(v)):
             return None
-        t = tt if t is None else t
+        if t is not None and tt != t:  # one frame's spots: one capture time
+            return None
+        t = tt
         uv.append((u, v))
     return t, uv

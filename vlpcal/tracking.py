@@ -125,12 +125,22 @@ class Tracker:
     ``period``: the cameras' frame period, s (the slowest camera's); it sets the window, the
     start window and when a track is lost. ``spots``: the most spots a frame is searched for
     (default: one per LED of the deployment's ``leds:``, else 1). The deployment's detector and
-    pixel corrections apply as in :class:`~vlpcal.locator.Locator`."""
+    pixel corrections apply as in :class:`~vlpcal.locator.Locator`. Frames come in time order;
+    one older than the newest by more than half the window can no longer join its rows and is
+    counted (``late``), not used."""
 
     def __init__(self, deployment: Deployment, period: float = 1 / 30,
                  acceleration: float = ACCELERATION, pixel_sigma: float = PIXEL_SIGMA,
                  spots: int | None = None, lag: float | None = None):
+        import math
+
+        if not (math.isfinite(period) and period > 0):
+            raise ValueError(f"period: expected seconds > 0, got {period!r}")
+        if lag is not None and not (math.isfinite(lag) and lag >= 0):
+            raise ValueError(f"lag: expected seconds ≥ 0 (or None), got {lag!r}")
         self.deployment = deployment
+        self.late = 0  #: frames that came after the rows they belonged to were written
+        self._newest = -np.inf
         #: s: how long after a frame's capture its row is written (None: half the window, the
         #: smoothest; 0: at once, the window then ending at the frame — for robots that steer
         #: by it, at a larger error)
@@ -154,7 +164,7 @@ class Tracker:
         # a blinking LED is dark for its code's longest run of 0s: no spot then is no loss
         dark = max((max(map(len, (c.pattern * 2).split("1"))) / c.bit_rate
                     for c in self.codes), default=0.0)
-        self._lost = LOST_PERIODS * period + dark
+        self._dark = dark
         # the room's outline, for the fits that are not surely inside it: made now, as its
         # first use mid-stream would hold a live frame for the geometry library's import
         deployment.outside(np.zeros((2, 3)), 0.0)
@@ -173,12 +183,17 @@ class Tracker:
         return self.update_spots(camera_id, t, [] if uv is None else [uv])
 
     def update_spots(self, camera_id: str, t: float, uvs) -> list[TrackUpdate]:
-        """As :meth:`update`, from the spots already found (``K×2`` px; NaN rows: none)."""
+        """As :meth:`update`, from the spots already found (``K×2`` px; NaN rows: none; past
+        ``spots``, the first ones)."""
         k = self._index[camera_id]
+        if t < self._newest - self.half:
+            self.late += 1
+            return []
+        self._newest = max(self._newest, t)
         out = self._due(t)
         self._drop_lost(t, out)
         uvs = np.asarray(uvs, float).reshape(-1, 2)
-        uvs = uvs[np.isfinite(uvs).all(axis=1)] - self._offset[k]
+        uvs = uvs[np.isfinite(uvs).all(axis=1)][:self.spots] - self._offset[k]
         rays = self._rays(k, t, uvs)
         claims = self._claim(k, t, uvs)
         for j, ray in enumerate(rays):
@@ -219,6 +234,11 @@ class Tracker:
     @property
     def half(self) -> float:
         return 0.5 * WINDOW * self.period
+
+    @property
+    def _lost(self) -> float:
+        """s: a track without a spot this long is lost (the period's share follows it)."""
+        return LOST_PERIODS * self.period + self._dark
 
     @property
     def _lag(self) -> float:

@@ -31,7 +31,8 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
 @click.option("--lag", type=Finite(0, 60), default=None,
               help="Seconds after a frame's capture its row is written: 0 writes each row as "
                    "its frame comes (the window then ends at it: for a robot that steers by "
-                   "it, at a larger error).  [default: half the fit's window, the smoothest]")
+                   "it, at a larger error); at most half the window.  [default: half the "
+                   "fit's window (2 frame periods), the smoothest]")
 @click.option("--leds", "spots", type=click.IntRange(1, 64), default=None,
               help="The most LEDs in view (spots looked for in each frame).  [default: the "
                    "deployment's leds: block's count, else 1]")
@@ -274,7 +275,9 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
                  publisher) -> None:
     """``vlpcal track --spots mqtt://…``: the spots cameras publish, each at its capture time
     (UTC s), fed to the tracker as they come; rows in UTC seconds. Each camera's message of a
-    frame without a spot (``{"t": …}``) tells the tracker that camera saw nothing then."""
+    frame without a spot (``{"t": …}``) tells the tracker that camera saw nothing then. A spot
+    captured later than now by more than a track survives without spots is no camera's of now
+    (its clock is wrong) and is counted, not used."""
     import time
 
     from ..mqtt import MqttError, SpotSubscriber
@@ -287,23 +290,29 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         if not quiet:
             click.echo(msg, err=True)
 
+    live = _LiveTracks(out, 0.0)  # refused at once if the file is there
     try:
         sub = SpotSubscriber(target, [c.id for c in dep.cameras], ca_file,
                              sizes={c.id: (c.width, c.height) for c in dep.cameras})
     except MqttError as e:
+        live.close()
+        live.remove()
         raise UserError(f"--spots {e}") from None
     say(f"listening for spots on {target.shown()}/spots/+")
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
-    live = _LiveTracks(out, 0.0)
     t_end = time.monotonic() + duration if duration else None
     rows: list = []
-    n, last, gaps = 0, {}, {}
+    n, future, crowded, last, gaps = 0, 0, 0, {}, {}
     try:
         while not (t_end and time.monotonic() > t_end):
             got = sub.get(timeout=0.2)
             if got is None:
                 continue
             t, cid, uv = got
+            if t > time.time() + tracker._lost:
+                future += 1
+                continue
+            crowded += len(uv) > tracker.spots
             made = _published(publisher, tracker.update_spots(cid, t, uv))
             live.write(made)
             rows += made
@@ -326,9 +335,19 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         live.remove()
         raise UserError(f"no spots on {target.shown()}/spots/+ from any camera of "
                         f"{deployment_path}, nothing tracked")
-    say(f"{n} spot messages"
-        + (f", {sub.bad} not spots (skipped)" if sub.bad else "")
-        + (f", {sub.dropped} dropped (the tracker fell behind)" if sub.dropped else "")
+    say(f"{n} spot messages tracked"
+        + (f"; {crowded} held more spots than --leds {tracker.spots} (the first used)"
+           if crowded else "")
+        + (f"; {sub.bad} not spots (skipped)" if sub.bad else "")
+        + (f"; {sub.unknown} of cameras not in the deployment" if sub.unknown else "")
+        + (f"; {sub.stale} retained from before (skipped)" if sub.stale else "")
+        + (f"; {future} captured in the future by their cameras' clocks (skipped)"
+           if future else "")
+        + (f"; {tracker.late} came after their rows were written (skipped)"
+           if tracker.late else "")
+        + (f"; {sub.dropped} dropped (the tracker fell behind)" if sub.dropped else "")
+        + (f"; {sub.waiting} not tracked when the run ended (the tracker fell behind)"
+           if sub.waiting else "")
         + (f"; the broker went away {sub.disconnects} time(s)" if sub.disconnects else "")
         + f" → {_summary(rows)} → {out}")
 
