@@ -439,6 +439,10 @@ def test_two_zone_locators_give_the_site_locators_fixes_and_keep_the_leds_id(bro
     assert topics == {"out/fixes/L1"}
     site_rows = sum(1 for _ in csv.DictReader(open(tmp_path / "all.csv")))  # failed ones too
     assert len(listen.on("fixes/L1")) == site_rows + len(west) + len(east)
+    # each process its own status: the site's on out/status, a zone's on out/status/<zone>
+    status = {tp for tp, m, _ in listen.messages if "/status" in tp}
+    assert status == {"out/status", "out/status/west", "out/status/east"}, status
+    assert all(m["zone"] == "west" for m in listen.on("status/west"))
     listen.close()
 
 

@@ -176,8 +176,10 @@ class Publisher:
 
     def __init__(self, target: Target, status: dict, qos: int = 0, ca_file=None,
                  client_id: str | None = None, buffer: int = BUFFER,
-                 timeout: float = CONNECT_TIMEOUT):
+                 timeout: float = CONNECT_TIMEOUT, status_topic: str = "status"):
         self.target, self.qos = target, qos
+        #: under the prefix: ``status``, or ``status/<zone>`` for one of a site's zone processes
+        self.status_topic = status_topic
         self._status = dict(status)
         self._buffer: deque = deque()
         self._limit = buffer
@@ -196,7 +198,7 @@ class Publisher:
         self._ilock = threading.Lock()  # never held around a paho call (its callbacks take it)
         self.client = _client(target, client_id or f"vlpcal-{os.getpid()}-{time.time_ns()}",
                               ca_file)
-        self.client.will_set(self.topic("status"), json.dumps({**self._status,
+        self.client.will_set(self.topic(self.status_topic), json.dumps({**self._status,
                                                                "state": "offline"}),
                              qos=1, retain=True)
         self.client.on_connect = self._on_connect
@@ -291,7 +293,7 @@ class Publisher:
         payload = json.dumps({**self._status, "state": "online", "t": time.time()},
                              allow_nan=False)
         if self._connected.is_set():
-            self.client.publish(self.topic("status"), payload, qos=1, retain=True)
+            self.client.publish(self.topic(self.status_topic), payload, qos=1, retain=True)
 
     @property
     def held(self) -> int:
@@ -313,7 +315,7 @@ class Publisher:
             self._buffer.clear()
             self._inflight.clear()
         if self._connected.is_set():
-            info = self.client.publish(self.topic("status"),
+            info = self.client.publish(self.topic(self.status_topic),
                                        json.dumps({**self._status, "state": "stopped",
                                                    "t": time.time()}), qos=1, retain=True)
             try:
@@ -341,12 +343,15 @@ def fix_message(t: float, fix_row: dict) -> dict:
 
 
 def track_message(t: float, update) -> dict:
-    """A track update (:class:`~vlpcal.tracking.TrackUpdate`) as its MQTT message."""
-    return {"t": t, "led": update.led, "x": float(update.position[0]),
-            "y": float(update.position[1]), "z": float(update.position[2]),
-            "vx": float(update.velocity[0]), "vy": float(update.velocity[1]),
-            "vz": float(update.velocity[2]), "sigma_m": update.sigma_m,
-            "cameras": update.cameras, "status": update.status}
+    """A track update (:class:`~vlpcal.tracking.TrackUpdate`) as its MQTT message: the CSV
+    row's numbers (µm, µm/s), null where there is none (a degenerate row's position)."""
+    def num(v):
+        v = float(v)
+        return round(v, 6) if math.isfinite(v) else None
+
+    (x, y, z), (vx, vy, vz) = map(num, update.position), map(num, update.velocity)
+    return {"t": t, "led": update.led, "x": x, "y": y, "z": z, "vx": vx, "vy": vy, "vz": vz,
+            "sigma_m": num(update.sigma_m), "cameras": update.cameras, "status": update.status}
 
 
 class SpotSubscriber:

@@ -81,12 +81,17 @@ class TrackUpdate:
     velocity: np.ndarray  #: m/s
     sigma_m: float  #: predicted RMS position error of the fit (at the spot noise)
     cameras: str  #: the cameras whose rays the window held, e.g. "C1+C2+C4"
-    status: str  #: ok; one_camera (one camera's rays: the motion carried it); degenerate
+    #: ok; one_camera (one camera's rays: the motion carried it); degenerate (no position: its
+    #: predicted error passes a tenth of the room's size)
+    status: str
 
     def row(self) -> list:
-        return [f"{self.t:.6f}", self.led, *(f"{v:.6f}" for v in self.position),
-                *(f"{v:.6f}" for v in self.velocity), f"{self.sigma_m:.6f}", self.cameras,
-                self.status]
+        """The CSV row (a number that is not there, as a degenerate row's position: empty)."""
+        def num(v):
+            return f"{v:.6f}" if np.isfinite(v) else ""
+
+        return [f"{self.t:.6f}", self.led, *map(num, self.position), *map(num, self.velocity),
+                num(self.sigma_m), self.cameras, self.status]
 
 
 @dataclass(eq=False)
@@ -446,8 +451,9 @@ class Tracker:
             fit, cov = np.r_[pos, vel, np.zeros(3)], np.eye(9) * s_pos ** 2
         sigma = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0)))
         status = "ok" if fit_ok else "one_camera"
-        if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name
-            status = "degenerate"
+        if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name: none
+            status = "degenerate"  # given (as the locator's degenerate fixes), so no robot
+            fit = np.full(9, np.nan)  # steers by it
         return TrackUpdate(t, tr.led, fit[:3].copy(), fit[3:6].copy(), sigma,
                            "+".join(self.cameras[k].id for k in cams), status)
 

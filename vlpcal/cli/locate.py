@@ -83,7 +83,7 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
                                what="the fixes"))
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
     live = bool(cameras) or bool(spots_url)
-    publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path)
+    publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path, zone)
     from ..writing import OutputError
 
     try:
@@ -291,7 +291,7 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
         sub = SpotSubscriber(target, loc.camera_ids, ca_file,
                              sizes={c.id: (c.width, c.height) for c in loc.deployment.cameras})
     except MqttError as e:
-        raise UserError(str(e)) from None
+        raise UserError(f"--spots {e}") from None
     say(f"listening for spots on {target.shown()}/spots/+")
     index = {c: k for k, c in enumerate(loc.camera_ids)}
     t_end = time.monotonic() + duration if duration else None

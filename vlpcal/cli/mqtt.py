@@ -31,9 +31,10 @@ def parse_mqtt(url: str, option: str):
         raise UserError(f"{option} {e}") from None
 
 
-def open_publisher(url, qos, ca_file, dep, deployment_path):
+def open_publisher(url, qos, ca_file, dep, deployment_path, zone: str | None = None):
     """The :class:`~vlpcal.mqtt.Publisher` for ``--publish`` (None without it); a broker that
-    cannot be used is one line (exit 2)."""
+    cannot be used is one line (exit 2). A zone's process keeps its status on
+    ``prefix/status/<zone>`` (the zones of a site share its prefix)."""
     if not url:
         return None
     import hashlib
@@ -47,8 +48,12 @@ def open_publisher(url, qos, ca_file, dep, deployment_path):
     except OSError:
         digest = None
     try:
-        return Publisher(target, {"deployment": dep.name, "deployment_sha256": digest,
-                                  "cameras": [c.id for c in dep.cameras]}, qos, ca_file)
+        status = {"deployment": dep.name, "deployment_sha256": digest,
+                  "cameras": [c.id for c in dep.cameras]}
+        if zone is not None:
+            status["zone"] = zone
+        return Publisher(target, status, qos, ca_file,
+                         status_topic="status" if zone is None else f"status/{zone}")
     except MqttError as e:
         raise UserError(f"--publish {e}") from None
 

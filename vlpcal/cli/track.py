@@ -245,7 +245,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
                 tracker.period = frames.period()
     except KeyboardInterrupt:
-        say("stopped (Ctrl-C): writing what was tracked")
+        say("stopped (Ctrl-C or a signal): writing what was tracked")
     finally:
         frames.stop()
         made = _published(publisher, tracker.finish(), utc)
@@ -324,7 +324,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
             if fps is None and gaps and n % 50 == 0:  # the slowest camera's, once it shows
                 tracker.period = min(max(gaps.values()), 10.0)
     except KeyboardInterrupt:
-        say("stopped (Ctrl-C): writing what was tracked")
+        say("stopped (Ctrl-C or a signal): writing what was tracked")
     finally:
         sub.close()
         made = _published(publisher, tracker.finish())

@@ -71,7 +71,7 @@ def play_spots(target, events, qos: int = 0, say=lambda msg: None) -> dict:
                 sent += 1
                 spots += u == u
     except KeyboardInterrupt:
-        say("stopped (Ctrl-C)")
+        say("stopped (Ctrl-C or a signal)")
     finally:
         client.disconnect()
         client.loop_stop()
