@@ -166,21 +166,29 @@ def test_json_schema_accepts_the_examples_and_rejects_structural_errors(tmp_path
             jsonschema.validate(doc, schema)
 
 
-def test_one_point_fast_path_of_outside_agrees_with_the_polygon(rng):
-    """A single position (the tracker's question, a frame at a time) is judged without
-    shapely when it is surely inside; the answer is the same as for the same point in a batch,
-    in an L-shaped room, on and off its outline, under the floor and over the ceiling."""
+def test_outside_judges_surely_inside_points_without_the_polygon_library_alike(rng):
+    """Positions surely inside the room are judged by an even–odd count, the rest by shapely's
+    distance; the answer is shapely's for every point (alone, as a tracker asks, or in a
+    batch), in an L-shaped room, on and off its outline, under the floor, over the ceiling."""
     from dataclasses import replace
 
     import numpy as np
+    import shapely
+
+    from vlpcal.deployment import PLAUSIBLE_SIGMAS, ROOM_SLACK
 
     dep = replace(deployment.from_dict(GOOD),
                   room=[[0, 0], [4, 0], [4, 2], [2, 2], [2, 3], [0, 3]])
     X = np.c_[rng.uniform(-0.5, 4.5, 3000), rng.uniform(-0.5, 3.5, 3000),
               rng.uniform(-0.5, dep.ceiling_height + 0.5, 3000)]
     X[:40, :2] = [[2, 2.5]] * 20 + [[4, 1]] * 20  # on the outline
+    X[40] = np.nan
     sigma = np.full(len(X), 1e-4)
+    slack = PLAUSIBLE_SIGMAS * sigma + ROOM_SLACK * dep.ceiling_height
+    away = shapely.distance(shapely.Polygon(dep.room), shapely.points(np.nan_to_num(X[:, :2])))
+    expected = np.isfinite(X).all(axis=1) & ((away > slack) | (X[:, 2] < -slack)
+                                             | (X[:, 2] > dep.ceiling_height + slack))
     batch = dep.outside(X, sigma)
     one = np.array([dep.outside(x, s)[0] for x, s in zip(X, sigma)])
-    assert (one == batch).all()
+    assert (batch == expected).all() and (one == expected).all()
     assert 0.1 < batch.mean() < 0.6

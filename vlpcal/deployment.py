@@ -143,36 +143,43 @@ class Deployment:
         beyond the room's walls by more than :data:`PLAUSIBLE_SIGMAS` of their own predicted
         error ``sigma`` (N) and :data:`ROOM_SLACK` of the ceiling height."""
         import numpy as np
-        import shapely
 
         X = np.atleast_2d(np.asarray(X, float))
-        if len(X) == 1 and self._surely_inside(*X[0].tolist()):  # one position, as a tracker
-            return np.zeros(1, bool)  # asks a frame at a time: no geometry library needed
-        sigma = np.broadcast_to(np.asarray(sigma, float), len(X))
+        result = np.zeros(len(X), bool)
+        # no position is never outside, a position surely inside neither: the others need
+        # the geometry library
+        doubt = np.isfinite(X).all(axis=1) & ~self._surely_inside(X)
+        if not doubt.any():
+            return result
+        import shapely
+
+        X = X[doubt]
+        sigma = np.broadcast_to(np.asarray(sigma, float), len(doubt))[doubt]
         fixed = np.isfinite(X).all(axis=1)
-        if not fixed.any():
-            return fixed
         slack = PLAUSIBLE_SIGMAS * np.where(np.isfinite(sigma), sigma, 0.0) \
             + ROOM_SLACK * self.ceiling_height
         z = np.where(fixed, X[:, 2], 0.0)
         out = (z < -slack) | (z > self.ceiling_height + slack)
         pts = shapely.points(np.where(fixed[:, None], X[:, :2], 0.0))
         away = shapely.distance(shapely.Polygon(self.room), pts)
-        return fixed & (out | (away > slack))
+        result[doubt] = fixed & (out | (away > slack))
+        return result
 
-    def _surely_inside(self, x: float, y: float, z: float) -> bool:
-        """Whether a point lies between floor and ceiling and inside the room's outline (an
-        even–odd crossing count; a point on the outline may say no): such a point is never
-        :meth:`outside`, whatever its error."""
-        if not 0.0 <= z <= self.ceiling_height:
-            return False
-        inside = False
-        (x1, y1) = self.room[-1]
-        for x2, y2 in self.room:
-            if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
-                inside = not inside
-            x1, y1 = x2, y2
-        return inside
+    def _surely_inside(self, X):
+        """Which positions (N×3) lie between floor and ceiling and inside the room's outline
+        (an even–odd crossing count over its edges; a point on the outline may say no): such a
+        point is never :meth:`outside`, whatever its error."""
+        import numpy as np
+
+        with np.errstate(invalid="ignore"):
+            x, y, z = X[:, 0, None], X[:, 1, None], X[:, 2]
+            inside = (z >= 0.0) & (z <= self.ceiling_height)
+            a = np.asarray(self.room, float)
+            b = np.roll(a, 1, axis=0)
+            up = (a[:, 1] > y) != (b[:, 1] > y)
+            with np.errstate(divide="ignore"):
+                cross = x < a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+            return inside & ((up & cross).sum(axis=1) % 2 == 1)
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:
