@@ -575,6 +575,13 @@ def test_a_folder_that_cannot_be_listed_is_named_and_hidden_files_are_not_frames
     code, _, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", frames, "--out", out)
     assert code == 2 and len(err) == 1, err
     assert "loop: cannot be read" in err[0] and "f.csv" not in err[0] and not out.exists()
+    # a link that leads to itself, given as the frames or as the output: one line, nothing made
+    (tmp_path / "self").symlink_to("self")
+    for args in (("--frames", tmp_path / "self", "--out", out),
+                 ("--frames", frames / "f1", "--out", tmp_path / "self")):
+        code, _, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, *args)
+        assert code == 2 and len(err) == 1 and "self" in err[0], err
+        assert not out.exists()
     from vlpcal.datasets import AsyncFrames
 
     (tmp_path / "async").mkdir()

@@ -63,6 +63,9 @@ def test_spot_messages_are_read_or_counted_bad():
     assert _spots_of(b'[{"t": 1, "u": 1, "v": 2}, {"t": 1, "u": 3, "v": 4}]')[1] == [
         (1.0, 2.0), (3.0, 4.0)]
     assert _spots_of(b'{"t": 2.5}') == (2.5, [])
+    full = json.dumps([{"t": 1796205364.6958123, "u": 84.52123456789012, "v": 50.17123456789012}
+                       for _ in range(64)], indent=1).encode()
+    assert len(_spots_of(full)[1]) == 64  # the most spots of a frame, at full precision
     for bad in (b'{"t": "179", "u": 1, "v": 1}', b'{"t": true, "u": 1, "v": 1}',
                 b'{"t": 1e308, "u": 1, "v": 1}', b'{"t": -5, "u": 1, "v": 1}', b'{"t": 0}',
                 b'{"t": 1, "u": 1e400, "v": 1}', b'{"t": 1, "u": 1, "v": 1, "x": 2}',

@@ -31,8 +31,9 @@ BUFFER = 100_000
 CONNECT_TIMEOUT = 10.0
 #: s between updates of the retained status (rate, cameras alive)
 STATUS_EVERY = 5.0
-#: a spot message's size, at most (bytes): a few spots of one frame
-MAX_SPOT_MESSAGE = 4096
+#: a spot message's size, at most (bytes): the most spots of one frame (64) at full float
+#: precision and indented (~100 bytes each), with room to spare
+MAX_SPOT_MESSAGE = 16384
 
 
 class MqttError(Exception):

@@ -38,7 +38,12 @@ def destination(path, folder: bool = False) -> Path:
     """The path to replace for ``path``: a symlink's final target; refused when it is a special
     file (FIFO, device, socket), or not the kind asked for (a file, or a ``folder``)."""
     path = Path(path)
-    target = path.resolve() if path.is_symlink() else path
+    try:
+        target = path.resolve() if path.is_symlink() else path
+    except (OSError, RuntimeError) as e:  # a link that leads to itself
+        raise OutputError(f"{path}: a link that cannot be followed "
+                          f"({getattr(e, 'strerror', None) or e}); expected a file or a new name") \
+            from None
     try:
         mode = os.stat(target).st_mode
     except FileNotFoundError:

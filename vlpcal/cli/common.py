@@ -120,9 +120,16 @@ def _output_file(path, inputs=(), beside=(), what: str = ""):
     if out.is_dir() or not out.parent.is_dir():
         raise UserError(f"{out}: cannot write {what + ' ' if what else ''}there (expected a "
                         "file in an existing folder)")
+    def resolved(p: Path) -> Path:
+        try:
+            return p.resolve()
+        except (OSError, RuntimeError) as e:  # a link that leads to itself
+            raise UserError(f"{p}: cannot be followed ({getattr(e, 'strerror', None) or e}); "
+                            "expected a file or a folder, or a link to one") from None
+
     companions = [out.with_suffix(s) for s in beside]
     for t in companions:
-        if t.resolve() == out.resolve():
+        if resolved(t) == resolved(out):
             raise UserError(f"{out}: the command writes its {t.suffix} beside the output under "
                             f"the same name; give the output its own suffix "
                             f"(e.g. {out.with_suffix('.yaml').name})")
@@ -131,9 +138,9 @@ def _output_file(path, inputs=(), beside=(), what: str = ""):
     except OutputError as e:
         raise UserError(str(e)) from None
     for t in targets:
-        r = t.resolve()
+        r = resolved(t)
         for src in inputs:
-            src = Path(src).resolve()
+            src = resolved(Path(src))
             if r == src or src in r.parents:
                 raise UserError(f"{out}: is (or would write {t.name} over) the command's own "
                                 f"input {src}; choose another output file")

@@ -541,12 +541,13 @@ def _write_or_refuse(out, result, notes, survey_path, header):
 def _read_test_points(dep, test_path, survey_path, survey):
     """``--test-points``: a bundle of measured points the calibration never sees (none of
     ``survey``'s, the bundle read already); (ids, X, spots)."""
-    from pathlib import Path
+
+    import os
 
     from ..datasets import DatasetError, read_survey_bundle
     from ..survey import survey_spots
 
-    if Path(test_path).resolve() == Path(survey_path).resolve():
+    if os.path.realpath(test_path) == os.path.realpath(survey_path):  # (no error on a loop)
         raise UserError(f"--test-points {test_path}: is the survey itself (test points must be "
                         "points the calibration never sees)")
     try:
