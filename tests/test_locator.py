@@ -55,6 +55,21 @@ def test_a_batch_rows_are_its_fixes_rows(site):
     assert batch.rows() == [fix.row() for fix in batch]
 
 
+def test_a_batch_rows_name_every_camera_of_a_large_site(rng):
+    """Rows of a site of 70 cameras (more than the bits of a machine word) name the cameras
+    each fix used as each Fix.row does."""
+    from vlpcal.locator import FixBatch
+
+    n, ids = 40, [f"C{k}" for k in range(70)]
+    used = rng.random((70, n)) < 0.05
+    used[69, ::2] = True
+    batch = FixBatch(ids, [f"s{i}" for i in range(n)], rng.normal(size=(n, 3)),
+                     np.array(["ok"] * n, dtype=object), used, rng.random((70, n)),
+                     rng.random(n), np.where(used, "ok", "no_spot").astype(object))
+    assert batch.rows() == [fix.row() for fix in batch]
+    assert all(r["cameras"].endswith("C69") for r in batch.rows()[::2])
+
+
 def test_bad_camera_data_is_a_status_never_an_exception(site):
     scene, path, pts, frames = site
     loc = Locator.from_file(path)

@@ -107,16 +107,12 @@ class FixBatch:
         with np.errstate(invalid="ignore"):
             worst = np.where(used, self.residual, -np.inf).max(axis=0, initial=-np.inf)
         residual = nums(worst, 3)
-        # the cameras and the per-camera statuses repeat: each pattern is joined once
-        joined: dict = {}
-        code = (used.T * (1 << np.arange(len(ids)))).sum(axis=1).tolist() if len(ids) else \
-            [0] * len(self)
-        cams = [joined.get(c) or joined.setdefault(c, "+".join(
-            i for k, i in enumerate(ids) if c >> k & 1)) for c in code]
-        status_text: dict = {}
-        per = list(zip(*self.camera_status.tolist())) if len(ids) else [()] * len(self)
-        statuses = [status_text.get(p) or status_text.setdefault(p, " ".join(
-            f"{c}:{st}" for c, st in zip(ids, p))) for p in per]
+        # the cameras used and the per-camera statuses repeat: each pattern is joined once
+        used_by = [tuple(u) for u in used.T.tolist()]
+        names = {u: "+".join(c for c, on in zip(ids, u) if on) for u in set(used_by)}
+        per = [tuple(p) for p in self.camera_status.T.tolist()]
+        said = {p: " ".join(f"{c}:{st}" for c, st in zip(ids, p)) for p in set(per)}
+        cams, statuses = [names[u] for u in used_by], [said[p] for p in per]
         status = [str(st) for st in self.status.tolist()]
         return [{"frame_id": f, "x": a, "y": b, "z": c, "status": st, "cameras": cm,
                  "sigma_m": sg, "residual_px": r, "camera_status": cs}
