@@ -390,6 +390,31 @@ class LiveGrouper:
             yield close()
 
 
+class FrameIntervals:
+    """Each camera's frame interval from the times of its frames: the median of its last 50
+    (a dropped frame's double gap moves it little); :meth:`period` is the slowest camera's."""
+
+    KEPT = 50
+
+    def __init__(self):
+        self._last: dict = {}
+        self._gaps: dict = {}
+
+    def add(self, camera_id: str, t: float) -> None:
+        last = self._last.get(camera_id)
+        if last is not None and t > last:
+            gaps = self._gaps.setdefault(camera_id, [])
+            gaps.append(t - last)
+            del gaps[:-self.KEPT]
+        if last is None or t > last:
+            self._last[camera_id] = t
+
+    def period(self, default: float = 0.1) -> float:
+        """s: the slowest camera's median interval (``default`` before any camera has three)."""
+        meds = [float(np.median(v)) for v in self._gaps.values() if len(v) >= 3]
+        return max(meds) if meds else default
+
+
 class TimedFrames:
     """Frames from live sources one at a time, each at its capture time on the host's clock
     (issue 16), in capture-time order — what :class:`~vlpcal.tracking.Tracker` takes.
@@ -412,8 +437,7 @@ class TimedFrames:
         self._queue: queue.Queue = queue.Queue(maxsize=1024)
         self._stop = threading.Event()
         self._threads: dict = {}
-        self._last: dict = {}  # camera id → its last arrival, for its frame interval
-        self._intervals: dict = {}
+        self._intervals = FrameIntervals()  # each camera's, from its arrivals
 
     def stop(self) -> None:
         self._stop.set()
@@ -435,8 +459,7 @@ class TimedFrames:
 
     def period(self) -> float:
         """s: the slowest camera's median frame interval so far (0.1 before any)."""
-        meds = [float(np.median(v)) for v in self._intervals.values() if len(v) >= 3]
-        return max(meds) if meds else 0.1
+        return self._intervals.period()
 
     def __iter__(self) -> Iterator[tuple]:
         import heapq
@@ -464,11 +487,7 @@ class TimedFrames:
                               f"{rest}")
             elif arrival is not None:
                 self.stats.frames[cid] += 1
-                if cid in self._last:
-                    gaps = self._intervals.setdefault(cid, [])
-                    gaps.append(arrival - self._last[cid])
-                    del gaps[:-50]
-                self._last[cid] = arrival
+                self._intervals.add(cid, arrival)
                 if stamp is not None:
                     self.stamped[cid] += 1
                     self.last_stamp[cid] = stamp

@@ -280,6 +280,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     (its clock is wrong) and is counted, not used."""
     import time
 
+    from ..live import FrameIntervals
     from ..mqtt import MqttError, SpotSubscriber
     from ..tracking import Tracker
 
@@ -302,7 +303,8 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
     t_end = time.monotonic() + duration if duration else None
     rows: list = []
-    n, future, crowded, last, gaps = 0, 0, 0, {}, {}
+    n, future, crowded = 0, 0, 0
+    intervals = FrameIntervals()  # the cameras' own rate, when --fps does not say it
     try:
         while not (t_end and time.monotonic() > t_end):
             got = sub.get(timeout=0.2)
@@ -317,12 +319,9 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
             live.write(made)
             rows += made
             n += 1
-            if cid in last and t > last[cid]:  # each camera's frame interval, a running mean
-                g = t - last[cid]  # (a gap of dropped frames counts at most thrice)
-                gaps[cid] = g if cid not in gaps else 0.9 * gaps[cid] + 0.1 * min(g, 3 * gaps[cid])
-            last[cid] = t
-            if fps is None and gaps and n % 50 == 0:  # the slowest camera's, once it shows
-                tracker.period = min(max(gaps.values()), 10.0)
+            intervals.add(cid, t)
+            if fps is None and n % 50 == 0:  # the slowest camera's, once it shows
+                tracker.period = min(intervals.period(tracker.period), 10.0)
     except KeyboardInterrupt:
         say("stopped (Ctrl-C or a signal): writing what was tracked")
     finally:
