@@ -13,6 +13,7 @@ from .mqtt import (
     open_publisher,
     parse_mqtt,
     publisher_summary,
+    subscriber_notes,
 )
 
 
@@ -342,13 +343,8 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
             close()
     finally:
         sub.close()
-    notes.append(f"spots: {sub.received} messages"
-                 + (f", {sub.bad} not spots (skipped)" if sub.bad else "")
-                 + (f", {sub.unknown} of cameras not in the deployment" if sub.unknown else "")
-                 + (f", {sub.stale} retained from before (skipped)" if sub.stale else "")
-                 + (f", {sub.dropped} dropped (the locator fell behind)" if sub.dropped else "")
-                 + (f", {sub.waiting} not located when the run ended (the locator fell behind)"
-                    if sub.waiting else "")
+    notes.append(", ".join([f"spots: {sub.received} messages",
+                            *subscriber_notes(sub, "locator", "located")])
                  + (f"; the broker went away {sub.disconnects} time(s)" if sub.disconnects
                     else ""))
     return n

@@ -79,6 +79,19 @@ def publisher_summary(pub) -> str:
         f"{held}{again}"
 
 
+def subscriber_notes(sub, who: str, done: str) -> list[str]:
+    """What a :class:`~vlpcal.mqtt.SpotSubscriber` skipped, dropped or left behind, for a
+    run's summary (``who``: the locator or tracker that fell behind; ``done``: located or
+    tracked)."""
+    return [part for part, n in (
+        (f"{sub.bad} not spots (skipped)", sub.bad),
+        (f"{sub.unknown} of cameras not in the deployment", sub.unknown),
+        (f"{sub.stale} retained from before (skipped)", sub.stale),
+        (f"{sub.dropped} dropped (the {who} fell behind)", sub.dropped),
+        (f"{sub.waiting} not {done} when the run ended (the {who} fell behind)", sub.waiting),
+    ) if n]
+
+
 class PublishingWriter:
     """A :class:`~vlpcal.locator.FixWriter` that also publishes every fix it writes, at UTC
     ``extra[utc]`` when the fixes carry their time in that column, else now."""

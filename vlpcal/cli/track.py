@@ -6,7 +6,7 @@ from __future__ import annotations
 import click
 
 from .common import Finite, UserError, _load_deployment, _output_file, main
-from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary
+from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary, subscriber_notes
 
 #: camera frames read and detected at once, at most — and at most this many bytes of them
 BLOCK, BLOCK_BYTES = 2048, 64 << 20
@@ -334,21 +334,17 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         live.remove()
         raise UserError(f"no spots on {target.shown()}/spots/+ from any camera of "
                         f"{deployment_path}, nothing tracked")
-    say(f"{n} spot messages tracked"
-        + (f"; {crowded} held more spots than --leds {tracker.spots} (the first used)"
-           if crowded else "")
-        + (f"; {sub.bad} not spots (skipped)" if sub.bad else "")
-        + (f"; {sub.unknown} of cameras not in the deployment" if sub.unknown else "")
-        + (f"; {sub.stale} retained from before (skipped)" if sub.stale else "")
-        + (f"; {future} captured in the future by their cameras' clocks (skipped)"
-           if future else "")
-        + (f"; {tracker.late} came after their rows were written (skipped)"
-           if tracker.late else "")
-        + (f"; {sub.dropped} dropped (the tracker fell behind)" if sub.dropped else "")
-        + (f"; {sub.waiting} not tracked when the run ended (the tracker fell behind)"
-           if sub.waiting else "")
-        + (f"; the broker went away {sub.disconnects} time(s)" if sub.disconnects else "")
-        + f" → {_summary(rows)} → {out}")
+    said = [f"{n} spot messages tracked"]
+    if crowded:
+        said.append(f"{crowded} held more spots than --leds {tracker.spots} (the first used)")
+    if future:
+        said.append(f"{future} captured in the future by their cameras' clocks (skipped)")
+    if tracker.late:
+        said.append(f"{tracker.late} came after their rows were written (skipped)")
+    said += subscriber_notes(sub, "tracker", "tracked")
+    if sub.disconnects:
+        said.append(f"the broker went away {sub.disconnects} time(s)")
+    say("; ".join(said) + f" → {_summary(rows)} → {out}")
 
 
 class _LiveTracks:
