@@ -341,6 +341,6 @@ def test_the_tracker_takes_no_nonsense(rng):
     rows += tr.finish()
     assert all(r.t >= 0 for r in rows[before:])
     slow = Tracker(dep, period=1 / 30)
-    lost = slow._lost
+    lost = slow.lost_after
     slow.period = 1 / 2
-    assert slow._lost == pytest.approx(lost * 15)
+    assert slow.lost_after == pytest.approx(lost * 15)

@@ -171,15 +171,14 @@ class Deployment:
         point is never :meth:`outside`, whatever its error."""
         import numpy as np
 
-        with np.errstate(invalid="ignore"):
-            x, y, z = X[:, 0, None], X[:, 1, None], X[:, 2]
-            inside = (z >= 0.0) & (z <= self.ceiling_height)
-            a = np.asarray(self.room, float)
-            b = np.roll(a, 1, axis=0)
+        x, y, z = X[:, 0, None], X[:, 1, None], X[:, 2]
+        a = np.asarray(self.room, float)  # each edge from b to a
+        b = np.roll(a, 1, axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):  # NaN positions, level edges
             up = (a[:, 1] > y) != (b[:, 1] > y)
-            with np.errstate(divide="ignore"):
-                cross = x < a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-            return inside & ((up & cross).sum(axis=1) % 2 == 1)
+            cross = x < a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+            inside = (z >= 0.0) & (z <= self.ceiling_height)
+        return inside & ((up & cross).sum(axis=1) % 2 == 1)
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:

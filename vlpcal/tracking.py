@@ -100,8 +100,8 @@ class _Ray:
     camera: int
     xy: np.ndarray  #: undistorted normalised image coordinates
     #: its two equations on the LED's position X, ``a @ X = y`` (see :meth:`Tracker._solve`)
-    a: np.ndarray = None
-    y: np.ndarray = None
+    a: np.ndarray
+    y: np.ndarray
 
 
 @dataclass
@@ -170,9 +170,9 @@ class Tracker:
         dark = max((max(map(len, (c.pattern * 2).split("1"))) / c.bit_rate
                     for c in self.codes), default=0.0)
         self._dark = dark
-        # the room's outline, for the fits that are not surely inside it: made now, as its
-        # first use mid-stream would hold a live frame for the geometry library's import
-        deployment.outside(np.zeros((2, 3)), 0.0)
+        # the geometry library judges the fits not surely inside the room: imported now, as
+        # its first use mid-stream would hold a live frame ~30 ms
+        import shapely  # noqa: F401
 
     # -- the interface ---------------------------------------------------------------------
     def update(self, camera_id: str, t: float, frame) -> list[TrackUpdate]:
@@ -241,13 +241,13 @@ class Tracker:
         return 0.5 * WINDOW * self.period
 
     @property
-    def _lost(self) -> float:
+    def lost_after(self) -> float:
         """s: a track without a spot this long is lost (the period's share follows it)."""
         return LOST_PERIODS * self.period + self._dark
 
     @property
     def _lag(self) -> float:
-        return self.half if self.lag is None else min(max(self.lag, 0.0), self.half)
+        return self.half if self.lag is None else min(self.lag, self.half)
 
     def _due(self, now: float) -> list[TrackUpdate]:
         """Rows whose window has passed by ``now``."""
@@ -264,7 +264,7 @@ class Tracker:
     def _drop_lost(self, now: float, out: list) -> None:
         keep = []
         for tr in self.tracks:
-            if now - tr.last_ray > self._lost or \
+            if now - tr.last_ray > self.lost_after or \
                     tr.last_ray - tr.last_two > COAST_PERIODS * self.period:
                 if not tr.tentative:
                     out += [self._row(tr, t) for t in tr.due]

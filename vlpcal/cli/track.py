@@ -311,7 +311,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
             if got is None:
                 continue
             t, cid, uv = got
-            if t > time.time() + tracker._lost:
+            if t > time.time() + tracker.lost_after:
                 future += 1
                 continue
             crowded += len(uv) > tracker.spots
