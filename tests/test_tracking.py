@@ -344,3 +344,21 @@ def test_the_tracker_takes_no_nonsense(rng):
     lost = slow.lost_after
     slow.period = 1 / 2
     assert slow.lost_after == pytest.approx(lost * 15)
+
+
+def test_one_camera_whose_clock_runs_ahead_does_not_make_the_others_late(rng):
+    """A camera stamping its frames 0.2 s ahead (a clock off) must not turn the on-time
+    cameras' frames into late ones: the stream's present is not one camera's."""
+    dep = square_rig()
+    path = circle(1.5)
+    events = streams(dep, path, 4.0, rng)
+    # in the order they come (their real capture order), C1's stamped 0.2 s ahead
+    skewed = [((t + 0.2 if cid == "C1" else t), cid, uv) for t, cid, uv in events]
+    tr = Tracker(dep, period=1 / 30)
+    rows = []
+    for t, cid, uv in skewed:
+        rows += tr.update_spot(cid, t, uv)
+    rows += tr.finish()
+    on_time = sum(cid != "C1" for _, cid, _ in events)
+    assert tr.late < 0.05 * on_time, tr.late
+    assert len(rows) > 0.5 * len(run(dep, events))

@@ -131,8 +131,8 @@ class Tracker:
     start window and when a track is lost. ``spots``: the most spots a frame is searched for
     (default: one per LED of the deployment's ``leds:``, else 1). The deployment's detector and
     pixel corrections apply as in :class:`~vlpcal.locator.Locator`. Frames come in time order;
-    one older than the newest by more than half the window can no longer join its rows and is
-    counted (``late``), not used."""
+    one older than the stream's present (:meth:`_present`) by more than half the window can no
+    longer join its rows and is counted (``late``), not used."""
 
     def __init__(self, deployment: Deployment, period: float = 1 / 30,
                  acceleration: float = ACCELERATION, pixel_sigma: float = PIXEL_SIGMA,
@@ -145,7 +145,7 @@ class Tracker:
             raise ValueError(f"lag: expected seconds ≥ 0 (or None), got {lag!r}")
         self.deployment = deployment
         self.late = 0  #: frames that came after the rows they belonged to were written
-        self._newest = -np.inf
+        self._latest: dict = {}  #: camera index → the time of its newest frame
         #: s: how long after a frame's capture its row is written (None: half the window, the
         #: smoothest; 0: at once, the window then ending at the frame — for robots that steer
         #: by it, at a larger error)
@@ -191,10 +191,10 @@ class Tracker:
         """As :meth:`update`, from the spots already found (``K×2`` px; NaN rows: none; past
         ``spots``, the first ones)."""
         k = self._index[camera_id]
-        if t < self._newest - self.half:
+        if t < self._present() - self.half:
             self.late += 1
             return []
-        self._newest = max(self._newest, t)
+        self._latest[k] = max(self._latest.get(k, -np.inf), t)
         out = self._due(t)
         self._drop_lost(t, out)
         uvs = np.asarray(uvs, float).reshape(-1, 2)
@@ -239,6 +239,14 @@ class Tracker:
     @property
     def half(self) -> float:
         return 0.5 * WINDOW * self.period
+
+    def _present(self) -> float:
+        """The stream's present: the cameras' newest frame times, the lower middle one (one
+        camera whose clock runs ahead, or one wild time, does not move it)."""
+        if not self._latest:
+            return -np.inf
+        times = sorted(self._latest.values())
+        return times[(len(times) - 1) // 2]
 
     @property
     def lost_after(self) -> float:
