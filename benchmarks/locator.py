@@ -1,14 +1,14 @@
 """End-to-end speed of the runtime locator, beside the JPEG-decode floor and the paper's 20 ms.
 
 One simulated paper-2024 install (three 160 × 120 cameras), ≥ 3000 frame sets of an LED along
-a robot's path. Measured on one core, best of several runs:
+a robot's path. Measured on one core, medians of 5 runs:
 
 - decode floor: grayscale ``cv2.imdecode`` of the same three JPEGs per set (nothing else);
 - Python API, batch: ``Locator.locate_batch`` on all sets (decode, detect, triangulate, fuse,
   predicted uncertainty), µs per fix;
 - Python API, one set at a time: ``Locator.locate``;
 - ``vlpcal locate --frames DIR --out fixes.csv``: a fresh process on the folder, wall time
-  including start-up, reading the files and writing the CSV (fixes/s), best of several runs;
+  including start-up, reading the files and writing the CSV (fixes/s), median of 5 runs;
   and the same process on a folder of two sets (its start-up alone). It runs as an installed
   package does, its bytecode cached (a machine that sets PYTHONDONTWRITEBYTECODE, as the one
   the figures come from does, would recompile vlpcal at every start: ~70 ms).
@@ -61,12 +61,13 @@ def main(argv=None) -> int:
     jpegs = [j for s in sets for j in s.values()]
     loc = Locator(deployment_of(scene, "true"))
 
-    # the floor and the API alternate, best of 5 each: both see the same machine
-    decode, batch = np.inf, np.inf
+    # the floor and the API alternate, 5 runs each, medians: both see the same machine
+    decodes, batches = [], []
     for _ in range(5):
-        decode = min(decode, best_time(lambda: [decode_gray(j) for j in jpegs], 1))
-        batch = min(batch, best_time(lambda: loc.locate_batch(sets), 1))
-    decode, batch = decode / args.sets * 1e6, batch / args.sets * 1e6
+        decodes.append(best_time(lambda: [decode_gray(j) for j in jpegs], 1))
+        batches.append(best_time(lambda: loc.locate_batch(sets), 1))
+    decode = float(np.median(decodes)) / args.sets * 1e6
+    batch = float(np.median(batches)) / args.sets * 1e6
     few = sets[:300]
     single = best_time(lambda: [loc.locate(s) for s in few], 2) / len(few) * 1e6
     fixes = loc.locate_batch(sets)
@@ -96,8 +97,8 @@ def main(argv=None) -> int:
         for _ in range(5):
             starts.append(cli("two"))
             walls.append(cli("frames"))
-        cli_rate = args.sets / min(walls)
-        start_s = min(starts)
+        cli_rate = args.sets / float(np.median(walls))
+        start_s = float(np.median(starts))
         rows_written = sum(1 for _ in open(tmp / "fixes.csv")) - 1
 
     marginal = (args.sets / cli_rate - start_s) / args.sets * 1e6
