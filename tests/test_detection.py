@@ -219,3 +219,21 @@ def test_one_frame_path_equals_the_batch(rng):
     assert detect_frame(good, shape=(240, 320))[1] == WRONG_SIZE
     assert detect_frame(np.zeros((60, 80), np.uint8), shape=(120, 160))[1] == WRONG_SIZE
     assert detect_frame(None)[1] == MISSING
+
+
+def test_quiet_stderr_interleaved_across_threads_restores_the_real_stderr():
+    """Two decoders' quiet spells that overlap (A in, B in, A out, B out, as two camera threads
+    do) leave file descriptor 2 on the real stderr, not on the null device."""
+    import os
+
+    from vlpcal.detection import _QuietStderr
+
+    before = os.fstat(2)
+    a, b = _QuietStderr(), _QuietStderr()
+    a.__enter__()
+    b.__enter__()
+    assert os.fstat(2).st_ino != before.st_ino or os.fstat(2).st_dev != before.st_dev
+    a.__exit__(None, None, None)
+    b.__exit__(None, None, None)
+    after = os.fstat(2)
+    assert (after.st_dev, after.st_ino) == (before.st_dev, before.st_ino)

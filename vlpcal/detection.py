@@ -25,6 +25,8 @@ v = row, the top-left pixel's centre at (0, 0)).
 
 from __future__ import annotations
 
+import os
+import threading
 from dataclasses import dataclass
 from functools import cache
 
@@ -179,26 +181,40 @@ def jpeg_size(buf: bytes) -> tuple[int, int] | None:
 class _QuietStderr:
     """libjpeg writes its warnings about damaged data ("Corrupt JPEG data: 9 extraneous
     bytes") straight to file descriptor 2, past Python: a damaged frame gets a status, not a
-    line on the user's terminal. The descriptor is redirected around a batch of decodes."""
+    line on the user's terminal. The descriptor is redirected around a batch of decodes.
+
+    One null descriptor serves the process (opening ``/dev/null`` per live frame cost more than
+    the rest of this), and threads share one redirection: the first in saves the real stderr,
+    the last out restores it (two threads each saving and restoring their own would leave
+    stderr on the null device when their turns interleave)."""
+
+    _lock = threading.Lock()
+    _depth = 0
+    _null: int | None = None
+    _saved: int | None = None
 
     def __enter__(self):
-        import os
-
-        try:
-            self._saved = os.dup(2)
-            null = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(null, 2)
-            os.close(null)
-        except OSError:
-            self._saved = None
+        cls = type(self)
+        with cls._lock:
+            if cls._depth == 0:
+                try:
+                    if cls._null is None:
+                        cls._null = os.open(os.devnull, os.O_WRONLY)
+                    cls._saved = os.dup(2)
+                    os.dup2(cls._null, 2)
+                except OSError:
+                    cls._saved = None
+            cls._depth += 1
         return self
 
     def __exit__(self, *exc):
-        import os
-
-        if self._saved is not None:
-            os.dup2(self._saved, 2)
-            os.close(self._saved)
+        cls = type(self)
+        with cls._lock:
+            cls._depth -= 1
+            if cls._depth == 0 and cls._saved is not None:
+                os.dup2(cls._saved, 2)
+                os.close(cls._saved)
+                cls._saved = None
 
 
 def decode_gray(data, shape=None) -> np.ndarray | None:
@@ -911,13 +927,17 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
     want = tuple(shape) if shape is not None else None
     if want is not None and min(want) < MIN_SIZE:
         return out, CORRUPT  # no spot can be measured in so small an image
-    codes, images = np.zeros(1, np.int8), {}
-    with _QuietStderr():
-        stack = _decode_into([frame], codes, want,
-                             np.empty((1, *want), np.uint8) if want else None, images)
-    if codes[0]:
-        return out, _CODE_REASON[int(codes[0])]
-    img = stack[0] if stack is not None else images[0]
+    img = _decode_whole(frame, want)
+    own = img is not None  # decoded here: this call's to change and restore
+    if img is None:  # anything but a whole JPEG of the camera's size: the batch's checks
+        codes, images = np.zeros(1, np.int8), {}
+        with _QuietStderr():
+            stack = _decode_into([frame], codes, want,
+                                 np.empty((1, *want), np.uint8) if want else None, images)
+        if codes[0]:
+            return out, _CODE_REASON[int(codes[0])]
+        own = stack is not None
+        img = stack[0] if own else images[0]
     if img.dtype != np.uint8 or not img.flags.c_contiguous:
         uv = detect_several(img[None], k, method, settings)[0]  # a float frame: the batch
         return uv, None
@@ -933,7 +953,7 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
     if peak - bg < s.min_snr * sigma or peak - bg < s.min_contrast:
         return out, None
     thr = bg + max(s.threshold * (peak - bg), 3.0 * sigma)
-    if k == 1 and _outside_max_one(img, r, c, s.window) <= thr:
+    if k == 1 and _outside_max_one(img, r, c, s.window, own) <= thr:
         spots = [(r, c)]
     else:
         fbg = float(np.median(img[::4, ::4]))
@@ -950,9 +970,25 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
     return out, None
 
 
-def _outside_max_one(img: np.ndarray, r: int, c: int, half: int) -> float:
+def _decode_whole(frame, want):
+    """The common live frame — JPEG bytes, whole (SOI to EOI), declaring the camera's size —
+    decoded to grayscale; None for anything else (which the batch's checks then judge)."""
+    if type(frame) is not bytes or want is None or frame[:2] != b"\xff\xd8" \
+            or frame[-2:] != b"\xff\xd9" or jpeg_size(frame) != want:
+        return None
+    try:
+        with _QuietStderr():
+            img = _cv2.imdecode(np.frombuffer(frame, np.uint8), _cv2.IMREAD_GRAYSCALE)
+    except _cv2.error:
+        return None
+    return img if img is not None and img.shape == want else None
+
+
+def _outside_max_one(img: np.ndarray, r: int, c: int, half: int, own: bool = False) -> float:
     """:func:`_outside_max` of one frame: its maximum outside the window around (r, c) and on
-    the window's rim where the rim is not the frame's border (on a copy: 19 kB at 160 × 120)."""
+    the window's rim where the rim is not the frame's border. ``own``: the frame may be changed
+    for a moment (the window blanked in place and put back), else it is copied (19 kB at
+    160 × 120)."""
     h, w = img.shape
     size = 2 * half + 1
     win, r0, c0 = _cut(img, r, c, half)
@@ -961,17 +997,26 @@ def _outside_max_one(img: np.ndarray, r: int, c: int, half: int) -> float:
         dy, dx = _ring_offsets(half, h, w)
         rim = np.where((r0 + dy == 0) | (r0 + dy == h - 1) | (c0 + dx == 0)
                        | (c0 + dx == w - 1), 0, rim)
-    rest = img.copy()
-    rest[r0:r0 + size, c0:c0 + size] = 0
-    return float(max(rest.max(), rim.max()))
+    if own:
+        saved = win.copy()
+        win[...] = 0
+        rest = img.flat[img.argmax()]
+        win[...] = saved
+    else:
+        copy = img.copy()
+        copy[r0:r0 + size, c0:c0 + size] = 0
+        rest = copy.max()
+    return float(max(rest, rim.max()))
 
 
 @cache
 def _plane_flat(half: int):
-    """:func:`_plane_design` flattened: the ring's flat indices, the plane's operator, and the
-    ``(2h+1)²×3`` design [1, u, v] whose product with weights gives their sum and moments."""
+    """:func:`_plane_design` flattened: the ring's flat indices, the operator that turns the
+    ring's values into the plane's value at every pixel of the window, and the ``(2h+1)²×3``
+    design [1, u, v] whose product with weights gives their sum and moments."""
     gx, gy, ring, fit = _plane_design(half)
-    return np.flatnonzero(ring), fit, np.c_[np.ones(gx.size), gx.ravel(), gy.ravel()]
+    design = np.c_[np.ones(gx.size), gx.ravel(), gy.ravel()]
+    return np.flatnonzero(ring), design @ fit.T, design
 
 
 def _core_centroid_one(img: np.ndarray, r: int, c: int, s: DetectorSettings):
@@ -980,9 +1025,10 @@ def _core_centroid_one(img: np.ndarray, r: int, c: int, s: DetectorSettings):
 
     h, w = img.shape
     peak = float(img[r, c])
-    row, col = img[r, max(c - 1, 0):c + 2].tolist(), img[max(r - 1, 0):r + 2, c].tolist()
-    p1, p2 = (row[0] if c > 0 else peak), (row[-1] if c < w - 1 else peak)
-    p3, p4 = (col[0] if r > 0 else peak), (col[-1] if r < h - 1 else peak)
+    p1 = float(img[r, c - 1]) if c > 0 else peak
+    p2 = float(img[r, c + 1]) if c < w - 1 else peak
+    p3 = float(img[r - 1, c]) if r > 0 else peak
+    p4 = float(img[r + 1, c]) if r < h - 1 else peak
     look, lr0, lc0 = _cut(img, r, c, 5)
     lo = _median_of(look.ravel()[_ring_flat(5, h, w)])
 
@@ -1004,8 +1050,8 @@ def _core_centroid_one(img: np.ndarray, r: int, c: int, s: DetectorSettings):
     if r < 1 or c < 1 or r > h - 2 or c > w - 2:
         return np.nan, np.nan
     win, r0, c0 = _cut(img, r, c, half)
-    ring, fit, design = _plane_flat(half)
+    ring, plane, design = _plane_flat(half)
     flat = win.astype(float).ravel()
-    sig = flat - design @ (flat[ring] @ fit)
+    sig = flat - plane @ flat[ring]
     tot, su, sv = np.maximum(sig - s.threshold * sig.max(), 0.0) @ design
     return c0 + su / tot, r0 + sv / tot
