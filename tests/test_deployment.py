@@ -192,3 +192,6 @@ def test_outside_judges_surely_inside_points_without_the_polygon_library_alike(r
     one = np.array([dep.outside(x, s)[0] for x, s in zip(X, sigma)])
     assert (batch == expected).all() and (one == expected).all()
     assert 0.1 < batch.mean() < 0.6
+    # the one-point test in plain Python and the vectorised one agree point for point
+    alone = np.array([dep._point_surely_inside(*x) for x in X.tolist()])
+    assert (alone == dep._surely_inside(X)).all() and 0.3 < alone.mean() < 0.9

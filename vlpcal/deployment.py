@@ -146,6 +146,8 @@ class Deployment:
 
         X = np.atleast_2d(np.asarray(X, float))
         result = np.zeros(len(X), bool)
+        if len(X) == 1 and self._point_surely_inside(*X[0].tolist()):
+            return result  # one point (a tracker's fit): judged in plain Python, ~1 µs
         # no position is never outside, a position surely inside neither: the others need
         # the geometry library
         doubt = np.isfinite(X).all(axis=1) & ~self._surely_inside(X)
@@ -172,13 +174,29 @@ class Deployment:
         import numpy as np
 
         x, y, z = X[:, 0, None], X[:, 1, None], X[:, 2]
-        a = np.asarray(self.room, float)  # each edge from b to a
-        b = np.roll(a, 1, axis=0)
-        with np.errstate(invalid="ignore", divide="ignore"):  # NaN positions, level edges
-            up = (a[:, 1] > y) != (b[:, 1] > y)
-            cross = x < a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-            inside = (z >= 0.0) & (z <= self.ceiling_height)
-        return inside & ((up & cross).sum(axis=1) % 2 == 1)
+        a = np.asarray(self.room, float)
+        b = a[np.arange(-1, len(a) - 1)]  # each edge from b, the vertex before, to a
+        rise = b[:, 1] - a[:, 1]
+        up = (a[:, 1] > y) != (b[:, 1] > y)  # the edge spans the point's y (never when level)
+        # the point lies before the edge's crossing at its y: x − a_x < (y − a_y) run / rise,
+        # times rise² (no division, so level edges and NaN positions need no warnings muted)
+        before = ((x - a[:, 0]) * rise - (y - a[:, 1]) * (b[:, 0] - a[:, 0])) * rise < 0
+        inside = (z >= 0.0) & (z <= self.ceiling_height)
+        return inside & ((up & before).sum(axis=1) % 2 == 1)
+
+    def _point_surely_inside(self, x: float, y: float, z: float) -> bool:
+        """:meth:`_surely_inside` for one point, in plain Python (numpy's calls on one point
+        cost ~20 µs; this ~1 µs): the same even–odd count by the same products."""
+        if not 0.0 <= z <= self.ceiling_height:
+            return False
+        odd = False
+        bx, by = self.room[-1]
+        for ax, ay in self.room:
+            rise = by - ay
+            if (ay > y) != (by > y) and ((x - ax) * rise - (y - ay) * (bx - ax)) * rise < 0:
+                odd = not odd
+            bx, by = ax, ay
+        return odd
 
     def camera(self, camera_id: str) -> Camera:
         for cam in self.cameras:
