@@ -237,3 +237,15 @@ def test_quiet_stderr_interleaved_across_threads_restores_the_real_stderr():
     b.__exit__(None, None, None)
     after = os.fstat(2)
     assert (after.st_dev, after.st_ino) == (before.st_dev, before.st_ino)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.uint8, np.int16])
+@pytest.mark.parametrize("k", [1, 2, 55, 56])
+def test_row_medians_are_numpys_in_value_and_dtype(dtype, k, rng):
+    """The detector's row medians (a partition, kept off np.median, whose NaN check imports
+    numpy.ma at every start) equal np.median's, dtype included."""
+    from vlpcal.detection import _medians
+
+    a = (rng.random((300, k)) * 255).astype(dtype)
+    expected, got = np.median(a, axis=1), _medians(a)
+    assert got.dtype == expected.dtype and np.array_equal(got, expected)

@@ -273,13 +273,24 @@ def as_gray(image) -> np.ndarray | None:
 
 # -- shared steps (vectorised over a stack) ----------------------------------------------------
 
+def _medians(a: np.ndarray) -> np.ndarray:
+    """``np.median(a, axis=-1)`` (the same values and dtype, for arrays without NaN) by a
+    partition: np.median's NaN check imports ``numpy.ma``, 9 ms of every command's start."""
+    m = a.shape[-1] // 2
+    dtype = a.dtype if a.dtype.kind == "f" else np.float64
+    if a.shape[-1] % 2:
+        return np.partition(a, m, axis=-1)[..., m].astype(dtype)
+    p = np.partition(a, (m - 1, m), axis=-1)
+    return (p[..., m - 1].astype(dtype) + p[..., m]) * 0.5
+
+
 def _noise(ring: np.ndarray) -> np.ndarray:
     """Per-frame noise sigma (DN) from the ring of pixels around the spot (``N×K``, in order
     around the ring): the median absolute difference of neighbours on the ring over √2, which
     a smooth background gradient does not inflate. Floor of 1 DN (8-bit quantisation and JPEG
     smoothing make smaller estimates meaningless)."""
     diff = np.abs(np.diff(ring, axis=1))
-    return np.maximum(1.4826 * np.median(diff, axis=1) / np.sqrt(2.0), 1.0).astype(float)
+    return np.maximum(1.4826 * _medians(diff) / np.sqrt(2.0), 1.0).astype(float)
 
 
 #: half size of the square ring (15×15) whose median is the background under the spot
@@ -294,7 +305,7 @@ def _peak(stack: np.ndarray, s: DetectorSettings):
     """
     r, c, peak = _argmax(stack)
     ring = _ring(stack, r, c, _RING)
-    bg = np.median(ring, axis=1)
+    bg = _medians(ring)
     sigma = _noise(ring)
     return r, c, peak, bg, sigma, _classify(peak, bg, sigma, s)
 
@@ -597,7 +608,7 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     # an unsaturated spot's window reaches _REACH σ, σ from the log-curvature at its peak;
     # the sharper axis counts, as a reflection's flank flattens the curvature on its side only
     p1, p2, p3, p4 = _neighbours(stack, r, c)
-    lo = np.median(_ring(stack, r, c, 5), axis=1)  # the background around an 11×11 look
+    lo = _medians(_ring(stack, r, c, 5))  # the background around an 11×11 look
     peak = stack[np.arange(n), r, c].astype(float)
 
     def lg(x):
@@ -631,7 +642,7 @@ def _core_centroid(stack, r, c, s: DetectorSettings):
     # near the frame's edge the window slides inside the frame (the ring then lies to one
     # side); a spot whose centre pixel is on the border row or column cannot be measured
     edge = (rc < 1) | (cc < 1) | (rc > h - 2) | (cc > w - 2)
-    for H in np.unique(half):
+    for H in sorted(set(half.tolist())):  # (np.unique imports numpy.ma: 9 ms of a start)
         idx = np.flatnonzero((half == H) & ~edge)
         if not len(idx):
             continue
@@ -668,7 +679,7 @@ def _detect_blob(stack, s: DetectorSettings, scratch: bool = False) -> SpotBatch
         img = stack[i]
         # the whole frame is segmented, so its background is the frame's, not the peak's ring
         # (which a wide lamp raises)
-        fbg = float(np.median(img[::4, ::4]))
+        fbg = _median_of(img[::4, ::4].ravel())
         floor = max(s.min_contrast, s.min_snr * sigma[i])
         found = _segment_one(img, fbg, fbg + max(s.threshold * (peak[i] - fbg), 3 * sigma[i]),
                              floor, s)
@@ -852,7 +863,7 @@ def _detect_several(frames, k, method, settings, shape, codes_out) -> np.ndarray
     cols = np.zeros((n, k), int)
     for i in np.flatnonzero(code == 0):
         img = stack[i]
-        fbg = float(np.median(img[::4, ::4]))
+        fbg = _median_of(img[::4, ::4].ravel())
         floor = max(s.min_contrast, s.min_snr * sigma[i])
         found = _segment(img, fbg, fbg + max(s.threshold * (peak[i] - fbg), 3 * sigma[i]),
                          floor, s, k)
@@ -956,7 +967,7 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
     if k == 1 and _outside_max_one(img, r, c, s.window, own) <= thr:
         spots = [(r, c)]
     else:
-        fbg = float(np.median(img[::4, ::4]))
+        fbg = _median_of(img[::4, ::4].ravel())
         floor = max(s.min_contrast, s.min_snr * sigma)
         found = _segment(img, fbg, fbg + max(s.threshold * (peak - fbg), 3 * sigma), floor,
                          s, k)
