@@ -221,6 +221,43 @@ def test_one_frame_path_equals_the_batch(rng):
     assert detect_frame(None)[1] == MISSING
 
 
+def test_one_frame_path_gives_the_batch_reason_for_every_frame(rng):
+    """detect_frame(every_reason=True), as the locator's live sets use it, gives each frame the
+    spot and the reason detect_spots gives it: measured, no_spot (dark, a lamp alone), too_dim,
+    at_edge (centre on the border, or within a pixel of it), corrupt_frame, wrong_size,
+    missing, a float frame; for every detector."""
+    from vlpcal.detection import DETECTORS, detect_frame, detect_spots
+
+    n = 12
+    u, v = rng.uniform(3, 157, n), rng.uniform(3, 117, n)
+    quiet = sim.Sensor(read_noise=0.3, shot_gain=0.0)
+    frames = (jpeg_frames(u, v) + jpeg_frames(u, v, sim.SpotLook(1.0, 600.0))
+              + jpeg_frames(u[:4], v[:4], distractors=[(6, 4, sim.SpotLook(1.6, 70.0))])
+              + jpeg_frames([0.2, 159.5, 80.0, 0.6, 1.4], [60.0, 3.0, 119.3, 50.0, 30.0])
+              + jpeg_frames([np.nan], [np.nan])
+              + [sim.encode_jpeg(sim.render([80.0], [60.0], look=sim.SpotLook(0.9, a),
+                                            sensor=quiet)[0]) for a in (3.0, 6.0, 9.0, 14.0)]
+              + [sim.render([70.3], [40.6])[0].astype(float), None, b"not a jpeg",
+                 sim.encode_jpeg(np.full((240, 320), 20, np.uint8))])
+    lamp = np.full((120, 160), 20.0)
+    yy, xx = np.mgrid[:120, :160]
+    lamp += 200 * np.exp(-((xx - 60) ** 2 + (yy - 50) ** 2) / (2 * 12.0 ** 2))
+    frames.append(sim.encode_jpeg(lamp.astype(np.uint8)))
+    for method in DETECTORS:
+        batch = detect_spots(frames, method, shape=(120, 160))
+        for i, f in enumerate(frames):
+            uv, why = detect_frame(f, 1, method, shape=(120, 160), every_reason=True)
+            assert why == batch[i].reason, (method, i, why, batch[i].reason)
+            # blob is measured step by step: against the whole batch; the others are the batch
+            # of one (mean2's two brightest pixels, on a tie, depend on the stack's layout)
+            expected = batch.uv[i] if method == "blob" else \
+                detect_spots([f], method, shape=(120, 160)).uv[0]
+            np.testing.assert_allclose(uv[0], expected, atol=1e-9, err_msg=f"{method} {i}")
+    reasons = {s.reason for s in detect_spots(frames, shape=(120, 160))}
+    assert {None, "no_spot", "too_dim", "at_edge", "corrupt_frame", "wrong_size",
+            "missing"} <= reasons
+
+
 def test_quiet_stderr_interleaved_across_threads_restores_the_real_stderr():
     """Two decoders' quiet spells that overlap (A in, B in, A out, B out, as two camera threads
     do) leave file descriptor 2 on the real stderr, not on the null device."""

@@ -92,6 +92,30 @@ def test_bad_camera_data_is_a_status_never_an_exception(site):
                    "nothing": "no_frames", "stranger only": "no_frames", "array": "no_spot"}
     assert np.isnan(batch.X).all()
     assert loc.unknown_cameras(cases.values()) == {"X9": 1}
+    # a set alone is measured frame by frame (the live path): the same statuses
+    for i, (name, fs) in enumerate(cases.items()):
+        one = loc.locate(fs, name)
+        assert (one.status, one.camera_status) == (got[name], batch[i].camera_status), name
+
+
+def test_a_set_alone_is_the_batchs_fix(site):
+    """Located alone (each frame measured on its own: detect_frame), every set gives the fix,
+    the cameras, the residuals and the camera statuses it gets in a batch (stacks)."""
+    import vlpcal.locator as locator
+
+    scene, path, pts, frames = site
+    loc = Locator.from_file(path)
+    sets = [{c: frames[c][i] for c in frames} for i in range(len(pts))]
+    sets[3] = {c: f for c, f in sets[3].items() if c != "C2"}  # a camera missing
+    sets[4]["C1"] = sets[4]["C1"][:200]  # a truncated frame
+    batch = loc.locate_batch(sets)
+    assert len(sets) > locator._FRAME_BY_FRAME  # the batch went through the stacks
+    for i, fs in enumerate(sets):
+        one, b = loc.locate(fs), batch[i]
+        assert (one.status, one.cameras, one.camera_status) == (b.status, b.cameras,
+                                                                 b.camera_status), i
+        np.testing.assert_allclose([one.x, one.y, one.z], [b.x, b.y, b.z], atol=1e-12)
+    assert {"missing", "corrupt_frame"} <= {s for f in batch for s in f.camera_status.values()}
 
 
 def test_frames_folder_with_every_kind_of_bad_file(site, tmp_path):

@@ -920,24 +920,43 @@ def _median_of(values: np.ndarray) -> float:
 
 
 def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
-                 settings: DetectorSettings = DEFAULTS, shape=None):
+                 settings: DetectorSettings = DEFAULTS, shape=None, every_reason: bool = False):
     """Up to ``k`` spots of one frame (JPEG bytes or an image array), most LED-like first:
     ``(k×2 px with NaN rows, reason)`` as :func:`detect_several` gives for ``[frame]``, with
     ``reason`` None unless the frame could not be measured (``corrupt_frame``, ``wrong_size``).
+    ``every_reason``: the reason :func:`detect_spots` gives the frame's best spot instead
+    (``no_spot``, ``too_dim`` and ``at_edge`` too), as the locator reports each camera.
 
     The live path takes frames one at a time, where a stack of one costs what a stack of
     hundreds does in numpy calls (~0.6 ms). ``blob`` is measured here step by step on the
     frame itself (:func:`_detect_blob`'s steps, equal to it to rounding: tested); the other
     detectors go through the batch."""
     k = max(1, int(k))
-    out = np.full((k, 2), np.nan)
     if method != "blob":
+        if every_reason and k == 1:
+            spot = detect_spots([frame], method, settings, shape)[0]
+            return np.array([[spot.u, spot.v]]), spot.reason
         uv, why = detect_several([frame], k, method, settings, shape, reasons=True)
+        if every_reason and why[0] is None:
+            why = [detect_spots([frame], method, settings, shape)[0].reason]
         return uv[0], why[0]
+    uv, code = _detect_frame_blob(frame, k, settings, shape)
+    if not every_reason and code not in _UNMEASURED:
+        code = 0
+    return uv, _CODE_REASON[code]
+
+
+#: the reasons :func:`detect_frame` gives without ``every_reason``: no frame to measure
+_UNMEASURED = (_REASON_CODE[CORRUPT], _REASON_CODE[WRONG_SIZE], _REASON_CODE[MISSING])
+
+
+def _detect_frame_blob(frame, k: int, s: DetectorSettings, shape):
+    """:func:`detect_frame` with ``blob``: ``(k×2 px, reason code of the best spot)``."""
+    out = np.full((k, 2), np.nan)
     # decoded and checked as a batch's frames are (the same reasons for the same frames)
     want = tuple(shape) if shape is not None else None
     if want is not None and min(want) < MIN_SIZE:
-        return out, CORRUPT  # no spot can be measured in so small an image
+        return out, _REASON_CODE[CORRUPT]  # no spot can be measured in so small an image
     img = _decode_whole(frame, want)
     own = img is not None  # decoded here: this call's to change and restore
     if img is None:  # anything but a whole JPEG of the camera's size: the batch's checks
@@ -946,13 +965,15 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
             stack = _decode_into([frame], codes, want,
                                  np.empty((1, *want), np.uint8) if want else None, images)
         if codes[0]:
-            return out, _CODE_REASON[int(codes[0])]
+            return out, int(codes[0])
         own = stack is not None
         img = stack[0] if own else images[0]
-    if img.dtype != np.uint8 or not img.flags.c_contiguous:
-        uv = detect_several(img[None], k, method, settings)[0]  # a float frame: the batch
-        return uv, None
-    s = settings
+    if img.dtype != np.uint8 or not img.flags.c_contiguous:  # a float frame: the batch
+        if k == 1:
+            spot = detect_spots(img[None], "blob", s)[0]
+            return np.array([[spot.u, spot.v]]), _REASON_CODE[spot.reason]
+        uv = detect_several(img[None], k, "blob", s)[0]
+        return uv, int(detect_spots(img[None], "blob", s).reason_code[0])
     h, w = img.shape
     flat = int(img.argmax())
     r, c = divmod(flat, w)
@@ -961,8 +982,10 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
     ring = win.ravel()[_ring_flat(_RING, h, w)].astype(np.int16)
     bg = _median_of(ring)
     sigma = max(1.4826 * _median_of(np.abs(ring[1:] - ring[:-1])) / np.sqrt(2.0), 1.0)
-    if peak - bg < s.min_snr * sigma or peak - bg < s.min_contrast:
-        return out, None
+    if peak - bg < s.min_snr * sigma:
+        return out, _REASON_CODE[NO_SPOT]
+    if peak - bg < s.min_contrast:
+        return out, _REASON_CODE[TOO_DIM]
     thr = bg + max(s.threshold * (peak - bg), 3.0 * sigma)
     if k == 1 and _outside_max_one(img, r, c, s.window, own) <= thr:
         spots = [(r, c)]
@@ -971,14 +994,17 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
         floor = max(s.min_contrast, s.min_snr * sigma)
         found = _segment(img, fbg, fbg + max(s.threshold * (peak - fbg), 3 * sigma), floor,
                          s, k)
-        if found is None:
-            return out, None
+        if found is None:  # nothing point-like: a lamp alone, or noise
+            return out, _REASON_CODE[NO_SPOT]
         spots = list(zip(found[0].tolist(), found[1].tolist()))
+    code = 0
     for j, (r, c) in enumerate(spots):
-        u, v = _core_centroid_one(img, r, c, s)
-        if 1.0 <= u <= w - 2.0 and 1.0 <= v <= h - 2.0:
+        u, v, edge = _core_centroid_one(img, r, c, s)
+        if 1.0 <= u <= w - 2.0 and 1.0 <= v <= h - 2.0 and not edge:
             out[j] = u, v
-    return out, None
+        elif j == 0:  # off the sensor in part (the batch's at_edge), or not measurable
+            code = _REASON_CODE[AT_EDGE if edge or u == u else NO_SPOT]
+    return out, code
 
 
 def _decode_whole(frame, want):
@@ -1031,7 +1057,8 @@ def _plane_flat(half: int):
 
 
 def _core_centroid_one(img: np.ndarray, r: int, c: int, s: DetectorSettings):
-    """:func:`_core_centroid` of one frame's spot at (r, c): ``(u, v)``, NaN at the edge."""
+    """:func:`_core_centroid` of one frame's spot at (r, c): ``(u, v, at_edge)``, NaN when
+    its centre pixel is on the frame's border (``at_edge``)."""
     import math
 
     h, w = img.shape
@@ -1059,10 +1086,12 @@ def _core_centroid_one(img: np.ndarray, r: int, c: int, s: DetectorSettings):
         r, c = int(np.rint(cv)), int(np.rint(cu))
     half = min(max(half, 3), _MAX_HALF)
     if r < 1 or c < 1 or r > h - 2 or c > w - 2:
-        return np.nan, np.nan
+        return np.nan, np.nan, True
     win, r0, c0 = _cut(img, r, c, half)
     ring, plane, design = _plane_flat(half)
     flat = win.astype(float).ravel()
     sig = flat - plane @ flat[ring]
     tot, su, sv = np.maximum(sig - s.threshold * sig.max(), 0.0) @ design
-    return c0 + su / tot, r0 + sv / tot
+    if not tot > 0:  # nothing over the threshold (the batch's NaN)
+        return np.nan, np.nan, False
+    return c0 + su / tot, r0 + sv / tot, False
