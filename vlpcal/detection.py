@@ -202,7 +202,9 @@ class _QuietStderr:
                         cls._null = os.open(os.devnull, os.O_WRONLY)
                     cls._saved = os.dup(2)
                     os.dup2(cls._null, 2)
-                except OSError:
+                except OSError:  # no redirection then (warnings may show); no descriptor lost
+                    if cls._saved is not None:
+                        os.close(cls._saved)
                     cls._saved = None
             cls._depth += 1
         return self
