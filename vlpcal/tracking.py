@@ -32,6 +32,7 @@ are ``T1``, ``T2``… for as long as they last.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import cv2
@@ -48,9 +49,12 @@ GATE_SIGMAS = 5.0
 #: two cameras' first spots start a track when they are this many frame periods apart or less
 START_WINDOW = 2.0
 #: a track that accepts no spot for this many frame periods (beyond its blink code's longest
-#: dark run) is lost …
+#: dark run) is lost
 LOST_PERIODS = 15.0
-#: … and so is one that only one camera has seen for this many (its depth is then a guess)
+#: a track that only one camera has seen for this many frame periods is coasting: its depth is
+#: a guess, so its 3D prediction no longer gates that camera's spots — the spot's own path in
+#: the image does (it moves no faster than :data:`TOP_SPEED` allows) — and it chooses spots
+#: after the tracks two cameras place; it lasts while a camera follows it
 COAST_PERIODS = 8.0
 #: a window's fit whose RMS residual passes this many spot sigmas does not fit the path (a
 #: turn sharper than the window's quadratic): the window is halved, else the motion carries it
@@ -139,12 +143,13 @@ class Tracker:
     def __init__(self, deployment: Deployment, period: float = 1 / 30,
                  acceleration: float = ACCELERATION, pixel_sigma: float = PIXEL_SIGMA,
                  spots: int | None = None, lag: float | None = None):
-        import math
-
         if not (math.isfinite(period) and period > 0):
             raise ValueError(f"period: expected seconds > 0, got {period!r}")
         if lag is not None and not (math.isfinite(lag) and lag >= 0):
             raise ValueError(f"lag: expected seconds ≥ 0 (or None), got {lag!r}")
+        if not isinstance(deployment, Deployment):
+            raise TypeError(f"deployment: expected a vlpcal Deployment (Tracker.from_file(path) "
+                            f"reads one), got {type(deployment).__name__}")
         self.deployment = deployment
         self.late = 0  #: frames that came after the rows they belonged to were written
         self._latest: dict = {}  #: camera index → the time of its newest frame
@@ -176,11 +181,18 @@ class Tracker:
         # its first use mid-stream would hold a live frame ~30 ms
         import shapely  # noqa: F401
 
+    @classmethod
+    def from_file(cls, path, **options) -> Tracker:
+        """A tracker of the deployment file at ``path`` (options as :class:`Tracker` takes)."""
+        from .deployment import load
+
+        return cls(load(path), **options)
+
     # -- the interface ---------------------------------------------------------------------
     def update(self, camera_id: str, t: float, frame) -> list[TrackUpdate]:
         """A camera's frame (JPEG bytes or an image array) captured at ``t`` s: its spots are
         found and the tracks updated; returns the rows now complete."""
-        cam = self.cameras[self._index[camera_id]]
+        cam = self.cameras[self._camera(camera_id)]
         uv, _ = detect_frame(frame, self.spots, self.deployment.detector,
                              self.deployment.detector_settings, shape=(cam.height, cam.width))
         return self.update_spots(camera_id, t, uv)
@@ -192,7 +204,9 @@ class Tracker:
     def update_spots(self, camera_id: str, t: float, uvs) -> list[TrackUpdate]:
         """As :meth:`update`, from the spots already found (``K×2`` px; NaN rows: none; past
         ``spots``, the first ones)."""
-        k = self._index[camera_id]
+        k = self._camera(camera_id)
+        if not math.isfinite(t):
+            raise ValueError(f"t: expected a capture time in seconds, got {t!r}")
         if t < self._present() - self.half:
             self.late += 1
             return []
@@ -200,7 +214,10 @@ class Tracker:
         out = self._due(t)
         self._drop_lost(t, out)
         uvs = np.asarray(uvs, float).reshape(-1, 2)
-        uvs = uvs[np.isfinite(uvs).all(axis=1)][:self.spots] - self._offset[k]
+        cam = self.cameras[k]  # a spot off the image (or not a number) is no spot
+        inside = (uvs[:, 0] >= -0.5) & (uvs[:, 0] <= cam.width - 0.5) & (uvs[:, 1] >= -0.5) \
+            & (uvs[:, 1] <= cam.height - 0.5)
+        uvs = uvs[inside][:self.spots] - self._offset[k]
         rays = self._rays(k, t, uvs)
         claims = self._claim(k, t, rays)
         for j, ray in enumerate(rays):
@@ -217,6 +234,13 @@ class Tracker:
         if not self._lag:  # rows at once: this frame's too
             out += self._due(t)
         return out
+
+    def _camera(self, camera_id: str) -> int:
+        try:
+            return self._index[camera_id]
+        except (KeyError, TypeError):
+            raise KeyError(f"camera {camera_id!r} is not in {self.deployment.name} (it has "
+                           f"{', '.join(c.id for c in self.cameras)})") from None
 
     def _rays(self, k: int, t: float, uvs) -> list[_Ray]:
         """Camera ``k``'s spots (px) at ``t`` as rays, each with its two equations on the LED's
@@ -282,8 +306,7 @@ class Tracker:
     def _drop_lost(self, now: float, out: list) -> None:
         keep = []
         for tr in self.tracks:
-            if now - tr.last_ray > self.lost_after or \
-                    tr.last_ray - tr.last_two > COAST_PERIODS * self.period:
+            if now - tr.last_ray > self.lost_after:
                 if not tr.tentative:
                     out += [self._row(tr, t) for t in tr.due]
             else:
@@ -367,13 +390,18 @@ class Tracker:
             pred = np.where(depth[:, None] > 0, Xc[:, :2] / depth[:, None], np.nan)
             slack = np.hypot(self.pixel_sigma, np.array([e[2] for e in ext]) * self._f[k]
                              / depth) / self._f[k]
+        coasting = [t - tr.last_two > COAST_PERIODS * self.period for tr in self.tracks]
+        for i in np.flatnonzero(coasting):
+            self._follow(self.tracks[i], k, t, depth[i], pred, slack, i)
         xy = np.array([r.xy for r in rays])
         d = np.linalg.norm(xy[None, :, :] - pred[:, None, :], axis=2) / slack[:, None]
         d = np.where(np.isfinite(d), d, np.inf)
         if d.size == 1:  # one track, one spot (the common case): no ranking to do
             return {0: self.tracks[0]} if d[0, 0] < GATE_SIGMAS else {}
-        # confirmed tracks choose first; a tentative one takes what they leave
-        later = np.array([GATE_SIGMAS if tr.tentative else 0.0 for tr in self.tracks])
+        # tracks two cameras place choose first; a tentative or coasting one takes what they
+        # leave
+        later = np.where(np.array([tr.tentative for tr in self.tracks]) | coasting,
+                         GATE_SIGMAS, 0.0)
         claims: dict = {}
         for flat in np.argsort(d + later[:, None], axis=None):
             i, j = np.unravel_index(flat, d.shape)
@@ -383,6 +411,19 @@ class Tracker:
                 continue
             claims[int(j)] = self.tracks[i]
         return claims
+
+    def _follow(self, tr: _Track, k: int, t: float, depth: float, pred, slack, i: int) -> None:
+        """A coasting track's gate in camera ``k``: around its last spot there (if camera ``k``
+        saw it within the rays kept), as far as :data:`TOP_SPEED` moves it since, at the depth
+        its motion suggests (else the room's size away), in row ``i`` of ``pred`` and
+        ``slack``."""
+        last = next((r for r in reversed(tr.rays) if r.camera == k), None)
+        if last is None or not t >= last.t:
+            return
+        depth = depth if depth > 0 else self._size
+        reach = 3 * self.pixel_sigma + TOP_SPEED * (t - last.t) * self._f[k] / depth  # px
+        pred[i] = last.xy
+        slack[i] = reach / GATE_SIGMAS / self._f[k]
 
     def _blink(self, k: int, t: float, lit: set) -> None:
         """Record, for the blink code, each placed track camera ``k`` should have seen at
