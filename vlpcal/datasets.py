@@ -453,9 +453,14 @@ def read_async_frames(root) -> AsyncFrames:
     frame whose file is missing reads as None, a missing camera: that camera sent nothing)."""
     root = Path(root)
     times = root / "times.csv"
+    if not root.is_dir():
+        raise DatasetError(f"{root}: not a folder (expected <camera_id>/<frame_no>.jpg and "
+                           "times.csv with camera_id,frame_no,t inside)")
     if not times.is_file():
+        hint = (" — it looks like a locate frames folder (<frame_id>/<camera_id>.jpg): that "
+                "goes to vlpcal locate --frames" if any(root.glob("*/*.jpg")) else "")
         raise DatasetError(f"{root}: no times.csv (expected <camera_id>/<frame_no>.jpg and "
-                           "times.csv with camera_id,frame_no,t)")
+                           f"times.csv with camera_id,frame_no,t){hint}")
     if times.stat().st_size > MAX_TIMES_BYTES:
         raise DatasetError(f"{times}: larger than {MAX_TIMES_BYTES >> 20} MB (over a million "
                            "frames: hours of four cameras at 30 fps): split the recording")

@@ -107,6 +107,10 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     for value, name in ((free_height, "--free-height"), (references, "--references")):
         if value is not None and not free_sets:
             raise click.BadParameter("is for a free survey (--free-sets N)", param_hint=name)
+    given = click.get_current_context().get_parameter_source("seconds")
+    if given == click.core.ParameterSource.COMMANDLINE and not robot_speed:
+        raise click.BadParameter("is for a robot's streams (--robot-speed M/S) or --publish",
+                                 param_hint="--seconds")
     if references is not None and references < 3 and free_height is None:
         raise click.BadParameter(f"expected 3 or more (2 or more with --free-height: fewer "
                                  f"cannot fix the room's frame), got {references}",
@@ -121,7 +125,8 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
 
             simulate_streams(scene, stage / "streams", robot_path(scene, robot_speed, seed=seed),
                              seconds, seed=seed)
-            click.echo(f"streams: a robot at {robot_speed:g} m/s for {seconds:g} s, cameras "
+            click.echo(f"streams: a robot at up to {robot_speed:g} m/s (slower in its turns) "
+                       f"for {seconds:g} s, cameras "
                        f"not synchronised → {out / 'streams'} (truth in "
                        f"{out / 'streams.truth.csv'})")
 

@@ -161,8 +161,13 @@ def _check_the_deployment_fits(loc, source, camera_ids, notes, folder=None) -> N
     present = [c for c in ids if c in camera_ids]
     absent = [c for c in ids if c not in camera_ids]
     hint = "is this the right deployment for them?"
+    if folder is not None and (folder.root / "times.csv").is_file():  # a robot's streams
+        hint = ("it holds times.csv and <camera_id>/<frame_no>.jpg: an asynchronous folder, "
+                "which vlpcal track --frames follows")
     if len(present) < 2 or len(absent) > len(ids) / 2:
-        others = ", ".join(c for c in camera_ids if c not in ids)[:200] or "none"
+        other = [c for c in camera_ids if c not in ids]
+        others = ", ".join(other[:8]) + (f" and {len(other) - 8} more" if len(other) > 8
+                                          else "") or "none"
         raise UserError(f"{source}: has {'frames' if folder else 'spots'} of only "
                         f"{len(present)} of {dep.name}'s {len(ids)} cameras "
                         f"({', '.join(present) or 'none'}; other ids there: {others}): {hint}")

@@ -50,8 +50,9 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
     fitted to every ray in it, so no two views need to be simultaneous. One row per camera
     frame that saw an LED: t,led,x,y,z,vx,vy,vz,sigma_m,cameras,status (m, m/s; t in s on the
     frames' clock, or UTC seconds live; status ok where two cameras or more placed it,
-    one_camera where its motion carried it). With the deployment's leds: block, each LED is
-    named by its blink code; without, tracks are T1, T2…
+    one_camera where one camera saw it and its motion carried it, degenerate — no position —
+    where that guess is as uncertain as a tenth of the room). With the deployment's leds:
+    block, each LED is named by its blink code; without, tracks are T1, T2…
 
     Example: vlpcal track -d deployment.yaml --frames streams/ --out tracks.csv
     """
@@ -177,6 +178,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
                  "corrupt_frame": "not whole JPEGs"}
         bad = "; ".join(f"{n} frames {words.get(w, w)}" for w, n in unreadable.items())
         click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
+                   + _lag_said(tracker)
                    + (f"; {missing} listed frames missing" if missing else "")
                    + (f"; {bad} (not used)" if bad else ""), err=True)
 
@@ -202,6 +204,14 @@ def _utc_row(update, utc: float) -> list:
     if utc:
         row[0] = f"{update.t + utc:.6f}"
     return row
+
+
+def _lag_said(tracker) -> str:
+    """What the summary says of a --lag past half the fit's window (the most a row can wait)."""
+    if tracker.lag is None or tracker.lag <= tracker.half:
+        return ""
+    return (f"; --lag {tracker.lag:g} s is past half the fit's window: rows were written "
+            f"{tracker.half:.3g} s after their frames")
 
 
 def _summary(rows) -> str:
@@ -268,7 +278,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
                if frames.stamped[cid] else ", no X-Timestamp (arrival times used)")
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
-    say(f"{n} camera frames → {_summary(rows)} → {out}")
+    say(f"{n} camera frames → {_summary(rows)} → {out}" + _lag_said(tracker))
 
 
 def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, out, fps, quiet,
@@ -344,7 +354,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     said += subscriber_notes(sub, "tracker", "tracked")
     if sub.disconnects:
         said.append(f"the broker went away {sub.disconnects} time(s)")
-    say("; ".join(said) + f" → {_summary(rows)} → {out}")
+    say("; ".join(said) + f" → {_summary(rows)} → {out}" + _lag_said(tracker))
 
 
 class _LiveTracks:
