@@ -71,3 +71,30 @@ def test_every_command_is_loaded_on_demand_from_its_module():
         assert common.main.commands[name].callback.__module__ == f"vlpcal.cli.{module}"
     ctx = click.Context(common.main)
     assert common.main.list_commands(ctx) == sorted(common.COMMANDS)
+
+
+def test_a_folder_given_to_the_wrong_command_is_named_for_the_right_one(tmp_path):
+    """From a new user's walk: locate on a robot's asynchronous folder, track on a locate
+    folder or a missing one, --seconds without a robot, and a --lag past half the window."""
+    run = CliRunner().invoke
+    sim = tmp_path / "sim"
+    res = run(main, ["simulate", "--out", str(sim), "--test-points", "3", "--robot-speed", "1",
+                     "--seconds", "1", "--survey-step", "0.6"])
+    assert res.exit_code == 0, res.output
+    dep = str(sim / "truth.yaml")
+    res = run(main, ["locate", "-d", dep, "--frames", str(sim / "streams"), "-o",
+                     str(tmp_path / "f.csv")])
+    assert res.exit_code == 2 and "vlpcal track --frames" in res.output
+    assert "more)" in res.output and len(res.output.strip().splitlines()) == 1
+    res = run(main, ["track", "-d", dep, "--frames", str(sim / "frames"), "-o",
+                     str(tmp_path / "t.csv")])
+    assert res.exit_code == 2 and "vlpcal locate --frames" in res.output
+    res = run(main, ["track", "-d", dep, "--frames", str(sim / "nowhere"), "-o",
+                     str(tmp_path / "t.csv")])
+    assert res.exit_code == 2 and "not a folder" in res.output
+    res = run(main, ["track", "-d", dep, "--frames", str(sim / "streams"), "-o",
+                     str(tmp_path / "t.csv"), "--lag", "30"])
+    assert res.exit_code == 0 and "--lag 30 s is past half the fit's window" in res.output
+    res = run(main, ["simulate", "--out", str(tmp_path / "s2"), "--seconds", "5"])
+    assert res.exit_code == 2 and "--robot-speed" in res.output
+    assert not (tmp_path / "s2").exists()
