@@ -410,3 +410,66 @@ def test_tracker_inputs_a_user_gets_wrong_are_named(tmp_path):
         for k, cid in enumerate(["C1", "C2", "C3", "C4"] * 3):
             assert tr.update_spots(cid, k / 120, [[1e300, -1e300], [-3.0, 60.0]]) == []
     assert not tr.tracks and not tr._pending
+
+
+def _multi_streams(dep, leds, seconds, rng, extra=None):
+    """(t, camera id, K×2 spots, NaN rows: unseen) of several LEDs (path, lit-or-None) and a
+    camera's extra spots (camera id → f(t) px), each camera on its own clock."""
+    events = []
+    for cam in dep.cameras:
+        t = capture_times(Timing(), seconds, rng)
+        spots = []
+        for path, lit in leds:
+            uv, _, inside = cam.project(path(t), margin=1.0)
+            uv = uv + rng.normal(0, SPOT_SIGMA, uv.shape)
+            seen = inside if lit is None else inside & lit(t)
+            spots.append(np.where(seen[:, None], uv, np.nan))
+        if extra and cam.id in extra:
+            spots.append(extra[cam.id](t))
+        events += list(zip(t, [cam.id] * len(t), np.stack(spots, axis=1)))
+    return sorted(events, key=lambda e: e[0])
+
+
+def test_a_coasting_track_takes_no_other_leds_spots_and_no_lamps(rng):
+    """From a hostile probe of coasting: a track that only C2 sees (its LED parked where C1
+    does not look) took, through its ever wider 3D prediction, another LED's spots in C1, so
+    that LED never got a track; and one whose LED left every view lived on forever on a lamp in
+    C2. The camera that follows a coasting track gives it spots near its last spot only, other
+    cameras only spots whose rays meet it and fit its path."""
+    cams = [paper_camera("C1", (0.9, 1.2, 2.3)), paper_camera("C2", (1.6, 1.2, 2.3))]
+    dep = Deployment("line", 2.3, [[0, 0], [2.6, 0], [2.6, 2.4], [0, 2.4]], cams)
+
+    def parked(t):  # drives to x = 2.35 (C2 alone sees it past 2.0) and stays
+        t = np.asarray(t, float)
+        return np.stack([1.2 + 1.15 * np.clip(t, 0, 1), np.full(t.shape, 1.0),
+                         np.full(t.shape, 0.15)], -1)
+
+    def circling(t):  # in both cameras' view
+        a = np.asarray(t, float) / 0.3
+        return np.stack([1.2 + 0.3 * np.cos(a), 1.3 + 0.3 * np.sin(a),
+                         np.full(a.shape, 0.15)], -1)
+
+    tracker = Tracker(dep, period=1 / 30, spots=2)
+    rows = []
+    for t, cid, uv in _multi_streams(dep, [(parked, None), (circling, lambda t: t >= 3.0)],
+                                     8.0, rng):
+        rows += tracker.update_spots(cid, t, uv)
+    rows += tracker.finish()
+    on_b = [r for r in rows if r.t > 3.5 and r.status == "ok"
+            and np.linalg.norm(r.position - circling(r.t)) < 0.01]
+    assert len(on_b) > 0.8 * 4.5 * 30, len(on_b)  # the second LED is tracked throughout
+    first = rows[0].led
+    assert {r.led for r in rows if r.t > 2.0 and np.linalg.norm(
+        np.nan_to_num(r.position) - circling(r.t)) < 0.05} - {first}  # under its own name
+
+    def gone(t):  # leaves every view at ~1.4 s
+        t = np.asarray(t, float)
+        return np.stack([1.2 + 1.15 * t, np.full(t.shape, 1.0), np.full(t.shape, 0.15)], -1)
+
+    lamp = cams[1].project(np.array([[2.4, 2.2, 0.0]]))[0][0]
+    tracker = Tracker(dep, period=1 / 30, spots=2)
+    rows = []
+    for t, cid, uv in _multi_streams(dep, [(gone, None)], 6.0, rng,
+                                     {"C2": lambda t: np.tile(lamp, (len(t), 1))}):
+        rows += tracker.update_spots(cid, t, uv)
+    assert rows and not [r for r in rows if r.t > 2.0] and not tracker.tracks

@@ -52,10 +52,16 @@ START_WINDOW = 2.0
 #: dark run) is lost
 LOST_PERIODS = 15.0
 #: a track that only one camera has seen for this many frame periods is coasting: its depth is
-#: a guess, so its 3D prediction no longer gates that camera's spots — the spot's own path in
-#: the image does (it moves no faster than :data:`TOP_SPEED` allows) — and it chooses spots
-#: after the tracks two cameras place; it lasts while a camera follows it
+#: a guess, so its 3D prediction gates nothing. The camera that sees it follows its spot in the
+#: image (from its last spot there, :data:`FOLLOW_PERIODS` ago at most, no farther than
+#: :data:`TOP_SPEED` moves it); another camera's spot joins it only when that spot's ray meets
+#: the track's latest ray as a new track's two first rays must. It chooses after the tracks
+#: two cameras place, and is lost when no camera follows it
 COAST_PERIODS = 8.0
+#: a coasting track's spot in a camera follows its spot there this many frame periods back at
+#: most (a few dropped frames; and its blink code's longest dark run); a camera that lost it
+#: for longer cannot give it spots alone
+FOLLOW_PERIODS = 4.0
 #: a window's fit whose RMS residual passes this many spot sigmas does not fit the path (a
 #: turn sharper than the window's quadratic): the window is halved, else the motion carries it
 FIT_SIGMAS = 4.0
@@ -327,16 +333,11 @@ class Tracker:
     def _refresh(self, tr: _Track, t: float) -> None:
         """The track's state now, from its rays of the last window and its state before:
         what the next spot is judged against."""
-        since = t - WINDOW * self.period
-        rays = [r for r in tr.rays if r.t >= since]
+        rays = self._window(tr, t)
         if len({r.camera for r in rays}) < 2:
             return  # one camera cannot place it: the state from two carries on (coasting)
-        # the state before anchors a window whose rays barely cross (loosened threefold: it
-        # holds these rays already, and counted twice they would make the track overconfident)
-        pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
-        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=pos)
-        if not (fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma
-                and self._plausible(fit, cov)):
+        fit, resid, cov = self._placed(tr, t, rays, self._extrapolated(tr, t)[0])
+        if fit is None:
             if tr.tentative:  # two LEDs' spots paired by chance: undone, its rays set free
                 tr.misfits += 1
                 if tr.misfits >= 2:
@@ -350,6 +351,25 @@ class Tracker:
         tr.fit, tr.fit_t = fit, t
         tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
         tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
+
+    def _window(self, tr: _Track, t: float) -> list:
+        """The track's rays of the window that ends at ``t``."""
+        since = t - WINDOW * self.period
+        return [r for r in tr.rays if r.t >= since]
+
+    def _placed(self, tr: _Track, t: float, rays, guess):
+        """The track's state at ``t`` from ``rays`` (two cameras' or more) and its state
+        before — (fit, RMS residual px, covariance) — or (None, residual, None) when they do not
+        fit one path in the room (:data:`FIT_SIGMAS`, :meth:`_plausible`). ``guess``: a
+        position near ``t`` (for the rays' weights). The state before anchors a window whose
+        rays barely cross (loosened threefold: it holds these rays already, and counted twice
+        they would make the track overconfident)."""
+        pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
+        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=guess)
+        if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma \
+                and self._plausible(fit, cov):
+            return fit, resid, cov
+        return None, resid, None
 
     def _plausible(self, fit, cov) -> bool:
         """Whether a window's fit can be the LED: inside the room (the locator's rule,
@@ -390,12 +410,12 @@ class Tracker:
             pred = np.where(depth[:, None] > 0, Xc[:, :2] / depth[:, None], np.nan)
             slack = np.hypot(self.pixel_sigma, np.array([e[2] for e in ext]) * self._f[k]
                              / depth) / self._f[k]
-        coasting = [t - tr.last_two > COAST_PERIODS * self.period for tr in self.tracks]
-        for i in np.flatnonzero(coasting):
-            self._follow(self.tracks[i], k, t, depth[i], pred, slack, i)
         xy = np.array([r.xy for r in rays])
         d = np.linalg.norm(xy[None, :, :] - pred[:, None, :], axis=2) / slack[:, None]
         d = np.where(np.isfinite(d), d, np.inf)
+        coasting = [t - tr.last_two > COAST_PERIODS * self.period for tr in self.tracks]
+        for i in np.flatnonzero(coasting):
+            d[i] = self._coasting_distances(self.tracks[i], k, t, rays, xy)
         if d.size == 1:  # one track, one spot (the common case): no ranking to do
             return {0: self.tracks[0]} if d[0, 0] < GATE_SIGMAS else {}
         # tracks two cameras place choose first; a tentative or coasting one takes what they
@@ -412,18 +432,47 @@ class Tracker:
             claims[int(j)] = self.tracks[i]
         return claims
 
-    def _follow(self, tr: _Track, k: int, t: float, depth: float, pred, slack, i: int) -> None:
-        """A coasting track's gate in camera ``k``: around its last spot there (if camera ``k``
-        saw it within the rays kept), as far as :data:`TOP_SPEED` moves it since, at the depth
-        its motion suggests (else the room's size away), in row ``i`` of ``pred`` and
-        ``slack``."""
+    def _coasting_distances(self, tr: _Track, k: int, t: float, rays, xy) -> np.ndarray:
+        """A coasting track's distance, in gate sigmas, to each spot of camera ``k`` at ``t``
+        (see :data:`COAST_PERIODS`): from its last spot in camera ``k`` if that camera follows
+        it, else a spot whose ray meets its latest ray of another camera (the test a new track's
+        two first rays pass) and with which its window's rays fit one path (so a lamp whose ray
+        happens to cross it does not), by that fit's residual; inf where neither holds."""
+        out = np.full(len(rays), np.inf)
         last = next((r for r in reversed(tr.rays) if r.camera == k), None)
-        if last is None or not t >= last.t:
-            return
-        depth = depth if depth > 0 else self._size
-        reach = 3 * self.pixel_sigma + TOP_SPEED * (t - last.t) * self._f[k] / depth  # px
-        pred[i] = last.xy
-        slack[i] = reach / GATE_SIGMAS / self._f[k]
+        if last is not None and 0 <= t - last.t <= FOLLOW_PERIODS * self.period + self._dark:
+            depth = float(self.cameras[k].to_camera(tr.fit[None, :3])[0, 2])
+            if depth > 0:  # at its last placed depth, however far it has moved since
+                reach = 3 * self.pixel_sigma + TOP_SPEED * (t - last.t) * self._f[k] / depth
+                return GATE_SIGMAS * np.linalg.norm(xy - last.xy, axis=1) * self._f[k] / reach
+            return out
+        other = next((r for r in reversed(tr.rays) if r.camera != k), None)
+        if other is None or t - other.t > START_WINDOW * self.period:
+            return out
+        window = self._window(tr, t)
+        for j, ray in enumerate(rays):  # a spot whose ray meets the track's latest …
+            score, X = self._meet(other, ray)
+            if score < 1:  # … and that the track's window of rays fits with it: placed again
+                fit, resid, _ = self._placed(tr, t, window + [ray], X)
+                if fit is not None:
+                    out[j] = GATE_SIGMAS * resid / (FIT_SIGMAS * self.pixel_sigma)
+        return out
+
+    def _meet(self, p: _Ray, ray: _Ray):
+        """How well two rays of two cameras meet as one LED: (their residual over what the
+        motion possible between them allows, < 1 when they do; the point), or (inf, None) when
+        they do not determine a point in front of both cameras, above the floor (a floor's
+        mirror image of an LED meets below it)."""
+        fit, resid, cov = self._solve([p, ray], ray.t, order=0)
+        if fit is None:
+            return np.inf, None
+        X = fit[:3]
+        depth = [float(self.cameras[r.camera].to_camera(X[None])[0, 2]) for r in (p, ray)]
+        if min(depth) <= 0 or X[2] < -3 * np.sqrt(max(cov[2, 2], 0.0)):
+            return np.inf, None
+        allowed = 3 * self.pixel_sigma + TOP_SPEED * abs(ray.t - p.t) * max(
+            self._f[r.camera] / d for r, d in zip((p, ray), depth))
+        return (resid / allowed if resid <= allowed else np.inf), X
 
     def _blink(self, k: int, t: float, lit: set) -> None:
         """Record, for the blink code, each placed track camera ``k`` should have seen at
@@ -464,25 +513,16 @@ class Tracker:
 
     def _start(self, ray: _Ray) -> None:
         """A spot no track claims: start a track with the recent spot of another camera whose
-        ray meets this one's best (within the motion possible between them, and above the
-        floor: a floor's mirror image of an LED meets below it), else keep it for the next."""
+        ray meets this one's best (:meth:`_meet`), else keep it for the next."""
         window = START_WINDOW * self.period
         self._pending = [p for p in self._pending if ray.t - p.t <= window]
         best, best_score = None, np.inf
         for p in self._pending:
             if p.camera == ray.camera:
                 continue
-            fit, resid, cov = self._solve([p, ray], ray.t, order=0)
-            if fit is None:
-                continue
-            X = fit[:3]
-            depth = [float(self.cameras[r.camera].to_camera(X[None])[0, 2]) for r in (p, ray)]
-            if min(depth) <= 0 or X[2] < -3 * np.sqrt(max(cov[2, 2], 0.0)):
-                continue
-            allowed = 3 * self.pixel_sigma + TOP_SPEED * abs(ray.t - p.t) * max(
-                self._f[r.camera] / d for r, d in zip((p, ray), depth))
-            if resid <= allowed and resid / allowed < best_score:
-                best, best_score = (p, X), resid / allowed
+            score, X = self._meet(p, ray)
+            if score < best_score:
+                best, best_score = (p, X), score
         if best is None:
             self._pending.append(ray)
             return
