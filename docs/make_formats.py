@@ -159,8 +159,7 @@ Example: `surveys/paper-2024/survey/`.
   `leds:`), else a track id (`T1`, …; also while a code is being read); `cameras` the cameras
   whose rays the fit's window held (`C1+C3`); `status` `ok` (two cameras or more), `one_camera`
   (one camera's rays, the track's motion placing the LED along them) or `degenerate` (a
-  predicted error past a tenth of the room's size: x, y, z, vx, vy, vz empty; a track that one
-  camera alone follows for long gets these, and keeps its `led`).
+  predicted error past a tenth of the room's size: x, y, z, vx, vy, vz empty).
 - Blink codes (`leds:` in the deployment): per LED `id`, `pattern` (a quoted string of `0`
   dark and `1` lit, 2–64 bits, repeated) and `bit_rate` (bits/s); no two patterns the same up
   to a shift at one bit rate. A track is named once its lit and dark frames over a whole repeat

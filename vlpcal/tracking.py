@@ -49,19 +49,12 @@ GATE_SIGMAS = 5.0
 #: two cameras' first spots start a track when they are this many frame periods apart or less
 START_WINDOW = 2.0
 #: a track that accepts no spot for this many frame periods (beyond its blink code's longest
-#: dark run) is lost
+#: dark run) is lost …
 LOST_PERIODS = 15.0
-#: a track that only one camera has seen for this many frame periods is coasting: its depth is
-#: a guess, so its 3D prediction gates nothing. The camera that sees it follows its spot in the
-#: image (from its last spot there, :data:`FOLLOW_PERIODS` ago at most, no farther than
-#: :data:`TOP_SPEED` moves it); another camera's spot joins it only when that spot's ray meets
-#: the track's latest ray as a new track's two first rays must. It chooses after the tracks
-#: two cameras place, and is lost when no camera follows it
+#: … and so is one that only one camera has seen for this many (its depth is then a guess: one
+#: camera alone cannot tell the LED from a lamp or another LED, so a track that coasted on
+#: would take their spots)
 COAST_PERIODS = 8.0
-#: a coasting track's spot in a camera follows its spot there this many frame periods back at
-#: most (a few dropped frames; and its blink code's longest dark run); a camera that lost it
-#: for longer cannot give it spots alone
-FOLLOW_PERIODS = 4.0
 #: a window's fit whose RMS residual passes this many spot sigmas does not fit the path (a
 #: turn sharper than the window's quadratic): the window is halved, else the motion carries it
 FIT_SIGMAS = 4.0
@@ -312,7 +305,8 @@ class Tracker:
     def _drop_lost(self, now: float, out: list) -> None:
         keep = []
         for tr in self.tracks:
-            if now - tr.last_ray > self.lost_after:
+            if now - tr.last_ray > self.lost_after or \
+                    tr.last_ray - tr.last_two > COAST_PERIODS * self.period:
                 if not tr.tentative:
                     out += [self._row(tr, t) for t in tr.due]
             else:
@@ -333,11 +327,16 @@ class Tracker:
     def _refresh(self, tr: _Track, t: float) -> None:
         """The track's state now, from its rays of the last window and its state before:
         what the next spot is judged against."""
-        rays = self._window(tr, t)
+        since = t - WINDOW * self.period
+        rays = [r for r in tr.rays if r.t >= since]
         if len({r.camera for r in rays}) < 2:
             return  # one camera cannot place it: the state from two carries on (coasting)
-        fit, resid, cov = self._placed(tr, t, rays, self._extrapolated(tr, t)[0])
-        if fit is None:
+        # the state before anchors a window whose rays barely cross (loosened threefold: it
+        # holds these rays already, and counted twice they would make the track overconfident)
+        pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
+        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=pos)
+        if not (fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma
+                and self._plausible(fit, cov)):
             if tr.tentative:  # two LEDs' spots paired by chance: undone, its rays set free
                 tr.misfits += 1
                 if tr.misfits >= 2:
@@ -351,25 +350,6 @@ class Tracker:
         tr.fit, tr.fit_t = fit, t
         tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
         tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
-
-    def _window(self, tr: _Track, t: float) -> list:
-        """The track's rays of the window that ends at ``t``."""
-        since = t - WINDOW * self.period
-        return [r for r in tr.rays if r.t >= since]
-
-    def _placed(self, tr: _Track, t: float, rays, guess):
-        """The track's state at ``t`` from ``rays`` (two cameras' or more) and its state
-        before — (fit, RMS residual px, covariance) — or (None, residual, None) when they do not
-        fit one path in the room (:data:`FIT_SIGMAS`, :meth:`_plausible`). ``guess``: a
-        position near ``t`` (for the rays' weights). The state before anchors a window whose
-        rays barely cross (loosened threefold: it holds these rays already, and counted twice
-        they would make the track overconfident)."""
-        pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
-        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=guess)
-        if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma \
-                and self._plausible(fit, cov):
-            return fit, resid, cov
-        return None, resid, None
 
     def _plausible(self, fit, cov) -> bool:
         """Whether a window's fit can be the LED: inside the room (the locator's rule,
@@ -413,15 +393,10 @@ class Tracker:
         xy = np.array([r.xy for r in rays])
         d = np.linalg.norm(xy[None, :, :] - pred[:, None, :], axis=2) / slack[:, None]
         d = np.where(np.isfinite(d), d, np.inf)
-        coasting = [t - tr.last_two > COAST_PERIODS * self.period for tr in self.tracks]
-        for i in np.flatnonzero(coasting):
-            d[i] = self._coasting_distances(self.tracks[i], k, t, rays, xy)
         if d.size == 1:  # one track, one spot (the common case): no ranking to do
             return {0: self.tracks[0]} if d[0, 0] < GATE_SIGMAS else {}
-        # tracks two cameras place choose first; a tentative or coasting one takes what they
-        # leave
-        later = np.where(np.array([tr.tentative for tr in self.tracks]) | coasting,
-                         GATE_SIGMAS, 0.0)
+        # confirmed tracks choose first; a tentative one takes what they leave
+        later = np.array([GATE_SIGMAS if tr.tentative else 0.0 for tr in self.tracks])
         claims: dict = {}
         for flat in np.argsort(d + later[:, None], axis=None):
             i, j = np.unravel_index(flat, d.shape)
@@ -431,32 +406,6 @@ class Tracker:
                 continue
             claims[int(j)] = self.tracks[i]
         return claims
-
-    def _coasting_distances(self, tr: _Track, k: int, t: float, rays, xy) -> np.ndarray:
-        """A coasting track's distance, in gate sigmas, to each spot of camera ``k`` at ``t``
-        (see :data:`COAST_PERIODS`): from its last spot in camera ``k`` if that camera follows
-        it, else a spot whose ray meets its latest ray of another camera (the test a new track's
-        two first rays pass) and with which its window's rays fit one path (so a lamp whose ray
-        happens to cross it does not), by that fit's residual; inf where neither holds."""
-        out = np.full(len(rays), np.inf)
-        last = next((r for r in reversed(tr.rays) if r.camera == k), None)
-        if last is not None and 0 <= t - last.t <= FOLLOW_PERIODS * self.period + self._dark:
-            depth = float(self.cameras[k].to_camera(tr.fit[None, :3])[0, 2])
-            if depth > 0:  # at its last placed depth, however far it has moved since
-                reach = 3 * self.pixel_sigma + TOP_SPEED * (t - last.t) * self._f[k] / depth
-                return GATE_SIGMAS * np.linalg.norm(xy - last.xy, axis=1) * self._f[k] / reach
-            return out
-        other = next((r for r in reversed(tr.rays) if r.camera != k), None)
-        if other is None or t - other.t > START_WINDOW * self.period:
-            return out
-        window = self._window(tr, t)
-        for j, ray in enumerate(rays):  # a spot whose ray meets the track's latest …
-            score, X = self._meet(other, ray)
-            if score < 1:  # … and that the track's window of rays fits with it: placed again
-                fit, resid, _ = self._placed(tr, t, window + [ray], X)
-                if fit is not None:
-                    out[j] = GATE_SIGMAS * resid / (FIT_SIGMAS * self.pixel_sigma)
-        return out
 
     def _meet(self, p: _Ray, ray: _Ray):
         """How well two rays of two cameras meet as one LED: (their residual over what the
