@@ -1012,14 +1012,9 @@ def _detect_frame_blob(frame, k: int, s: DetectorSettings, shape):
 def _decode_whole(frame, want):
     """The common live frame — JPEG bytes, whole (SOI to EOI), declaring the camera's size —
     decoded to grayscale; None for anything else (which the batch's checks then judge)."""
-    if type(frame) is not bytes or want is None or frame[:2] != b"\xff\xd8" \
-            or frame[-2:] != b"\xff\xd9" or jpeg_size(frame) != want:
+    if type(frame) is not bytes or want is None:
         return None
-    try:
-        with _QuietStderr():
-            img = _cv2.imdecode(np.frombuffer(frame, np.uint8), _cv2.IMREAD_GRAYSCALE)
-    except _cv2.error:
-        return None
+    img = decode_gray(frame, want)
     return img if img is not None and img.shape == want else None
 
 
