@@ -286,6 +286,11 @@ def _medians(a: np.ndarray) -> np.ndarray:
     return (p[..., m - 1].astype(dtype) + p[..., m]) * 0.5
 
 
+def _median(values: np.ndarray) -> float:
+    """The median of a 1-D array, as a float (:func:`_medians`)."""
+    return float(_medians(values))
+
+
 def _noise(ring: np.ndarray) -> np.ndarray:
     """Per-frame noise sigma (DN) from the ring of pixels around the spot (``N×K``, in order
     around the ring): the median absolute difference of neighbours on the ring over √2, which
@@ -681,7 +686,7 @@ def _detect_blob(stack, s: DetectorSettings, scratch: bool = False) -> SpotBatch
         img = stack[i]
         # the whole frame is segmented, so its background is the frame's, not the peak's ring
         # (which a wide lamp raises)
-        fbg = _median_of(img[::4, ::4].ravel())
+        fbg = _median(img[::4, ::4].ravel())
         floor = max(s.min_contrast, s.min_snr * sigma[i])
         found = _segment_one(img, fbg, fbg + max(s.threshold * (peak[i] - fbg), 3 * sigma[i]),
                              floor, s)
@@ -865,7 +870,7 @@ def _detect_several(frames, k, method, settings, shape, codes_out) -> np.ndarray
     cols = np.zeros((n, k), int)
     for i in np.flatnonzero(code == 0):
         img = stack[i]
-        fbg = _median_of(img[::4, ::4].ravel())
+        fbg = _median(img[::4, ::4].ravel())
         floor = max(s.min_contrast, s.min_snr * sigma[i])
         found = _segment(img, fbg, fbg + max(s.threshold * (peak[i] - fbg), 3 * sigma[i]),
                          floor, s, k)
@@ -912,13 +917,6 @@ def _cut(img: np.ndarray, r: int, c: int, half: int):
     r0 = min(max(r - half, 0), max(h - size, 0))
     c0 = min(max(c - half, 0), max(w - size, 0))
     return img[r0:r0 + size, c0:c0 + size], r0, c0
-
-
-def _median_of(values: np.ndarray) -> float:
-    """The median of a 1-D array (``np.median``'s value, at a tenth of its call's cost)."""
-    s = np.sort(values)
-    m = len(s) // 2
-    return float(s[m]) if len(s) % 2 else 0.5 * (float(s[m - 1]) + float(s[m]))
 
 
 def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
@@ -982,8 +980,8 @@ def _detect_frame_blob(frame, k: int, s: DetectorSettings, shape):
     peak = float(img.flat[flat])
     win, r0, c0 = _cut(img, r, c, _RING)
     ring = win.ravel()[_ring_flat(_RING, h, w)].astype(np.int16)
-    bg = _median_of(ring)
-    sigma = max(1.4826 * _median_of(np.abs(ring[1:] - ring[:-1])) / np.sqrt(2.0), 1.0)
+    bg = _median(ring)
+    sigma = max(1.4826 * _median(np.abs(ring[1:] - ring[:-1])) / np.sqrt(2.0), 1.0)
     if peak - bg < s.min_snr * sigma:
         return out, _REASON_CODE[NO_SPOT]
     if peak - bg < s.min_contrast:
@@ -992,7 +990,7 @@ def _detect_frame_blob(frame, k: int, s: DetectorSettings, shape):
     if k == 1 and _outside_max_one(img, r, c, s.window, own) <= thr:
         spots = [(r, c)]
     else:
-        fbg = _median_of(img[::4, ::4].ravel())
+        fbg = _median(img[::4, ::4].ravel())
         floor = max(s.min_contrast, s.min_snr * sigma)
         found = _segment(img, fbg, fbg + max(s.threshold * (peak - fbg), 3 * sigma), floor,
                          s, k)
@@ -1065,7 +1063,7 @@ def _core_centroid_one(img: np.ndarray, r: int, c: int, s: DetectorSettings):
     p3 = float(img[r - 1, c]) if r > 0 else peak
     p4 = float(img[r + 1, c]) if r < h - 1 else peak
     look, lr0, lc0 = _cut(img, r, c, 5)
-    lo = _median_of(look.ravel()[_ring_flat(5, h, w)])
+    lo = _median(look.ravel()[_ring_flat(5, h, w)])
 
     def lg(x):
         return math.log(max(x - lo, 0.5))
