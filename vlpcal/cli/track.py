@@ -91,9 +91,8 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
            publisher) -> None:
     import sys
 
-    import numpy as np
-
     from ..datasets import DatasetError, read_async_frames
+    from ..live import FrameIntervals
     from ..tracking import Tracker
 
     if cameras:
@@ -111,12 +110,10 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
         raise UserError(f"{frames_dir}: cameras {', '.join(unknown)} are not in "
                         f"{deployment_path} (expected its camera ids)")
     if fps is None:  # the slowest camera's median frame interval
-        gaps = []
-        for cid in folder.camera_ids:
-            t = np.array([e[0] for e in folder.events if e[1] == cid])
-            if len(t) > 1:
-                gaps.append(float(np.median(np.diff(t))))
-        fps = 1.0 / max(gaps) if gaps and max(gaps) > 0 else 30.0
+        intervals = FrameIntervals(kept=None)
+        for t, cid, _ in folder.events:
+            intervals.add(cid, t)
+        fps = 1.0 / intervals.period(default=1 / 30, least=1)
         if not 0.1 <= fps <= 10000:
             raise UserError(f"{frames_dir}/times.csv: its cameras' frames are "
                             f"{1 / fps:.3g} s apart (expected capture times in seconds: "
