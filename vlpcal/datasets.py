@@ -52,14 +52,17 @@ def _check_id(value: str, where: str) -> str:
 MAX_FRAME_BYTES = 32 * 2 ** 20
 
 
-def read_frame(path) -> bytes:
+def read_frame(path, missing=b""):
     """A frame file's bytes; ``b""`` (a corrupt frame to the detector) when it is not a
     regular file (a FIFO would block the reader forever, a link to ``/dev/zero`` never end),
-    is larger than :data:`MAX_FRAME_BYTES` or cannot be read."""
+    is larger than :data:`MAX_FRAME_BYTES` or cannot be read; ``missing`` when it is not
+    there."""
     import stat
 
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except FileNotFoundError:
+        return missing
     except OSError:
         return b""
     try:
@@ -438,14 +441,7 @@ class AsyncFrames:
     def frame(self, camera_id: str, frame_no: str) -> bytes | None:
         """The frame's bytes; None if there is no such file, ``b""`` (a corrupt frame) if it
         cannot be read."""
-        path = self.root / camera_id / f"{frame_no}.jpg"
-        try:
-            os.stat(path)
-        except FileNotFoundError:
-            return None
-        except OSError:
-            return b""
-        return read_frame(path)
+        return read_frame(self.root / camera_id / f"{frame_no}.jpg", missing=None)
 
 
 def read_async_frames(root) -> AsyncFrames:
