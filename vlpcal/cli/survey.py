@@ -541,7 +541,6 @@ def _write_or_refuse(out, result, notes, survey_path, header):
 def _read_test_points(dep, test_path, survey_path, survey):
     """``--test-points``: a bundle of measured points the calibration never sees (none of
     ``survey``'s, the bundle read already); (ids, X, spots)."""
-
     import os
 
     from ..datasets import DatasetError, read_survey_bundle
