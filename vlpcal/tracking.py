@@ -360,19 +360,14 @@ class Tracker:
                     and not self.deployment.outside(fit[:3], sigma)[0])
 
     def _predicted(self, k: int, t: float):
-        """Each track's extrapolated spot in camera ``k`` at ``t`` (T×2 px, NaN: behind it) and
-        the scatter (px) it may show there: the spot noise and where the track may be by now."""
-        cam = self.cameras[k]
+        """Each track's extrapolated spot in camera ``k`` at ``t`` (T×2 px, NaN: behind it),
+        where the blink code expects to see it."""
         if not self.tracks:
-            return np.zeros((0, 2)), np.zeros(0)
-        ext = [self._extrapolated(tr, t) for tr in self.tracks]
-        X = np.array([e[0] for e in ext])
-        pred, front, _ = cam.project(X)
-        depth = cam.to_camera(X)[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            slack = np.hypot(self.pixel_sigma, np.array([e[2] for e in ext]) * self._f[k] / depth)
+            return np.zeros((0, 2))
+        X = np.array([self._extrapolated(tr, t)[0] for tr in self.tracks])
+        pred, front, _ = self.cameras[k].project(X)
         pred[~front] = np.nan
-        return pred, slack
+        return pred
 
     def _claim(self, k: int, t: float, rays) -> dict:
         """Which track each ray of camera ``k`` at ``t`` belongs to (ray index → track): the
@@ -427,7 +422,7 @@ class Tracker:
         """Record, for the blink code, each placed track camera ``k`` should have seen at
         ``t``: lit if it took a spot, dark if none; and name the tracks whose code is due."""
         cam = self.cameras[k]
-        pred, _ = self._predicted(k, t)
+        pred = self._predicted(k, t)
         m = VIEW_MARGIN_PX
         inside = (pred[:, 0] >= m) & (pred[:, 1] >= m) & (pred[:, 0] <= cam.width - 1 - m) \
             & (pred[:, 1] <= cam.height - 1 - m)
