@@ -16,8 +16,9 @@ periods in all); with ``lag`` 0 the window ends at the frame and its row is writ
 - a track starts from two cameras whose spots arrive within :data:`START_WINDOW` frame periods
   and whose rays meet within the motion possible between them;
 - a window where one camera alone saw the LED leans on the track's own motion (its last fit,
-  carried forward, within the acceleration it allows): a track survives it, and ends after
-  :data:`LOST_PERIODS` frame periods without a spot.
+  carried forward, within the acceleration it allows): a track survives it for
+  :data:`COAST_PERIODS` frame periods (one camera alone cannot tell the LED from a lamp or
+  another LED for longer), and ends after :data:`LOST_PERIODS` frame periods without a spot.
 
 Several LEDs: a frame gives up to ``K`` spots (:func:`~vlpcal.detection.detect_several`); each
 track takes the spot nearest its prediction (in its own sigmas; nearest pairs first, a spot to

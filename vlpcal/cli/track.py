@@ -58,8 +58,8 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
     """
     dep = _load_deployment(deployment_path)
     if sum(map(bool, (frames_dir, cameras, spots_url))) != 1:
-        raise UserError("give one of --frames DIR, --camera ID=SOURCE … (one per camera) or "
-                        "--spots mqtt://…")
+        raise UserError("give exactly one of --frames DIR, --camera ID=SOURCE … (one per "
+                        "camera) or --spots mqtt://…")
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
