@@ -171,6 +171,8 @@ class Tracker:
         self._pending: list[_Ray] = []
         self._next = 1
         self.codes = deployment.leds
+        if spots is not None and not (isinstance(spots, (int, np.integer)) and spots >= 1):
+            raise ValueError(f"spots: expected a whole number ≥ 1 (or None), got {spots!r}")
         self.spots = int(spots) if spots else max(1, len(self.codes))
         self._repeat = max((c.period for c in self.codes), default=0.0)
         # a blinking LED is dark for its code's longest run of 0s: no spot then is no loss
@@ -207,10 +209,12 @@ class Tracker:
         k = self._camera(camera_id)
         if not math.isfinite(t):
             raise ValueError(f"t: expected a capture time in seconds, got {t!r}")
+        # the camera's newest time counts even for a late frame: a camera whose clock runs
+        # ahead, heard first, must not make the others' frames late before they are heard
+        self._latest[k] = max(self._latest.get(k, -np.inf), t)
         if t < self._present() - self.half:
             self.late += 1
             return []
-        self._latest[k] = max(self._latest.get(k, -np.inf), t)
         out = self._due(t)
         self._drop_lost(t, out)
         uvs = np.asarray(uvs, float).reshape(-1, 2)
