@@ -449,3 +449,69 @@ def test_a_track_one_camera_alone_sees_takes_no_other_leds_spots_and_no_lamps(rn
                                      {"C2": lambda t: np.tile(lamp, (len(t), 1))}):
         rows += tracker.update_spots(cid, t, uv)
     assert rows and not [r for r in rows if r.t > 2.0] and not tracker.tracks
+
+
+def test_a_live_tracks_file_on_a_full_disk_is_one_line_and_keeps_whole_rows(tmp_path):
+    """From a hostile probe: track --spots on a disk that filled up ended in two tracebacks
+    and a row cut in half. The write that fails is one line naming the file; the rows written
+    before stay, whole; later writes and the close are quiet."""
+    import csv
+    import errno
+
+    from vlpcal.cli import UserError
+    from vlpcal.cli.track import _LiveTracks
+    from vlpcal.tracking import TrackUpdate
+
+    class Filling:  # a file whose disk holds `room` more bytes
+        def __init__(self, f, room):
+            self.f, self.room = f, room
+
+        def write(self, text):
+            if len(text) > self.room:
+                self.f.write(text[:self.room])
+                self.room = 0
+                raise OSError(errno.ENOSPC, "No space left on device")
+            self.room -= len(text)
+            return self.f.write(text)
+
+        def __getattr__(self, name):
+            return getattr(self.f, name)
+
+    out = tmp_path / "tracks.csv"
+    live = _LiveTracks(str(out), 0.0)
+    row = TrackUpdate(1.0, "T1", np.array([1.0, 2.0, 0.15]), np.zeros(3), 0.001, "C1+C2", "ok")
+    live.write([row, row])
+    live.f = Filling(live.f, 30)
+    live.w = csv.writer(live.f)
+    with pytest.raises(UserError, match="tracks.csv: could not write the tracks .No space"):
+        live.write([row] * 5)
+    live.write([row])  # quiet once it failed
+    live.close()
+    lines = out.read_text().splitlines()
+    assert len(lines) == 3 and all(line.endswith(",ok") for line in lines[1:])
+
+
+def test_a_camera_whose_clock_runs_ahead_heard_first_does_not_stop_the_others(rng):
+    """From a hostile probe: when the fast camera's first frame came before any other camera's,
+    every other frame was judged late for good (a late frame never counted its camera), and
+    track --spots wrote 0 rows."""
+    dep = square_rig()
+    events = streams(dep, circle(1.5), 4.0, rng)
+    # in the order they come (their real capture order), C1's stamped 0.2 s ahead, and C1's
+    # first frame the first of all
+    skewed = [((t + 0.2 if cid == "C1" else t), cid, uv) for t, cid, uv in events]
+    first = next(e for e in skewed if e[1] == "C1")
+    skewed = [first] + [e for e in skewed if e is not first]
+    tr = Tracker(dep, period=1 / 30)
+    rows = []
+    for t, cid, uv in skewed:
+        rows += tr.update_spot(cid, t, uv)
+    rows += tr.finish()
+    assert tr.late < 0.05 * len(skewed), tr.late
+    assert len(rows) > 0.5 * len(run(dep, events))
+
+
+@pytest.mark.parametrize("spots", [0, -3, 2.5, float("nan"), "2"])
+def test_tracker_spots_is_a_whole_number(spots):
+    with pytest.raises(ValueError, match="spots: expected a whole number"):
+        Tracker(square_rig(), spots=spots)

@@ -371,15 +371,49 @@ class _LiveTracks:
         except OutputError as e:
             raise UserError(str(e)) from None
         self.w = csv.writer(self.f)
-        self.w.writerow(TRACK_COLUMNS)
-        self.f.flush()
+        self.failed, self._whole = False, 0
+        try:
+            self._put([TRACK_COLUMNS])
+        except UserError:  # not even the header: no file of ours is left
+            self.close()
+            self.remove()
+            raise
 
     def write(self, rows) -> None:
-        self.w.writerows(_utc_row(r, self.utc) for r in rows)
-        self.f.flush()
+        self._put(_utc_row(r, self.utc) for r in rows)
+
+    def _put(self, lines) -> None:
+        """CSV lines, flushed; a disk that fails (full, gone) is one line naming the file, the
+        rows written before it kept whole (a row cut short is cut off)."""
+        import os
+
+        if self.failed:
+            return
+        try:
+            self.w.writerows(lines)
+            self.f.flush()
+            self._whole = self.f.tell()
+        except OSError as e:
+            self.failed = True
+            try:
+                os.truncate(self.path, self._whole)
+            except OSError:
+                pass
+            raise UserError(f"{self.path}: could not write the tracks ({e.strerror or e}); "
+                            "the rows written before are kept") from None
 
     def close(self) -> None:
-        self.f.close()
+        import os
+
+        try:
+            self.f.close()
+        except OSError:  # what it held is written already (or the disk failed: said)
+            pass
+        if self.failed:  # closing tried the unwritten rest again: whole rows only
+            try:
+                os.truncate(self.path, self._whole)
+            except OSError:
+                pass
 
     def remove(self) -> None:
         import os
