@@ -73,6 +73,9 @@ class Profile:
     look: Appearance = Appearance()
     #: m, 1-sigma of a tape-measured survey position per axis
     tape: float = 0.003
+    #: floor polygons nobody walks or drives over (a deployment's ``site.keep_out``): survey
+    #: points, test points and the paths of a carried or driven LED stay out of them
+    keep_out: tuple = ()
     #: where each value comes from (parameter → source), shown by ``vlpcal simulate --describe``
     sources: dict = field(default_factory=dict, compare=False, hash=False)
 
@@ -248,28 +251,46 @@ def _under_carrier(cam: Camera, points, radius) -> np.ndarray:
 
 
 def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
-                 chunk: int | None = None, carrier_radius=0.0) -> tuple[dict, np.ndarray]:
+                 chunk: int | None = None, carrier_radius=0.0, on=None,
+                 only_seen: bool = False) -> tuple[dict, np.ndarray]:
     """JPEG frames of an LED at each world point ``N×3`` from every true camera
     (``carrier_radius``: :func:`render_camera`'s, scalar or one per point).
 
     Returns ``(frames, seen)``: camera id → one JPEG per point, and ``C×N`` whether the LED's
     centre was inside each camera's image. Deterministic for (scene, points, seed); frame i
     depends only on point i, its index and the seed.
+
+    Several LEDs in each frame (a wand's two): ``points`` ``N×K×3``, ``on`` ``N×K`` whether
+    each is lit (default all); ``seen`` is then ``C×N×K`` (lit and inside). ``only_seen``: a
+    frame no LED is seen in is not rendered (None in its place) — a survey keeps only the
+    frames that show the LED, and with many cameras most frames show nothing, so skipping them
+    makes the cost follow the sightings, not cameras × points; the frames rendered are the
+    same bytes either way.
     """
-    points = np.atleast_2d(np.asarray(points, float))
-    radius = np.broadcast_to(np.asarray(carrier_radius, float), len(points))
+    pts = np.asarray(points, float)
+    several = pts.ndim == 3
+    pts = pts if several else np.atleast_2d(pts)[:, None]
+    n, n_led = pts.shape[:2]
+    lit = np.ones((n, n_led), bool) if on is None else np.asarray(on, bool).reshape(n, n_led)
+    radius = np.broadcast_to(np.asarray(carrier_radius, float), n)
     look = scene.profile.look
     frames, seen = {}, []
     for k, cam in enumerate(scene.true):
-        jpegs, inside = [], []
+        inside = cam.project(pts.reshape(-1, 3))[2].reshape(n, n_led) & lit
+        todo = np.flatnonzero(inside.any(axis=1)) if only_seen else np.arange(n)
+        jpegs: list = [None] * n
         step = chunk or max(1, CHUNK_PIXELS // (cam.width * cam.height))
-        for s in range(0, len(points), step):
+        for s in range(0, len(todo), step):
+            idx = todo[s:s + step]
             rngs = [np.random.default_rng([scene.seed, seed, STREAM_FRAMES, k + 1, i + 1])
-                    for i in range(s, min(s + step, len(points)))]
-            imgs, ins = render_camera(cam, points[s:s + step], look, rngs, distractors,
-                                      radius[s:s + step])
-            jpegs += [encode_jpeg(f, look.jpeg_quality) for f in imgs]
-            inside.append(ins)
+                    for i in idx]
+            # one LED keeps the N×3 call, so that its frames are the bytes they always were
+            imgs, _ = render_camera(cam, pts[idx] if several else pts[idx, 0], look, rngs,
+                                    distractors, radius[idx, None] if several else radius[idx],
+                                    lit[idx] if several else (None if on is None
+                                                              else lit[idx, 0]))
+            for i, img in zip(idx, imgs):
+                jpegs[i] = encode_jpeg(img, look.jpeg_quality)
         frames[cam.id] = jpegs
-        seen.append(np.concatenate(inside) if inside else np.zeros(0, bool))
+        seen.append(inside if several else inside[:, 0])
     return frames, np.array(seen)
