@@ -6,12 +6,16 @@ frames look. Every value says where it comes from (``Profile.sources``).
 - ``cheap-wide``: four wide-angle (77°) cameras with strong barrel distortion in a 2 × 2 grid
   under a 2.8 m ceiling, hung with 1–2° of tilt, a floor reflection and a lamp in view.
 - ``qvga``: the paper's geometry with 320 × 240 px cameras (the OV2640's next mode).
+
+:func:`profile_of_deployment` makes a profile of any deployment file (``vlpcal simulate -d``).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import replace
+
+import numpy as np
 
 from ..geometry import NADIR, PAPER_F, Camera, paper_rig
 from .scene import Appearance, InstallErrors, Profile
@@ -145,6 +149,70 @@ def qvga() -> Profile:
 
 
 PROFILES = {"paper-2024": paper_2024, "cheap-wide": cheap_wide, "qvga": qvga}
+
+#: px: cameras at least this wide look like ``qvga``'s (a wider blur in pixels), narrower ones
+#: like ``paper-2024``'s
+QVGA_LOOK_WIDTH = 320
+
+
+def profile_of_deployment(dep, errors: InstallErrors) -> Profile:
+    """Any deployment as a simulation profile: its cameras as the nominal install (any number,
+    any room, its keep-outs kept), hung with ``errors`` — ``vlpcal simulate -d`` passes
+    :data:`vlpcal.demo.DEMO_ERRORS`, the demo's careful install by hand (that module, above
+    this one, owns the numbers). The rest is the closest named profile's, so that a site
+    looks like one the benchmarks measured:
+
+    - the frames look like ``paper-2024``'s (the paper's 160 × 120 px OV2640), or ``qvga``'s
+      when the cameras (their median width) are :data:`QVGA_LOOK_WIDTH` px wide or wider,
+      except that the LED is as bright under the cameras as the paper's under its own
+      (``reference_distance`` = the cameras' median height), whatever the ceiling — someone
+      hanging cameras higher picks an LED that the cameras still see;
+    - the principal-point error scales with the image width from ``errors``' (as ``qvga``
+      scales ``paper-2024``'s), since ``errors`` counts pixels of a 160 px wide image;
+    - the tape is ``paper-2024``'s (±3 mm).
+    """
+    cams = tuple(dep.cameras)
+    width = float(np.median([c.width for c in cams]))
+    wide = width >= QVGA_LOOK_WIDTH
+    base = qvga() if wide else paper_2024()
+    height = float(np.median([c.position[2] for c in cams]))
+    look = replace(base.look, reference_distance=max(height, 0.5))
+    errors = replace(errors, principal=errors.principal * width / 160.0)
+    xs, ys = np.asarray(dep.room, float).T
+    return Profile(
+        name=dep.name,
+        description=f"{len(cams)} cameras of the deployment over a "
+                    f"{np.ptp(xs):.1f} × {np.ptp(ys):.1f} m floor under a "
+                    f"{dep.ceiling_height:g} m ceiling"
+                    + (f", {len(dep.keep_out)} keep-out{'s' * (len(dep.keep_out) > 1)}"
+                       if dep.keep_out else "") + ", hung with a careful install's errors",
+        nominal=cams,
+        room=tuple(tuple(map(float, xy)) for xy in dep.room),
+        ceiling_height=float(dep.ceiling_height),
+        errors=errors,
+        look=look,
+        tape=base.tape,
+        keep_out=tuple(tuple(tuple(map(float, xy)) for xy in k) for k in dep.keep_out),
+        sources={
+            "layout": "the deployment file: its cameras as planned (nominal.yaml), its room "
+                      "and keep-outs",
+            "install errors": "a careful install by hand (vlpcal demo's): "
+                              f"±{errors.position * 1000:.0f} mm across, "
+                              f"±{errors.height * 1000:.0f} mm in height, "
+                              f"{math.degrees(errors.tilt):.2g}° of tilt per axis, "
+                              f"{math.degrees(errors.yaw):.2g}° of yaw, focal length "
+                              f"±{errors.focal * 100:.2g} %, principal point "
+                              f"±{errors.principal:.2g} px (at {width:.0f} px wide), k1 "
+                              f"{errors.k1[0]:+g} ± {errors.k1[1]:g}",
+            "look": (f"qvga's (the cameras are {width:.0f} px wide: ≥ {QVGA_LOOK_WIDTH} px)"
+                     if wide else f"paper-2024's (the cameras are {width:.0f} px wide: "
+                                  f"< {QVGA_LOOK_WIDTH} px)"),
+            "led_peak": f"{look.led_peak:g} DN under a camera {look.reference_distance:.2f} m "
+                        "up (the cameras' median height): as bright as the paper's LED under "
+                        "its cameras",
+            "tape": "paper-2024's: ±3 mm per axis",
+        },
+    )
 
 
 def get_profile(name: str) -> Profile:

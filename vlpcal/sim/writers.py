@@ -12,14 +12,43 @@ from ..deployment import Deployment, provenance, save
 from .scene import ROBOT_RADIUS, STREAM_PATH, STREAM_TAPE, Scene, render_scene
 
 
+def free_floor(profile, margin: float = 0.0, clearance: float | None = None):
+    """The floor an LED may be carried or driven over: the room shrunk by ``margin`` (m) minus
+    every keep-out grown by ``clearance`` (default ``margin``), as a shapely geometry (maybe
+    empty)."""
+    from shapely.geometry import Polygon
+    from shapely.ops import unary_union
+
+    room = Polygon(profile.room).buffer(-margin)
+    if not profile.keep_out:
+        return room
+    grow = margin if clearance is None else clearance
+    return room.difference(unary_union([Polygon(k) for k in profile.keep_out]).buffer(grow))
+
+
+def onto_floor(floor, xy) -> np.ndarray:
+    """``xy`` (``N×2``) with every point off ``floor`` (a shapely area) moved to the nearest
+    point of it — a path through a wall or a keep-out follows its edge instead; points on the
+    floor are left exactly as they are (all of them when there is no floor to go to)."""
+    import shapely
+
+    xy = np.array(xy, float)
+    if floor.is_empty:
+        return xy
+    off = ~shapely.intersects_xy(floor, xy[:, 0], xy[:, 1])
+    if off.any():
+        lines = shapely.shortest_line(shapely.points(xy[off]), floor)
+        xy[off] = shapely.get_coordinates(shapely.get_point(lines, 1))
+    return xy
+
+
 def grid_points(scene: Scene, step: float, heights, margin: float = 0.05,
                 min_cameras: int = 1) -> np.ndarray:
-    """A grid of LED points over the room (``step`` m) at each height, kept where at least
-    ``min_cameras`` true cameras see them: ``N×3``."""
+    """A grid of LED points over the room (``step`` m) at each height, outside the keep-outs,
+    kept where at least ``min_cameras`` true cameras see them: ``N×3``."""
     from shapely import contains_xy
-    from shapely.geometry import Polygon
 
-    room = Polygon(scene.profile.room).buffer(-margin)
+    room = free_floor(scene.profile, margin)
     x0, y0, x1, y1 = room.bounds
     gx, gy = np.meshgrid(np.arange(x0, x1 + 1e-9, step), np.arange(y0, y1 + 1e-9, step))
     xy = np.c_[gx.ravel(), gy.ravel()]
@@ -30,7 +59,8 @@ def grid_points(scene: Scene, step: float, heights, margin: float = 0.05,
 
 
 def trajectory(scene: Scene, n: int, height: float = 0.15, seed: int = 0) -> np.ndarray:
-    """A robot's LED path: a smooth closed loop inside the room at ``height`` (``n×3``)."""
+    """A robot's LED path: a smooth closed loop inside the room at ``height`` (``n×3``),
+    following the edge of a wall or keep-out it would cross."""
     from shapely.geometry import Polygon
 
     rng = np.random.default_rng([scene.seed, seed, STREAM_PATH])
@@ -40,7 +70,8 @@ def trajectory(scene: Scene, n: int, height: float = 0.15, seed: int = 0) -> np.
     phase = rng.uniform(0, 2 * np.pi)
     x = (x0 + x1) / 2 + (x1 - x0) / 2 * 0.9 * np.sin(a * t + phase)
     y = (y0 + y1) / 2 + (y1 - y0) / 2 * 0.9 * np.sin(b * t)
-    return np.c_[x, y, np.full(n, height)]
+    xy = onto_floor(free_floor(scene.profile, 0.3), np.c_[x, y])
+    return np.c_[xy, np.full(n, height)]
 
 
 def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
@@ -48,7 +79,8 @@ def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
     """A free survey's LED (``n×3``): a person sweeping the room with the LED on a pole, up
     and down between the floor and 40 % of the ceiling's height — or, with ``height``, a robot
     driving the room at that height. Both wander over the whole floor (a Lissajous figure with
-    incommensurate frequencies, jittered, as a hand or a planner would)."""
+    incommensurate frequencies, jittered, as a hand or a planner would), around keep-outs and
+    along the walls of a room that is not a rectangle."""
     from shapely.geometry import Polygon
 
     rng = np.random.default_rng([scene.seed, seed, STREAM_PATH, 2])
@@ -59,7 +91,7 @@ def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
     x = (x0 + x1) / 2 + (x1 - x0) / 2 * np.sin(2 * np.pi * fx * t + phase[0])
     y = (y0 + y1) / 2 + (y1 - y0) / 2 * np.sin(2 * np.pi * fy * t + phase[1])
     xy = np.c_[x, y] + rng.normal(0, 0.02 * min(x1 - x0, y1 - y0), (n, 2))
-    xy = np.clip(xy, [x0, y0], [x1, y1])
+    xy = onto_floor(free_floor(scene.profile, 0.1), np.clip(xy, [x0, y0], [x1, y1]))
     if height is None:
         top = 0.4 * scene.profile.ceiling_height
         z = top * (0.5 + 0.5 * np.sin(2 * np.pi * fz * t + phase[2]))
@@ -68,31 +100,169 @@ def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
     return np.c_[xy, z]
 
 
+#: m: how close to a wall a hand keeps the LED (a pole's, a wand's ends)
+WALL_CLEARANCE = 0.1
+
+
+def wand_fits(profile, length: float) -> bool:
+    """Whether a wand ``length`` m long can be held somewhere with both ends on the free floor
+    whatever its direction (its centre :data:`WALL_CLEARANCE` + half its length from every
+    wall and keep-out)."""
+    return not free_floor(profile, WALL_CLEARANCE + length / 2, length / 2).is_empty
+
+
+def longest_wand(profile) -> float:
+    """m: the longest wand :func:`wand_fits` the room (to a centimetre, rounded down)."""
+    lo, hi = 0.0, 2 * max(np.ptp(np.asarray(profile.room, float), axis=0))
+    while hi - lo > 0.005:
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if wand_fits(profile, mid) else (lo, mid)
+    return np.floor(lo * 100) / 100
+
+
+def wand_path(scene: Scene, n: int, length: float, seed: int = 0) -> np.ndarray:
+    """A wand's two LEDs (``n×2×3``, LED A then B, ``length`` m apart) waved through the room
+    by a person: its centre follows :func:`free_path` (squeezed so that both ends stay on the
+    free floor, :func:`wand_fits`), its direction wanders smoothly and at random over the
+    sphere (its elevation and heading sums of slow sines), and both LEDs stay between the
+    floor and 40 % of the ceiling's height — a direction too steep for that is flattened, and
+    the centre rides as high as the ends allow. ``ValueError`` when the wand cannot fit."""
+    p = scene.profile
+    if not (np.isfinite(length) and length > 0):
+        raise ValueError(f"a wand's length must be a positive number of metres, got {length}")
+    if not wand_fits(p, length):
+        raise ValueError(f"a wand {length:g} m long does not fit in this room: its ends would "
+                         "cross a wall or a keep-out wherever it is held (at most "
+                         f"{longest_wand(p):.2f} m here)")
+    top = 0.4 * p.ceiling_height
+    centre = free_path(scene, n, None, seed)
+    # the free path's rectangle mapped onto the one the centre may use, then onto its floor
+    floor = free_floor(p, WALL_CLEARANCE + length / 2, length / 2)
+    a0, b0, a1, b1 = free_floor(p, WALL_CLEARANCE).bounds
+    c0, d0, c1, d1 = floor.bounds
+    xy = np.c_[c0 + (centre[:, 0] - a0) * (c1 - c0) / max(a1 - a0, 1e-12),
+               d0 + (centre[:, 1] - b0) * (d1 - d0) / max(b1 - b0, 1e-12)]
+    xy = onto_floor(floor, xy)
+    rng = np.random.default_rng([scene.seed, seed, STREAM_PATH, 3])
+    t = np.linspace(0, 1, n)
+
+    def slow(lo, hi):  # three sines of lo–hi cycles over the whole survey, summed
+        f, ph = rng.uniform(lo, hi, 3), rng.uniform(0, 2 * np.pi, 3)
+        return np.sin(2 * np.pi * f[:, None] * t + ph[:, None]).sum(axis=0)
+
+    # elevation up to ±85°, mostly nearer level; heading turning to and fro and round
+    elevation = 0.95 * np.pi / 2 * slow(8.0, 30.0) / 3
+    heading = 1.5 * slow(4.0, 16.0) + 2 * np.pi * (rng.uniform(-8, 8) * t + rng.uniform())
+    # steep enough to leave [0, top] at both ends: flattened, keeping its heading
+    dz = np.clip(np.sin(elevation), -0.9 * top / length, 0.9 * top / length)
+    d = np.c_[np.c_[np.cos(heading), np.sin(heading)] * np.sqrt(1 - dz ** 2)[:, None], dz]
+    half = 0.5 * length * np.abs(dz)
+    z = half + (top - 2 * half) * centre[:, 2] / top
+    mid = np.c_[xy, z]
+    return np.stack([mid - 0.5 * length * d, mid + 0.5 * length * d], axis=1)
+
+
 def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int = 0,
                          height: float | None = None, overwrite: bool = False,
-                         carrier_radius: float | None = None):
+                         carrier_radius: float | None = None, wand: float | None = None,
+                         marks=None, truth=None):
     """A free survey bundle (issue 15): the ``references`` (true positions) taped to
     ± ``profile.tape`` per axis with their frames, and ``n_free`` free sets of the LED moved
     along :func:`free_path` (its positions unrecorded, as in life; a robot's body hides the
     floor under its LED, ``carrier_radius``, by default :data:`~.scene.ROBOT_RADIUS`).
-    Returns (measured references, the free path's true positions)."""
-    refs = np.asarray(references, float)
-    path = free_path(scene, n_free, height, seed)
+    Returns (measured references ``N×3``, the free LED's true positions ``M×3``).
+
+    ``wand`` (m): every free set shows two LEDs that far apart on a rigid bar waved by hand
+    (:func:`wand_path`; not with ``height``); the true positions are then ``M×2×3`` (LED A,
+    then B). A camera that sees either LED keeps its frame. The references show one LED.
+
+    ``marks``: ``(ids, measured)``: the references' point ids (N) and which coordinates the
+    survey records (``N×3`` booleans) — frame marks (DESIGN.md): an unmeasured coordinate is
+    written NaN (an empty cell). A measured coordinate that is 0 (the origin mark, the x mark's
+    y and z, the floor) is set by definition, not read off a tape: it is written 0 exactly and
+    the LED misses its mark by ± ``profile.tape`` instead; any other measured coordinate is
+    taped (written ± ``profile.tape``). Without ``marks``: ids ``R01``…, every coordinate taped.
+
+    ``truth``: a CSV to write the free LED's true positions to (``set_id,led,x,y,z``, LED
+    ``A``, and ``B`` for a wand's other; every set, seen or not), or None.
+    """
+    refs = np.asarray(references, float).reshape(-1, 3)
+    n = len(refs)
+    ids, measured = _marks(marks, n)
+    if wand is not None and height is not None:
+        raise ValueError("a wand is waved by hand: it has no height of its own")
+    path = free_path(scene, n_free, height, seed) if wand is None \
+        else wand_path(scene, n_free, wand, seed)
     if carrier_radius is None:
         carrier_radius = 0.0 if height is None else ROBOT_RADIUS
-    carrier = np.r_[np.zeros(len(refs)), np.full(len(path), carrier_radius)]
-    frames, seen = render_scene(scene, np.vstack([refs, path]), seed=seed,
-                                carrier_radius=carrier)
+    carrier = np.r_[np.zeros(n), np.full(n_free, carrier_radius)]
     rng = np.random.default_rng([scene.seed, seed, STREAM_TAPE])
-    measured = refs + rng.normal(0.0, scene.profile.tape, refs.shape)
-    n = len(refs)
+    noise = rng.normal(0.0, scene.profile.tape, refs.shape)
+    if measured is None:
+        placed, record = refs, refs + noise
+    else:
+        defined = measured & (refs == 0.0)
+        placed = refs + np.where(defined, noise, 0.0)
+        record = np.where(measured, refs + np.where(defined, 0.0, noise), np.nan)
+    if wand is None:
+        frames, seen = render_scene(scene, np.vstack([placed, path]), seed=seed,
+                                    carrier_radius=carrier, only_seen=True)
+    else:
+        # the references are one LED: the wand's second LED off
+        both = np.concatenate([np.repeat(placed[:, None], 2, axis=1), path])
+        on = np.r_[np.tile([True, False], (n, 1)), np.ones((n_free, 2), bool)]
+        frames, seen = render_scene(scene, both, seed=seed, carrier_radius=carrier, on=on,
+                                    only_seen=True)
+        seen = seen.any(axis=2)
     kept = {cid: [f if s else None for f, s in zip(jpegs, seen[k])]
             for k, (cid, jpegs) in enumerate(frames.items())}
-    write_survey_bundle(root, [f"R{i + 1:02d}" for i in range(n)], measured,
+    free_ids = [f"F{i + 1:05d}" for i in range(n_free)]
+    write_survey_bundle(root, ids, record,
                         {c: v[:n] for c, v in kept.items()}, overwrite=overwrite,
                         free_frames={c: v[n:] for c, v in kept.items()},
-                        free_ids=[f"F{i + 1:05d}" for i in range(n_free)])
-    return measured, path
+                        free_ids=free_ids)
+    if truth is not None:
+        write_led_truth(truth, free_ids, path)
+    return record, path
+
+
+def _marks(marks, n: int):
+    """``(ids, measured N×3 or None)`` from :func:`simulate_free_survey`'s ``marks``."""
+    if marks is None:
+        return [f"R{i + 1:02d}" for i in range(n)], None
+    try:
+        ids, measured = marks
+    except (TypeError, ValueError):
+        raise ValueError("marks: expected (point ids, N×3 booleans of the measured "
+                         "coordinates)") from None
+    ids = [str(i) for i in ids]
+    measured = np.asarray(measured)
+    if len(ids) != n or measured.shape != (n, 3) or measured.dtype != bool:
+        raise ValueError(f"marks: expected {n} point ids and {n}×3 booleans for the {n} "
+                         f"references, got {len(ids)} ids and {measured.dtype} "
+                         f"{measured.shape}")
+    if not measured.any(axis=1).all():
+        k = int(np.flatnonzero(~measured.any(axis=1))[0])
+        raise ValueError(f"marks: {ids[k]} has no measured coordinate (a point with none "
+                         "tells the survey nothing)")
+    return ids, measured
+
+
+def write_led_truth(path, set_ids, positions) -> None:
+    """Where each LED really was at each set: ``set_id,led,x,y,z`` (m), LEDs ``A``, ``B``… —
+    one row per LED and set (``positions`` ``M×3`` for one LED or ``M×K×3``)."""
+    import csv
+
+    from ..writing import OutputSet
+
+    pos = np.asarray(positions, float)
+    pos = pos[:, None] if pos.ndim == 2 else pos
+    names = [chr(ord("A") + k) for k in range(pos.shape[1])]
+    with OutputSet(path) as (tmp,), open(tmp, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(("set_id", "led", "x", "y", "z"))
+        w.writerows((sid, led, *(repr(round(float(v), 9)) for v in x))
+                    for sid, xs in zip(set_ids, pos) for led, x in zip(names, xs))
 
 
 def deployment_of(scene: Scene, which: str = "nominal") -> Deployment:
@@ -101,7 +271,7 @@ def deployment_of(scene: Scene, which: str = "nominal") -> Deployment:
     cams = list(scene.nominal if which == "nominal" else scene.true)
     prov = provenance("vlpcal simulate", profile=p.name, seed=scene.seed, cameras=which)
     return Deployment(f"{p.name}-sim", p.ceiling_height, [list(xy) for xy in p.room], cams,
-                      extra={"provenance": prov})
+                      [[list(xy) for xy in k] for k in p.keep_out], extra={"provenance": prov})
 
 
 def write_deployments(scene: Scene, out) -> tuple[Path, Path]:
@@ -123,7 +293,7 @@ def simulate_survey(scene: Scene, root, points, seed: int = 0, overwrite: bool =
     records the positions as a tape measure would give them (± ``profile.tape`` per axis).
     Returns the measured positions."""
     points = np.asarray(points, float)
-    frames, seen = render_scene(scene, points, seed=seed)
+    frames, seen = render_scene(scene, points, seed=seed, only_seen=True)
     rng = np.random.default_rng([scene.seed, seed, STREAM_TAPE])
     measured = points + rng.normal(0.0, scene.profile.tape, points.shape)
     ids = [f"S{i + 1:04d}" for i in range(len(points))]
