@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import click
 
-from .common import Finite, UserError, _floats, main
+from .common import Finite, UserError, _floats, _load_deployment, main
 
 
 @main.command()
-@click.option("--profile", "profile_name", default="paper-2024", show_default=True,
-              help="Simulation profile: paper-2024, cheap-wide or qvga.")
+@click.option("--profile", "profile_name", default=None,
+              help="Simulation profile: paper-2024 (the default), cheap-wide or qvga.")
+@click.option("--deployment", "-d", "deployment_path", type=click.Path(dir_okay=False),
+              default=None,
+              help="Instead of a profile: your deployment (any cameras, room, keep-outs) as "
+                   "the planned install, its cameras hung with a careful install's errors.")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(0),
               help="Seed of the install and frames.")
 @click.option("--out", type=click.Path(file_okay=False), required=False,
@@ -30,6 +34,10 @@ from .common import Finite, UserError, _floats, main
               help="The free survey's LED on a robot at this height, m (instead of a pole).")
 @click.option("--references", type=click.IntRange(2, 200), default=None,
               help="Reference points of the free survey (default: as survey plan --free).")
+@click.option("--wand", type=Finite(), default=None, metavar="LENGTH",
+              help="The free survey's LED is a wand's two, LENGTH m apart on a rigid bar waved "
+                   "by hand (with --free-sets); their true positions in "
+                   "OUT/free-survey.truth.csv.")
 @click.option("--robot-speed", type=Finite(0.0, 50.0, min_open=True), default=None,
               help="Also a robot's LED driving at this speed, m/s, seen by unsynchronised "
                    "cameras (OUT/streams/: <camera_id>/<frame_no>.jpg and times.csv, 30 fps "
@@ -42,29 +50,41 @@ from .common import Finite, UserError, _floats, main
                    "--seconds, each at 30 fps from its own phase (for vlpcal locate --spots).")
 @click.option("--overwrite", is_flag=True, help="Replace what is in --out.")
 @click.option("--describe", is_flag=True, help="Print the profile's parameters and sources.")
-def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, trajectory,
-             free_sets, free_height, references, robot_speed, seconds, publish, overwrite,
-             describe):
+def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heights,
+             test_points, trajectory, free_sets, free_height, references, wand, robot_speed,
+             seconds, publish, overwrite, describe):
     """Simulate an install: nominal and true deployments, a survey bundle, a frames folder.
+
+    The install is a named profile (--profile) or your own deployment (-d): its cameras as
+    planned, hung with the errors of a careful install by hand (vlpcal demo's).
 
     Writes OUT/nominal.yaml (the cameras as planned), OUT/truth.yaml (as really installed, for
     evaluation), OUT/survey/ (a survey bundle, tape-measure noise on points.csv),
     OUT/frames/ (a locate frames folder) and OUT/frames.truth.csv; with --free-sets, a free
-    survey OUT/free-survey/ (reference points and free/ sets); with --robot-speed, a moving
+    survey OUT/free-survey/ (reference points and free/ sets; the free LED's true positions in
+    OUT/free-survey.truth.csv) — with --wand, a wand's two LEDs; with --robot-speed, a moving
     robot's LED seen by unsynchronised cameras, OUT/streams/ (for vlpcal track).
 
-    Example: vlpcal simulate --profile cheap-wide --seed 3 --out sim-cheap
+    Examples: vlpcal simulate --profile cheap-wide --seed 3 --out sim-cheap;
+    vlpcal simulate -d my-site.yaml --free-sets 1800 --wand 0.5 --out sim-mine
     """
     from pathlib import Path
 
-    from ..sim.profiles import get_profile
+    from ..sim.profiles import get_profile, profile_of_deployment
     from ..sim.scene import make_scene
     from ..sim.writers import grid_points
 
-    try:
-        profile = get_profile(profile_name)
-    except ValueError as e:
-        raise click.BadParameter(str(e), param_hint="--profile") from None
+    if profile_name is not None and deployment_path is not None:
+        raise click.UsageError("give --profile NAME or -d DEPLOYMENT, not both")
+    if deployment_path is not None:
+        from ..demo import DEMO_ERRORS
+
+        profile = profile_of_deployment(_load_deployment(deployment_path), DEMO_ERRORS)
+    else:
+        try:
+            profile = get_profile(profile_name or "paper-2024")
+        except ValueError as e:
+            raise click.BadParameter(str(e), param_hint="--profile") from None
     if describe:
         click.echo(f"{profile.name}: {profile.description}")
         for key, text in profile.sources.items():
@@ -104,9 +124,12 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
     if free_sets and free_height is not None and not 0 <= free_height <= top:
         raise click.BadParameter(f"expected a height from 0 to {top:g} m",
                                  param_hint="--free-height")
-    for value, name in ((free_height, "--free-height"), (references, "--references")):
+    for value, name in ((free_height, "--free-height"), (references, "--references"),
+                        (wand, "--wand")):
         if value is not None and not free_sets:
             raise click.BadParameter("is for a free survey (--free-sets N)", param_hint=name)
+    if wand is not None:
+        _check_wand(profile, wand, free_height)
     given = click.get_current_context().get_parameter_source("seconds")
     if given == click.core.ParameterSource.COMMANDLINE and not robot_speed:
         raise click.BadParameter("is for a robot's streams (--robot-speed M/S) or --publish",
@@ -115,11 +138,20 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
         raise click.BadParameter(f"expected 3 or more (2 or more with --free-height: fewer "
                                  f"cannot fix the room's frame), got {references}",
                                  param_hint="--references")
+    refs = None
+    if free_sets:  # the references the free survey's planner asks for, before any work
+        from ..sim.writers import deployment_of
+        from ..survey import SurveyError, plan_references
+
+        try:
+            refs = plan_references(deployment_of(scene, "nominal"), references)
+        except SurveyError as e:
+            raise UserError(f"--free-sets: {e}") from None
     out.parent.mkdir(parents=True, exist_ok=True)
     with OutputSet(out, folders=True) as (stage,):
         stage.chmod(0o755)
         _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
-                       references, trajectory, test_points)
+                       refs, wand, trajectory, test_points, deployment_path is not None)
         if robot_speed:
             from ..sim.streams import robot_path, simulate_streams
 
@@ -133,7 +165,28 @@ def simulate(profile_name, seed, out, survey_step, survey_heights, test_points, 
 
 #: what vlpcal simulate writes in its --out folder
 SIMULATED = {"nominal.yaml", "truth.yaml", "survey", "frames", "frames.truth.csv",
-             "free-survey", "streams", "streams.truth.csv"}
+             "free-survey", "free-survey.truth.csv", "streams", "streams.truth.csv"}
+
+
+def _check_wand(profile, length: float, free_height) -> None:
+    """``--wand``: a bar a hand can wave in this room, before any work."""
+    import math
+
+    from ..sim.writers import longest_wand, wand_fits
+
+    if free_height is not None:
+        raise click.BadParameter("is waved by hand: give --free-height (a robot's LED) or "
+                                 "--wand, not both", param_hint="--wand")
+    xs, ys = zip(*profile.room)
+    diagonal = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
+    if not 0 < length <= diagonal:
+        raise click.BadParameter(f"expected a length above 0 m and at most the room's "
+                                 f"diagonal ({diagonal:.2f} m), got {length:g}",
+                                 param_hint="--wand")
+    if not wand_fits(profile, length):
+        raise click.BadParameter(f"a wand {length:g} m long cannot be waved in this room "
+                                 f"without its ends crossing a wall or keep-out; at most "
+                                 f"{longest_wand(profile):.2f} m here", param_hint="--wand")
 
 
 def _publish_spots(profile, seed, url, speed, seconds) -> None:
@@ -163,12 +216,16 @@ def _publish_spots(profile, seed, url, speed, seconds) -> None:
 
 
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
-                   references, trajectory, test_points) -> None:
+                   refs, wand, trajectory, test_points, own: bool) -> None:
     """Write the simulated install into ``stage`` (``out`` once renamed), saying what goes
-    where."""
+    where (``refs``: the free survey's planned references; ``own``: a user's deployment,
+    whose install and look are said too)."""
+    import os
+
     import numpy as np
 
     from ..sim.writers import (
+        free_floor,
         grid_points,
         simulate_frames,
         simulate_survey,
@@ -180,27 +237,42 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
 
     write_deployments(scene, stage)
     simulate_survey(scene, stage / "survey", pts, seed=seed, overwrite=True)
+    n_cams = len(scene.true)
     click.echo(f"{profile.name} (seed {seed}): {out / 'nominal.yaml'}, {out / 'truth.yaml'}")
-    click.echo(f"survey: {len(pts)} points at h = {', '.join(map(str, heights))} m "
-               f"→ {out / 'survey'}")
+    if own:
+        src = profile.sources
+        click.echo(f"  {n_cams} camera{'s' * (n_cams != 1)} hung with "
+                   f"{src['install errors']}; frames look like "
+                   f"{src['look']}")
+    shots = sum(int(c.project(pts)[2].sum()) for c in scene.true)
+    click.echo(f"survey: {len(pts)} points at h = {', '.join(map(str, heights))} m, "
+               f"{shots} frames from {n_cams} camera{'s' * (n_cams != 1)} → "
+               f"{out / 'survey'}")
     if free_sets:
-        from ..sim.writers import deployment_of, simulate_free_survey
-        from ..survey import plan_references
+        from ..sim.writers import simulate_free_survey
 
-        refs = plan_references(deployment_of(scene, "nominal"), references)
         simulate_free_survey(scene, stage / "free-survey", refs.xyz, free_sets, seed=seed,
-                             height=free_height, overwrite=True)
-        written = sum(1 for p in (stage / "free-survey" / "free" / "frames").iterdir())
+                             height=free_height, overwrite=True, wand=wand,
+                             truth=stage / "free-survey.truth.csv")
+        sets = list((stage / "free-survey" / "free" / "frames").iterdir())
+        jpegs = sum(len(os.listdir(d)) for d in sets)
+        what = (f"(a robot at h = {free_height:g} m)" if free_height is not None else
+                f"(a wand: two LEDs {wand:g} m apart, waved by hand)" if wand is not None
+                else "(an LED on a pole)")
         click.echo(f"free survey: {len(refs.ids)} reference points and {free_sets} free sets "
-                   + (f"(a robot at h = {free_height:g} m) " if free_height is not None else
-                      "(an LED on a pole) ") + f"→ {out / 'free-survey'}; {written} of the sets "
-                   "have frames (a camera saw the LED; the others are left out, as a capture "
-                   "leaves them)")
+                   f"{what} → {out / 'free-survey'}; {len(sets)} of the sets have frames "
+                   f"({jpegs} in all: a camera saw "
+                   f"{'an LED' if wand is not None else 'the LED'}; the others are left out, "
+                   f"as a capture leaves them); truth in {out / 'free-survey.truth.csv'}")
     if trajectory:
         test = path_of(scene, trajectory, seed=seed)
     else:
         rng = np.random.default_rng([seed, 11])
-        cand = grid_points(scene, 0.02, (0.0, 0.15, 0.35, 0.7), min_cameras=2)
+        # a 2 cm grid to draw from, coarser in a room so large that it would pass 50 000
+        # floor points (its test points stay as random; the draw stays quick)
+        area = free_floor(profile, 0.05).area
+        cand = grid_points(scene, max(0.02, float(np.sqrt(area / 50_000))),
+                           (0.0, 0.15, 0.35, 0.7), min_cameras=2)
         test = cand[rng.choice(len(cand), min(test_points, len(cand)), replace=False)]
     if len(test):
         simulate_frames(scene, stage / "frames", test, seed=seed + 1, overwrite=True)
