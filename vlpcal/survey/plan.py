@@ -361,14 +361,42 @@ REFERENCE_HEIGHTS = (0.0, 0.2, 0.4)
 @dataclass
 class FreeRoute:
     """Where to carry the LED in a free survey: stops in walking order (``N×2`` floor
-    positions), at each a sweep from ``low`` to ``high`` m; per stop the camera pairs it shows
-    the LED to together at two heights or more, and the cameras whose image quarter it fills."""
+    positions), at each a sweep from ``low`` up to ``tops[i]`` m (``high`` unless the stop is in
+    a thin overlap, which only a low sweep crosses for long) and back; per stop the camera pairs
+    it shows the LED to together (half the moments a link needs, or more), and the cameras whose
+    image quarter it fills. ``sets``: ``C×C``, the moments each pair is expected to share over
+    the whole route; ``linkage``: what the geometry allows (:func:`.linkage.link_cameras`)."""
 
     stops: np.ndarray
     pairs: list[list[tuple[str, str]]]
     quarters: list[list[str]]
     low: float
     high: float
+    tops: np.ndarray = None
+    sets: np.ndarray = None
+    linkage: object = field(default=None, repr=False)
+
+    def __post_init__(self):
+        if self.tops is None:
+            self.tops = np.full(len(self.stops), self.high)
+
+    @property
+    def groups(self) -> list:
+        """Camera ids of each group the route links (pairs sharing
+        :data:`~.free.MIN_SHARED` moments), the largest first."""
+        from .free import MIN_SHARED
+        from .linkage import _components
+
+        ids = self.linkage.camera_ids
+        return [[ids[k] for k in g] for g in _components(self.sets >= MIN_SHARED)]
+
+    @property
+    def minutes(self) -> float:
+        """About how long the walk takes: a sweep at each stop, and the walk between them."""
+        from .linkage import SWEEP_SECONDS, WALK_SPEED
+
+        walk = float(np.linalg.norm(np.diff(self.stops, axis=0), axis=1).sum())
+        return (len(self.stops) * SWEEP_SECONDS + walk / WALK_SPEED) / 60
 
 
 #: image quarters, in words, by (column, row) of the quarter
@@ -376,73 +404,85 @@ QUARTER_WORDS = {(0, 0): "top-left", (1, 0): "top-right", (0, 1): "bottom-left",
                  (1, 1): "bottom-right"}
 
 
-def free_route(deployment, heights=None, margin_px: float = 5.0) -> FreeRoute:
-    """A short walk for a free survey (issue 15) that shows the LED to every overlapping camera
-    pair at two heights or more and passes through every quarter of every camera's image: a
-    stop in the shared view of each pair not yet served, where the pair sees the most of a
-    sweep from the floor to the top height, then one under the middle of each image quarter no
-    stop falls in, visited in nearest-neighbour order from the stop nearest a corner of the
-    room. At each stop the LED is swept up and down: depth is what
-    separates a camera's height from its focal length."""
-    from shapely import contains_xy
+def free_route(deployment, heights=None, margin_px: float = 5.0, obstacles=None) -> FreeRoute:
+    """A short walk for a free survey (issues 15, 26) that links every camera the geometry
+    lets a free LED link and passes through every quarter of every camera's image: a stop in
+    the shared view of each pair a stop can link (:mod:`.linkage`), thin overlaps included —
+    there the sweep stays as low as the overlap reaches, else it would cross it in a moment —
+    where one stop gives the pair the most, the pair with the least shared air first, until
+    every such pair is expected to share :data:`~.free.MIN_SHARED` moments over the stops; then
+    one under the middle of each image quarter no stop falls in (at ``margin_px``), visited in
+    nearest-neighbour order from the stop nearest a corner of the room. At each stop the LED is
+    swept up and down: depth is what separates a camera's height from its focal length."""
+    from .free import MIN_SHARED
+    from .linkage import SWEEP_SETS, link_cameras, reach
 
     cams = deployment.cameras
-    room = _floor(deployment)
     if heights is None:
         heights = (0.0, round(0.4 * deployment.ceiling_height, 2))
-    if room.is_empty:
-        raise SurveyError("the keep-out areas leave no floor to survey")
     low, high = float(min(heights)), float(max(heights))
-    x0, y0, x1, y1 = room.bounds
-    step = max(min(x1 - x0, y1 - y0) / 40, np.sqrt(room.area / 10000))  # ≤ ~10 000 places
-    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
-    xy = np.c_[gx.ravel(), gy.ravel()]
-    xy = xy[contains_xy(room, xy[:, 0], xy[:, 1])]
-    levels = np.linspace(low, high, 5)
-    seen = np.stack([np.stack([c.project(np.c_[xy, np.full(len(xy), h)], margin=margin_px)[2]
-                               for c in cams]) for h in levels])  # L×C×P
-    def pairs_seeing(at):  # the pairs that see a sweep at place ``at`` at two levels or more
-        return {(k, j) for k in range(len(cams)) for j in range(k + 1, len(cams))
-                if (seen[:, k, at] & seen[:, j, at]).sum() >= 2}
-
-    depth = {(k, j): (seen[:, k] & seen[:, j]).sum(axis=0) for k in range(len(cams))
-             for j in range(k + 1, len(cams))}
-    todo = {p for p, d in depth.items() if d.max() >= 2}
+    at = reach(deployment, low, high, obstacles=obstacles)
+    linkage = link_cameras(deployment, at=at)
+    T = at.top_index
+    C = len(cams)
+    pairs = [(k, j) for k in range(C) for j in range(k + 1, C)]
+    need = MIN_SHARED / SWEEP_SETS
+    todo = [p for p in pairs if at.score(*p).best[: T + 1].max() >= need]
     if not todo:
-        raise SurveyError("no place in the room is seen by two cameras at two heights: a "
-                          "free survey needs cameras that overlap")
-    served: list = []
-    while todo:  # the pair with the least shared air first: its stop is the least free
-        p = min(todo, key=lambda p: ((depth[p] >= 2).sum(), p))
-        best = np.flatnonzero(depth[p] == depth[p].max())
-        at = int(best[np.argmin(np.linalg.norm(xy[best] - xy[best].mean(axis=0), axis=1))])
-        served.append(at)
-        todo -= pairs_seeing(at)
+        raise SurveyError("no place in the room is seen by two cameras long enough for a "
+                          "free LED to link them: a free survey needs cameras that overlap")
+    overlapping = [p for p in pairs if at.score(*p).air > 0]
+    got = np.zeros(len(overlapping))
+    where = {p: i for i, p in enumerate(overlapping)}
+    cells, tops, shown = [], [], []
 
-    def quarter(c, at):
-        uv, _, ok = c.project(np.array([[*xy[at], low]]), margin=margin_px)
+    def add(cell, m):
+        share = at.stop_sets(cell, m, overlapping)
+        got[:] += share
+        cells.append(cell)
+        tops.append(m)
+        shown.append([overlapping[i] for i in np.flatnonzero(share >= MIN_SHARED / 2)])
+
+    todo.sort(key=lambda p: (at.score(*p).air, p))  # the least shared air first: least free
+    for p in todo:
+        if got[where[p]] >= MIN_SHARED:
+            continue
+        s = at.score(*p)
+        m = max(m for m in range(T + 1) if s.best[m] >= need)  # as high as still links
+        add(tuple(int(v) for v in s.where[m]), m)
+        if p not in shown[-1]:
+            shown[-1].append(p)
+
+    def quarter(c, cell):
+        uv, _, ok = c.project(np.array([[*at.place(cell), low]]), margin=margin_px)
         return (int(uv[0, 0] >= c.width / 2), int(uv[0, 1] >= c.height / 2)) if ok[0] else None
 
-    for c in cams:  # every image quarter gets a stop under it, at the sweep's foot
+    for k, c in enumerate(cams):  # every image quarter gets a stop under it, at the sweep's foot
         for qc, qr in QUARTER_WORDS:
-            if any(quarter(c, at) == (qc, qr) for at in served):
+            if any(quarter(c, cell) == (qc, qr) for cell in cells):
                 continue
             target = c.ground(np.array([[(0.25 + 0.5 * qc) * c.width,
                                          (0.25 + 0.5 * qr) * c.height]]), low)[0]
             if not np.isfinite(target).all():
                 continue
-            mine = np.flatnonzero(seen[0, cams.index(c)])
-            if len(mine):
-                served.append(int(mine[np.argmin(np.linalg.norm(xy[mine] - target, axis=1))]))
-    stops = xy[served]
-    pairs_at = [[(cams[k].id, cams[j].id) for k, j in sorted(pairs_seeing(at))] for at in served]
-    quarters_at = [[f"{c.id} {QUARTER_WORDS[q]}" for c in cams if (q := quarter(c, at))]
-                   for at in served]
-    corners = np.array(room.envelope.exterior.coords[:4])
+            iy, ix = np.nonzero(at.seen[k, 0])
+            if len(iy):
+                d = np.hypot(at.xs[ix] - target[0], at.ys[iy] - target[1])
+                add((int(iy[np.argmin(d)]), int(ix[np.argmin(d)])), T)
+    stops = np.array([at.place(cell) for cell in cells])
+    ids = [c.id for c in cams]
+    pairs_at = [[(ids[k], ids[j]) for k, j in sorted(sh)] for sh in shown]
+    quarters_at = [[f"{c.id} {QUARTER_WORDS[q]}" for c in cams if (q := quarter(c, cell))]
+                   for cell in cells]
+    corners = np.array(at.room.envelope.exterior.coords[:4])
     order = [int(np.argmin(np.min(np.linalg.norm(stops[:, None] - corners[None], axis=2),
                                   axis=1)))]
     while len(order) < len(stops):
         rest = [i for i in range(len(stops)) if i not in order]
         order.append(min(rest, key=lambda i: np.linalg.norm(stops[i] - stops[order[-1]])))
+    sets = np.zeros((C, C))
+    for (k, j), n in zip(overlapping, got):
+        sets[k, j] = sets[j, k] = n
     return FreeRoute(stops[order], [pairs_at[i] for i in order],
-                     [quarters_at[i] for i in order], low, high)
+                     [quarters_at[i] for i in order], low, high,
+                     at.levels[np.array(tops)[order]], sets, linkage)
