@@ -28,6 +28,30 @@ UNLUCKY_SHARE = 0.20
 MAX_PLANNED_POINTS = 1500
 
 
+def tape_mark(tape: float) -> float:
+    """m: what a tape measuring to ``tape`` per axis marks — the decimal unit at or under its
+    precision (±3 mm: 1 mm)."""
+    return float(10.0 ** np.floor(np.log10(tape) + 1e-9))
+
+
+def to_marks(xyz, tape: float = TAPE_M) -> np.ndarray:
+    """Planned positions rounded to what the tape marks: a surveyor reads 1.234 m, not
+    1.23456789."""
+    q = tape_mark(tape)
+    return np.round(np.asarray(xyz, float) / q) * q
+
+
+def duration_words(minutes: float) -> str:
+    """A survey's time as a person says it: ``12 min``, ``3.5 h``."""
+    if minutes < 90:
+        return f"{max(1, round(minutes)):d} min"
+    return f"{minutes / 60:.1f} h"
+
+
+#: about this long (min) to place the LED at a point, measure it and let the cameras see it
+MINUTES_PER_POINT = 1.0
+
+
 @dataclass
 class SurveyPlan:
     """Points to measure: ids in walking order, planned positions N×3, who sees what."""
@@ -45,6 +69,16 @@ class SurveyPlan:
     #: the coarser grids tried first: (step m, points, typical, unlucky)
     coarser: list = field(default_factory=list)
     capped: bool = False  #: a finer grid would have passed :data:`MAX_PLANNED_POINTS`
+
+    @property
+    def mark(self) -> float:
+        """m: what the tape marks, to which the positions are rounded (:func:`tape_mark`)."""
+        return tape_mark(self.tape)
+
+    @property
+    def minutes(self) -> float:
+        """About how long measuring the points takes (:data:`MINUTES_PER_POINT` each)."""
+        return len(self.ids) * MINUTES_PER_POINT
 
     @property
     def meets_budget(self) -> bool:
@@ -167,6 +201,9 @@ def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_p
         pts = np.concatenate([pts, fine[want]])
         _, first = np.unique(np.round(pts / quantum), axis=0, return_index=True)
         pts = pts[np.sort(first)]
+    pts = to_marks(pts, tape)  # what the tape marks; points it merges are one
+    _, first = np.unique(np.round(pts / quantum), axis=0, return_index=True)
+    pts = pts[np.sort(first)]
     seen = seen_by(pts)
     for k, cam in enumerate(cams):
         if seen[k].sum() < MIN_POINTS_POSE:
@@ -265,14 +302,20 @@ def _walking_order(pts: np.ndarray, quantum: float) -> np.ndarray:
 
 
 def plan_references(deployment, count: int | None = None, heights=None,
-                    margin_px: float = 5.0) -> SurveyPlan:
+                    margin_px: float = 5.0, tape: float = TAPE_M) -> SurveyPlan:
     """Where a free survey's reference points go (issue 15): where two or more cameras see
     them, spread over the room (farthest-point order) at three heights (:data:`REFERENCE_HEIGHTS`
     of the ceiling: cameras that all look down cannot tell a longer focal length from a
     deeper LED by the free LED alone; references spread in depth tell them), and where cameras
-    overlap only in pairs (a line of cameras chained by small overlaps) at least two in every
-    overlap. ``count``: 6 where some point is seen by three cameras or more, else four per
-    overlapping pair, at most 12 — or as given. Ids ``R01``… in walking order."""
+    overlap only in pairs (a line of cameras chained by small overlaps) and the count allows
+    two in every overlap, at least that. ``count``: 6 where some point is seen by three cameras
+    or more, else four per overlapping pair, at most 12 — or as given. Ids ``R01``… in walking
+    order; positions to the marks of a tape measuring to ``tape`` (:func:`to_marks`).
+
+    Issue 26: with more overlapping pairs than the count (twelve cameras), the pairs taken in
+    turn, two each, used up the count in the first few overlaps (an office's twelve in its
+    lower half, their hull 26 % of it); now each overlap gets its share only where the count
+    has one for each, and the farthest-point order spreads the rest."""
     from shapely import contains_xy
 
     cams = deployment.cameras
@@ -313,16 +356,16 @@ def plan_references(deployment, count: int | None = None, heights=None,
                 centre = cand[pool, :2].mean(axis=0)
                 chosen.append(int(free[np.argmax(np.linalg.norm(cand[free, :2] - centre, axis=1))]))
 
-    if not triples:  # every overlap gets its share (two at least, at both heights)
+    if not triples and len(pairs) <= count:  # every overlap gets its share (one at least)
         for k, j in pairs:
-            farthest(np.flatnonzero(seen[k] & seen[j]), max(2, count // len(pairs)))
+            farthest(np.flatnonzero(seen[k] & seen[j]), count // len(pairs))
     farthest(np.arange(len(cand)), max(0, count - len(chosen)))
-    pts = cand[chosen[:count]]
+    pts = to_marks(cand[chosen[:count]], tape)
     order = _walking_order(pts, step * 1e-6)
     pts = pts[order]
     seen = np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
     return SurveyPlan([f"R{i + 1:02d}" for i in range(len(pts))], pts, seen,
-                      [c.id for c in cams])
+                      [c.id for c in cams], tape=float(tape))
 
 
 def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
