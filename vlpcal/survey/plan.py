@@ -368,6 +368,79 @@ def plan_references(deployment, count: int | None = None, heights=None,
                       [c.id for c in cams], tape=float(tape))
 
 
+@dataclass
+class FrameMarks(SurveyPlan):
+    """A wand survey's frame marks (issue 26): ``O`` (the origin), ``X`` (along the frame's +x
+    from it) and floor marks ``F1``… at ``xyz`` in the nominal frame (where to put them; seen
+    by ``seen``), and ``recorded``: what the survey's ``points.csv`` holds for them (N×3, NaN:
+    a coordinate nobody measures — ``O,0,0,0``, ``X,,0,0``, ``F1,,,0``). ``axis``: the nominal
+    axis (``x`` or ``y``) the O→X line runs along, which becomes the calibrated frame's x."""
+
+    recorded: np.ndarray = None
+    axis: str = "x"
+
+
+#: floor marks besides O and X: with them, five points fix the floor plane with redundancy
+FLOOR_MARKS = 3
+
+
+def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, margin_px: float = 5.0,
+               tape: float = TAPE_M) -> FrameMarks:
+    """Where a wand survey's frame marks go (no tape: the wand's length gives the scale, the
+    marks the frame): every mark on the floor where two cameras or more see it (5 px margin);
+    ``O`` and ``X`` as far apart as such places allow along one room axis — the nominal x,
+    unless along y they could be twice as far apart (a longer baseline fixes the frame's
+    rotation better) — ``O`` at the end nearer the room's origin; then ``floor_marks`` marks
+    ``F1``… each where it widens the marks' convex hull most, so the floor plane is fixed over
+    the room, not along one line."""
+    import shapely
+    from shapely import contains_xy
+
+    from .linkage import PLACING_SHARE, _box, footprint
+
+    cams = deployment.cameras
+    room = _floor(deployment)
+    if room.is_empty:
+        raise SurveyError("the keep-out areas leave no floor to survey")
+    x0, y0, x1, y1 = room.bounds
+    size = footprint(cams, 0.0)
+    step = max(min(x1 - x0, y1 - y0) / 48, np.sqrt(room.area / 20000))
+    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+    pts = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
+    two = contains_xy(room, pts[:, 0], pts[:, 1]) & (np.stack(
+        [c.project(pts, margin=margin_px)[2] for c in cams]).sum(axis=0) >= 2)
+    # a mark is put by eye: it must stay in two views wherever it lands, nearby
+    w = int(round(PLACING_SHARE * size / step))
+    two = _box(two.reshape(gx.shape)[None].astype(float), w)[0].ravel() > 1 - 1e-9
+    xy = pts[two, :2]
+    if len(xy) < 2 + floor_marks:
+        raise SurveyError("too few places on the floor are seen by two cameras for the frame's "
+                          "marks: a wand survey needs cameras that overlap")
+    best = {}
+    for a in (0, 1):  # per axis: the row (equal other coordinate) with the longest span
+        key = np.round((xy[:, 1 - a] - xy[:, 1 - a].min()) / step).astype(int)
+        spans = [(np.ptp(xy[key == r, a]), r) for r in np.unique(key)]
+        span, r = max(spans, key=lambda t: (t[0], -t[1]))  # ties: nearer the origin
+        row = np.flatnonzero(key == r)
+        best[a] = (span, row[np.argmin(xy[row, a])], row[np.argmax(xy[row, a])])
+    a = 1 if best[1][0] >= 2 * best[0][0] else 0
+    chosen = [int(best[a][1]), int(best[a][2])]
+    for _ in range(floor_marks):  # each the one that widens the marks' hull most
+        d = np.min(np.linalg.norm(xy[:, None] - xy[None, chosen], axis=2), axis=1)
+        sets = np.concatenate([np.repeat(xy[None, chosen], len(xy), axis=0), xy[:, None]], 1)
+        area = shapely.area(shapely.convex_hull(shapely.multipoints(sets)))
+        chosen.append(int(np.argmax(area + 1e-6 * step * d)))  # ties: the farthest
+    pts = to_marks(np.c_[xy[chosen], np.zeros(len(chosen))], tape)
+    ids = ["O", "X"] + [f"F{i + 1}" for i in range(floor_marks)]
+    recorded = np.full((len(ids), 3), np.nan)
+    recorded[0] = 0.0
+    recorded[1, 1:] = 0.0
+    recorded[2:, 2] = 0.0
+    seen = np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
+    return FrameMarks(ids, pts, seen, [c.id for c in cams], tape=float(tape), recorded=recorded,
+                      axis="xy"[a])
+
+
 def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
     """What the plan's predicted calibration costs the fixes, in a surveyor's words (``chosen``:
     the grid was sized to the budget, not stated)."""
