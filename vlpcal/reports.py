@@ -33,53 +33,155 @@ def save_figure(fig, path, dpi: int = 110) -> None:
 LABELLED_POINTS = 150
 
 
-def survey_plan_figure(path, dep, plan, route=None) -> None:
-    """One panel per height: room, keep-out areas, cameras, points with their ids; with a free
-    survey's ``route`` (:class:`vlpcal.survey.FreeRoute`) its stops, numbered, on every
-    panel."""
+#: offsets (points) a map's label tries, nearest first, until it overlaps no other label
+LABEL_OFFSETS = [(4, 4), (4, -4), (-4, 4), (-4, -4), (6, 0), (-6, 0), (0, 7), (0, -7),
+                 (10, 10), (10, -10), (-10, 10), (-10, -10), (16, 0), (-16, 0), (0, 16), (0, -16),
+                 (18, 18), (18, -18), (-18, 18), (-18, -18)]
+
+
+def _place_labels(ax, labels, avoid=()) -> list:
+    """Put each label ``(xy, text, style)`` beside its point at the first of
+    :data:`LABEL_OFFSETS` where it overlaps no label placed before it nor a box of ``avoid``
+    (display coordinates), else where it overlaps least; returns the placed boxes. Call it once
+    the figure's layout is final: text keeps its size in points while the axes scale."""
+    renderer = ax.figure.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    taken = list(avoid)
+    placed = []
+
+    def overlap(bb):  # with other labels and points, and what sticks out of the panel
+        inside = max(0.0, min(bb.x1, frame.x1) - max(bb.x0, frame.x0)) \
+            * max(0.0, min(bb.y1, frame.y1) - max(bb.y0, frame.y0))
+        return bb.width * bb.height - inside + sum(
+            max(0.0, min(bb.x1, o.x1) - max(bb.x0, o.x0))
+            * max(0.0, min(bb.y1, o.y1) - max(bb.y0, o.y0)) for o in taken)
+
+    for xy, text, style in labels:
+        best = None
+        for dx, dy in LABEL_OFFSETS:
+            t = ax.annotate(text, xy, xytext=(dx, dy), textcoords="offset points",
+                            ha="left" if dx > 0 else "right" if dx < 0 else "center",
+                            va="bottom" if dy > 0 else "top" if dy < 0 else "center", **style)
+            bb = t.get_window_extent(renderer).expanded(1.05, 1.1)
+            cost = overlap(bb)
+            if best is None or cost < best[0]:
+                if best is not None:
+                    best[1].remove()
+                best = (cost, t, bb)
+            else:
+                t.remove()
+            if cost == 0:
+                break
+        taken.append(best[2])
+        placed.append(best[2])
+    return placed
+
+
+def survey_plan_figure(path, dep, plan, route=None) -> list:
+    """One panel per height: room, keep-out areas, cameras, points with their ids (a wand
+    survey's frame marks: O, X, F1…); with a free survey's ``route``
+    (:class:`vlpcal.survey.FreeRoute`) its stops, numbered, on every panel — those swept only
+    low (a thin overlap) in another colour — and cameras the route cannot link ringed, with
+    where another camera would link them. Labels are placed so that none overlaps another
+    (:func:`_place_labels`); returns their boxes (display coordinates), for a check."""
+    from matplotlib.transforms import Bbox
+
     plt = _pyplot()
     heights = sorted(set(plan.xyz[:, 2].round(6)))
     room = np.array(dep.room + dep.room[:1])
     span = np.ptp(room, axis=0)
     aspect = float(np.clip(span[1] / max(span[0], 1e-12), 0.3, 2.0))
-    fig, axes = plt.subplots(1, len(heights), figsize=(5.5 * len(heights), 5.5 * aspect + 1.6),
+    fig, axes = plt.subplots(1, len(heights), figsize=(max(5.5 * len(heights), 8.0),
+                                                      5.5 * aspect + 1.8),
                              squeeze=False, constrained_layout=True)
+    marks = hasattr(plan, "recorded") and plan.recorded is not None
+    unlinked, remedies = [], []
+    if route is not None and route.linkage is not None and len(route.groups) > 1:
+        unlinked = [c for g in route.groups[1:] for c in g]
+        remedies = [r for r in route.linkage.remedies if r.camera_at is not None]
+    low = (np.zeros(0, bool) if route is None
+           else np.asarray(route.tops) < route.high - 1e-9)
+    pending = []  # per panel: (ax, labels, anchor points to keep clear)
     for ax, h in zip(axes[0], heights):
+        labels, anchors = [], []
         ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
         for poly in dep.keep_out:
+            poly = poly["polygon"] if isinstance(poly, dict) else poly
             ax.fill(*np.array(poly).T, color="0.85", hatch="//", ec="0.5")
         for c in dep.cameras:
             ax.plot(*c.position[:2], "rs", ms=7)
-            ax.annotate(c.id, c.position[:2], color="r", fontsize=8, xytext=(4, 4),
-                        textcoords="offset points")
+            anchors.append((*c.position[:2], 9 if c.id in unlinked else 4))
+            if c.id in unlinked:
+                first = ax is axes[0][0] and c.id == unlinked[0]
+                ax.plot(*c.position[:2], "o", ms=17, mfc="none", mec="#c00000", mew=1.8,
+                        label="camera the free LED cannot link" if first else None)
+            labels.append((c.position[:2], c.id + (" not linked" if c.id in unlinked else ""),
+                           {"color": "#c00000" if c.id in unlinked else "r", "fontsize": 8}))
+        for r in remedies:
+            first = ax is axes[0][0] and r is remedies[0]
+            ax.plot(*r.camera_at, "s", ms=11, mfc="none", mec="#c00000", ls="none", mew=1.2,
+                    label="another camera here would link them" if first else None)
+            anchors.append((*r.camera_at, 6))
+            labels.append((r.camera_at, "add a camera?", {"color": "#c00000", "fontsize": 7}))
         sel = np.flatnonzero(np.isclose(plan.xyz[:, 2], h))
-        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "-", color="0.8", lw=0.6)  # walking order
-        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "o", color="#2a7ab0", ms=4)
+        if not marks:
+            ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "-", color="0.8", lw=0.6)  # walking order
+        ax.plot(plan.xyz[sel, 0], plan.xyz[sel, 1], "D" if marks else "o", color="#2a7ab0",
+                ms=6 if marks else 4)
+        anchors.extend((x, y, 4) for x, y in plan.xyz[sel, :2])
+        few = route is not None  # a few references or marks: their ids in full
         if len(sel) <= LABELLED_POINTS:  # beyond, numbers would smear: the CSV has them
             for i in sel:
-                ax.annotate(plan.ids[i][1:].lstrip("0"), plan.xyz[i, :2], fontsize=5,
-                            xytext=(2, 2), textcoords="offset points")
+                text = plan.ids[i] if few else plan.ids[i][1:].lstrip("0")
+                labels.append((plan.xyz[i, :2], text,
+                               {"fontsize": 9 if marks else 7 if few else 5, "color": "#2a7ab0",
+                                "weight": "bold" if marks else "normal"}))
         if route is not None:
             ax.plot(route.stops[:, 0], route.stops[:, 1], "-", color="#d08020", lw=1.2,
-                    alpha=0.8, label=f"free LED: sweep {route.low:g}–{route.high:g} m at each "
-                                     "stop")
-            for n, (x, y) in enumerate(route.stops, start=1):
-                ax.annotate(str(n), (x, y), color="#d08020", fontsize=8, weight="bold",
-                            ha="center", va="center",
-                            bbox={"boxstyle": "circle,pad=0.2", "fc": "w", "ec": "#d08020"})
-        ids = (f"{plan.ids[sel[0]]}…" if len(sel) <= LABELLED_POINTS else
-               f"{plan.ids[sel[0]]}–{plan.ids[sel[-1]]}, in walking order: ids in the CSV")
-        ax.set_title(f"LED at h = {h:g} m: {len(sel)} points ({ids})", fontsize=9)
+                    alpha=0.8, label=f"{'wand' if marks else 'free LED'}: sweep "
+                                     f"{route.low:g}–{route.high:g} m at each stop"
+                                     if ax is axes[0][0] else None)
+            ax.plot(*route.stops[~low].T, "o", color="#d08020", ms=3)
+            if low.any():
+                tops = sorted(set(np.round(np.asarray(route.tops)[low], 2)))
+                said = f"to {tops[0]:g} m" if len(tops) == 1 else "as low as the words say"
+                ax.plot(*route.stops[low].T, "v", color="#7a30a0", ms=6,
+                        label=f"sweep only {said} here (a thin overlap)"
+                        if ax is axes[0][0] else None)
+            anchors.extend((x, y, 4) for x, y in route.stops)
+            for n, (xy, lo) in enumerate(zip(route.stops, low), start=1):
+                labels.append((xy, str(n), {"fontsize": 7, "weight": "bold",
+                                            "color": "#7a30a0" if lo else "#b06000"}))
+        if marks:
+            title = f"frame marks on the floor: {', '.join(plan.ids)}"
+        else:
+            ids = (f"{plan.ids[sel[0]]}…" if len(sel) <= LABELLED_POINTS else
+                   f"{plan.ids[sel[0]]}–{plan.ids[sel[-1]]}, in walking order: ids in the CSV")
+            title = f"LED at h = {h:g} m: {len(sel)} point{'s' if len(sel) != 1 else ''} ({ids})"
+        ax.set_title(title, fontsize=9)
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")
+        pending.append((ax, labels, anchors))
     axes[0][0].set_ylabel("y (m)")
-    if route is not None:
-        fig.legend(*axes[0][0].get_legend_handles_labels(), loc="outside lower center",
-                   fontsize=8, frameon=False)
-    what = ("measure each reference point, then carry the LED along the route"
+    handles = axes[0][0].get_legend_handles_labels()
+    if handles[0]:
+        fig.legend(*handles, loc="outside lower center", fontsize=8, frameon=False,
+                   ncol=min(2, len(handles[0])))
+    what = ("put the frame marks, then wave the wand along the route" if marks else
+            "measure each reference point, then carry the LED along the route"
             if route is not None else "place the LED at each point, measure, record")
     fig.suptitle(f"Survey plan for {dep.name}: {what}", fontsize=10)
+    fig.canvas.draw()  # the layout is final: then labels, placed in display units
+    fig.set_layout_engine("none")
+    boxes = []
+    px = fig.dpi / 72  # pixels a point
+    for ax, labels, anchors in pending:
+        a = np.reshape(np.asarray(anchors, float), (-1, 3))
+        clear = [Bbox.from_bounds(x - r * px, y - r * px, 2 * r * px, 2 * r * px)
+                 for (x, y), r in zip(ax.transData.transform(a[:, :2]), a[:, 2])]
+        boxes.append(_place_labels(ax, labels, clear))
     save_figure(fig, path, dpi=130)
+    return [b for panel in boxes for b in panel]
 
 
 def calibration_figure(path, stats, per_point, X, cameras, lens_rows=()) -> None:

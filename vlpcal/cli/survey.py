@@ -44,6 +44,10 @@ def survey():
 @click.option("--free-height", default=None, type=Finite(0.0, 10000.0),
               help="Plan a free survey whose LED rides a robot at this height, m (implies "
                    "--free): the route is driven, not swept.")
+@click.option("--wand", default=None, type=Finite(1e-6, 10000.0), metavar="LENGTH",
+              help="Plan a wand survey, m between the wand's two LEDs (implies --free): no "
+                   "tape; frame marks (O, X, F1–F3) to put on the floor instead of references, "
+                   "and a route to wave the wand along.")
 @click.option("--references", type=click.IntRange(2, 200), default=None,
               help="With --free: how many reference points (3 or more; 2 or more with "
                    "--free-height).  [default: 6 where cameras overlap in threes, up to 12 on "
@@ -51,16 +55,20 @@ def survey():
 @click.option("--min-per-camera", default=12, show_default=True, type=click.IntRange(6, 1000),
               help="Points each camera must see (more let the calibration fit more of its lens).")
 @click.option("--tape", default=0.003, show_default=True, type=Finite(1e-7, 100.0),
-              help="How precisely the positions will be measured, m per axis (a tape: 0.003).")
+              help="How precisely the positions will be measured, m per axis (a tape: 0.003); "
+                   "positions are written to what it marks (1 mm).")
 @click.option("--spot-noise", default=0.03, show_default=True, type=Finite(1e-4, 10.0),
               help="The spots' precision, px (0.03: the default detector at its best).")
-def survey_plan(deployment_path, out, step, heights, free, free_height, references,
+def survey_plan(deployment_path, out, step, heights, free, free_height, wand, references,
                 min_per_camera, tape, spot_noise):
     """Plan the survey: where to put the LED, with ids, and a map to print.
 
     The grid is made finer until the survey's own measurement errors add at most 10 % to the
-    cameras' error (20 % for an unlucky tape), predicted from --tape and --spot-noise.
-    With --free: the reference points of a free survey, and the route to carry the LED.
+    cameras' error (20 % for an unlucky tape), predicted from --tape and --spot-noise; the
+    time it takes is said (about a minute a point). With --free: the reference points of a
+    free survey, and the route to carry the LED; with --wand: frame marks instead of
+    references. A free plan says, before anyone measures, whether the free LED can link every
+    camera, and names those it cannot with what would link them.
 
     Example: vlpcal survey plan -d planned.yaml --out survey-plan.csv
     """
@@ -70,12 +78,16 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, referenc
     from ..reports import survey_plan_figure
     from ..survey import SurveyError, plan_survey
     from ..survey.calibration import format_length
-    from ..survey.plan import budget_sentence
+    from ..survey.plan import budget_sentence, duration_words, plan_marks
 
     dep = _load_deployment(deployment_path)
-    free = free or free_height is not None
+    free = free or free_height is not None or wand is not None
     if references is not None and not free:
         raise click.BadParameter("is for a free survey (--free)", param_hint="--references")
+    if wand is not None and (references is not None or free_height is not None):
+        raise click.BadParameter("a wand survey plans frame marks, not references, and is "
+                                 "waved by hand (drop --references and --free-height)",
+                                 param_hint="--wand")
     if references is not None and references < 3 and free_height is None:
         raise click.BadParameter(f"expected 3 or more (2 or more with --free-height), got "
                                  f"{references}", param_hint="--references")
@@ -90,14 +102,21 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, referenc
         raise click.BadParameter(f"expected a height from 0 to below {top:g} m (nine tenths of "
                                  f"the lowest camera's), got {free_height:g}",
                                  param_hint="--free-height")
+    sweep = hs if heights else None
+    if wand is not None and not heights:  # the wand's LEDs: from the floor to 40 % + half of it
+        sweep = (0.0, min(round(0.4 * dep.ceiling_height + wand / 2, 2), round(0.99 * top, 2)))
     route = None
     try:
-        if free:
+        if wand is not None:
+            from ..survey import free_route
+
+            plan = plan_marks(dep, tape=tape)
+            route = free_route(dep, sweep)
+        elif free:
             from ..survey import free_route, plan_references
 
-            plan = plan_references(dep, references, hs if heights else None)
-            route = free_route(dep, (free_height,) * 2 if free_height is not None
-                               else hs if heights else None)
+            plan = plan_references(dep, references, hs if heights else None, tape=tape)
+            route = free_route(dep, (free_height,) * 2 if free_height is not None else sweep)
         else:
             plan = plan_survey(dep, step, hs, min_per_camera, tape=tape, spot_noise=spot_noise)
     except SurveyError as e:
@@ -116,13 +135,23 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, referenc
     from ..writing import OutputSet
 
     with OutputSet(out.with_suffix(".png"), out) as (png, csv_file):  # both, or neither
-        write_truth_csv(csv_file, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
+        if wand is not None:  # the marks' unmeasured coordinates are empty cells
+            import csv
+
+            with open(csv_file, "w", newline="", encoding="utf-8") as f:
+                w = csv.writer(f, lineterminator="\n")
+                w.writerow(POINTS_COLUMNS)
+                w.writerows([pid, *("" if math.isnan(v) else f"{v:g}" for v in row)]
+                            for pid, row in zip(plan.ids, plan.recorded))
+        else:
+            write_truth_csv(csv_file, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
         survey_plan_figure(png, dep, plan, route)
     if route is not None:
-        _echo_free_plan(plan, route, out)
+        _echo_free_plan(plan, route, out, wand)
         return
     click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
-               f"(grid {format_length(plan.step)}) → {out}, map {out.with_suffix('.png')}")
+               f"(grid {format_length(plan.step)}; positions to {format_length(plan.mark)}) → "
+               f"{out}, map {out.with_suffix('.png')}")
     click.echo(budget_sentence(plan, chosen=step is None))
     few = [f"{cid} {int(n)}" for cid, n in zip(plan.camera_ids, plan.seen.sum(axis=1))
            if n < min_per_camera]
@@ -135,37 +164,80 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, referenc
                   if j != k]
         pairs = ", ".join(f"{cj} {n}" for cj, n in shared if n)
         click.echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
+    said = f"time: about {duration_words(plan.minutes)} with a tape (a minute a point)"
+    if plan.minutes >= 60:  # hours of work: a wand needs none of it
+        try:
+            from ..survey import free_route
+
+            wand_route = free_route(dep, (0.0, min(round(0.4 * dep.ceiling_height + 0.25, 2),
+                                                   round(0.99 * top, 2))))
+        except SurveyError:
+            wand_route = None
+        if wand_route is not None:
+            said += (f"; a wand survey needs no tape: 5 marks on the floor (about 5 min) and "
+                     f"about {duration_words(wand_route.minutes)} of waving a 0.5 m wand "
+                     f"(vlpcal survey plan -d {deployment_path} --wand 0.5 --out marks.csv)")
+    click.echo(said)
 
 
-def _echo_free_plan(plan, route, out) -> None:
-    """A free survey's plan in words: the references to measure, then the route."""
-    hs = sorted(set(plan.xyz[:, 2].round(6)))
-    click.echo(f"{len(plan.ids)} reference points at h = {', '.join(f'{h:g}' for h in hs)} m "
-               f"→ {out}, map {out.with_suffix('.png')}: measure each, and let the cameras "
-               "see the LED there")
-    for pid, (x, y, z), seen in zip(plan.ids, plan.xyz, plan.seen.T):
-        who = "+".join(c for c, s in zip(plan.camera_ids, seen) if s)
-        click.echo(f"  {pid}: ({x:.2f}, {y:.2f}, {z:.2f}) m, seen by {who}")
+def _echo_free_plan(plan, route, out, wand=None) -> None:
+    """A free survey's plan in words: the references (or a wand's frame marks) to measure, the
+    route, and whether it links every camera."""
+    import numpy as np
+
+    from ..survey.calibration import format_length
+    from ..survey.plan import duration_words
+    if wand is not None:
+        axis = {"x": "+x", "y": "+y"}[plan.axis]
+        click.echo(f"wand survey ({wand:g} m between its LEDs; no tape): {len(plan.ids)} marks on "
+                   f"the floor, each seen by two cameras or more → {out} (its empty cells: not "
+                   f"measured), map {out.with_suffix('.png')}; put a mark where each is said "
+                   "(in the plan's frame, to a few cm) and let the cameras see the LED on it:")
+        o = plan.xyz[0, :2]
+        for pid, (x, y, _), seen in zip(plan.ids, plan.xyz, plan.seen.T):
+            who = "+".join(c for c, s in zip(plan.camera_ids, seen) if s)
+            what = ("the origin" if pid == "O" else
+                    f"{np.hypot(x - o[0], y - o[1]):.2f} m along the plan's {axis} from O: the "
+                    "calibrated frame's +x" if pid == "X" else "anywhere near, on the floor")
+            click.echo(f"  {pid}: ({x:.2f}, {y:.2f}) m, {what}; seen by {who}")
+    else:
+        hs = sorted(set(plan.xyz[:, 2].round(6)))
+        click.echo(f"{len(plan.ids)} reference points at h = {', '.join(f'{h:g}' for h in hs)} m "
+                   f"→ {out}, map {out.with_suffix('.png')}: measure each to "
+                   f"{format_length(plan.mark)} (about {duration_words(plan.minutes)}), and let "
+                   "the cameras see the LED there")
+        for pid, (x, y, z), seen in zip(plan.ids, plan.xyz, plan.seen.T):
+            who = "+".join(c for c, s in zip(plan.camera_ids, seen) if s)
+            click.echo(f"  {pid}: ({x:.3f}, {y:.3f}, {z:.3f}) m, seen by {who}")
     stops = f"{len(route.stops)} stop{'s' if len(route.stops) > 1 else ''}"
+    time = (f"about {duration_words(route.minutes)}" if route.low == route.high else
+            f"one sweep each: about {duration_words(route.minutes)}")
+    low = np.flatnonzero(route.tops < route.high - 1e-9)
     if route.low == route.high:
         click.echo(f"then, while the cameras record, drive the robot (its LED at {route.low:g} m) "
-                   f"through {stops} and over the floor between them (the map shows the "
+                   f"through {stops} ({time}) and over the floor between them (the map shows the "
                    "route); calibrate with --free-height " f"{route.low:g}:")
     else:
-        click.echo(f"then, while the cameras record, carry the LED along {stops}, sweeping it "
-                   f"from {route.low:g} to {route.high:g} m and back at each (the map shows the "
-                   "route):")
-    linked = {c for stop in route.pairs for pair in stop for c in pair}
-    alone = [c for c in plan.camera_ids if c not in linked]
-    if alone:
-        click.echo(f"note: {', '.join(alone)} overlap{'s' if len(alone) == 1 else ''} no other "
-                   "camera at two heights: a free survey cannot calibrate "
-                   f"{'it' if len(alone) == 1 else 'them'} (a tape survey can)")
-    for n, ((x, y), pairs, quarters) in enumerate(zip(route.stops, route.pairs, route.quarters),
-                                                  start=1):
+        what = "wave the wand" if wand is not None else "carry the LED"
+        click.echo(f"then, while the cameras record, {what} along {stops} ({time}), sweeping "
+                   f"{'its LEDs' if wand is not None else 'it'} from {route.low:g} to "
+                   f"{route.high:g} m and back at each"
+                   + (f" ({len(low)} stop{'s' if len(low) != 1 else ''} only as high as said: "
+                      "there two cameras share a thin overlap near the floor)" if len(low) else "")
+                   + " (the map shows the route):")
+    for n, ((x, y), pairs, quarters, t) in enumerate(
+            zip(route.stops, route.pairs, route.quarters, route.tops), start=1):
         what = [f"pairs {', '.join(f'{a}+{b}' for a, b in pairs)}"] if pairs else []
         what += [", ".join(quarters)] if quarters else []
+        what += [f"sweep only to {t:.2f} m"] if t < route.high - 1e-9 else []
         click.echo(f"  {n:2d}. ({x:.2f}, {y:.2f}) m: {'; '.join(what)}")
+    lines = route.linkage.sentences()
+    if len(route.groups) <= 1:
+        click.echo(f"linked: {lines[0]}")
+        return
+    click.echo(f"warning: {lines[0]}; a free survey would refuse them after the measuring:")
+    for line in lines[1:]:
+        click.echo(f"warning: {line}")
 
 
 @survey.command("capture")
