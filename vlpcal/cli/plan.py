@@ -98,6 +98,24 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         yaml_file.write_text(dumps(dep, f"Planned by vlpcal plan from {site_path}: candidate "
                                         f"{candidate}."), encoding="utf-8")
     click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
+    _echo_linkage(dep)
+
+
+def _echo_linkage(dep) -> None:
+    """Whether a free survey can calibrate the layout: the cameras a free LED swept from the
+    floor to 40 % of the ceiling can link, judged from the geometry (one line when all are);
+    those it cannot, named with what would link them — told now, while cameras can still be
+    moved, not after a survey's measuring."""
+    from ..survey import SurveyError
+    from ..survey.linkage import link_cameras
+
+    try:
+        lines = link_cameras(dep).sentences()
+    except SurveyError as e:
+        lines = [f"cannot be judged: {e}"]
+    click.echo(f"free survey (vlpcal survey plan --free): {lines[0]}")
+    for line in lines[1:]:
+        click.echo(f"  {line}")
 
 
 @main.command("check")
