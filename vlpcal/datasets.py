@@ -195,7 +195,8 @@ class SurveyBundle:
     #: the free survey (issue 15): moments when the LED was somewhere unknown, in order
     free_ids: list = field(default_factory=list)
     free_frames: dict = field(default_factory=dict)  # (set_id, camera_id) → Path
-    free_observations: dict = field(default_factory=dict)  # (set_id, camera_id) → (u, v)
+    #: (set_id, camera_id) → [(u, v, led or None)]: one spot, or a wand's two
+    free_observations: dict = field(default_factory=dict)
 
     def camera_ids(self) -> list[str]:
         ids = {c for _, c in self.frames} | {c for _, c in self.observations} | \
@@ -227,14 +228,17 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
     ids = [_check_id(str(p), f"point {i}") for i, p in enumerate(point_ids)]
     if len(set(ids)) != len(ids):
         raise DatasetError("point ids must be unique")
-    if not ids or xyz.shape != (len(ids), 3) or not np.isfinite(xyz).all():
-        raise DatasetError(f"a survey needs N ≥ 1 finite positions N×3 for its {len(ids)} "
-                           f"point ids, got {xyz.shape}")
+    if not ids or xyz.shape != (len(ids), 3) or np.isinf(xyz).any() \
+            or np.isnan(xyz).all(axis=1).any() or (np.isnan(xyz).any() and not free_frames):
+        raise DatasetError(f"a survey needs N ≥ 1 positions N×3 for its {len(ids)} point ids, "
+                           f"finite (NaN, a coordinate not measured, only in a free survey's "
+                           f"references, and never all three), got {xyz.shape}")
     _check_lengths(frames, len(ids), "frames")
     _check_lengths(observations, len(ids), "observations")
     with _staged(root, overwrite) as tmp:
         _write_csv(tmp / "points.csv", POINTS_COLUMNS,
-                   [[p, *map(_fmt, xyz[i])] for i, p in enumerate(ids)])
+                   [[p, *(_fmt(x) if np.isfinite(x) else "" for x in xyz[i])]
+                    for i, p in enumerate(ids)])
         _write_jpegs(frames or {}, ids, lambda p: tmp / "frames" / p)
         if observations:
             rows = [[p, cam, _fmt(uv[i, 0]), _fmt(uv[i, 1])]
@@ -248,9 +252,11 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
     return root
 
 
-def read_points(path, allow_empty: bool = False) -> tuple[list[str], np.ndarray]:
+def read_points(path, allow_empty: bool = False, unmeasured: bool = False
+                ) -> tuple[list[str], np.ndarray]:
     """A ``point_id,x,y,z`` file (a survey's ``points.csv``, or ``survey plan``'s output):
-    ids in file order and ``N×3`` positions, m."""
+    ids in file order and ``N×3`` positions, m. With ``unmeasured``, a cell may be empty: that
+    coordinate was not measured (NaN; a frame mark such as ``X,,0,0``, DESIGN.md)."""
     path = Path(path)
     ids, xyz, seen = [], [], set()
     for n, row in enumerate(_read_csv(path, POINTS_COLUMNS), start=2):
@@ -260,7 +266,17 @@ def read_points(path, allow_empty: bool = False) -> tuple[list[str], np.ndarray]
             raise DatasetError(f"{where}: duplicate point_id {pid!r}")
         seen.add(pid)
         ids.append(pid)
-        xyz.append([_finite(row[c], f"{where} {c}") for c in ("x", "y", "z")])
+        cells = [(row[c] or "").strip() for c in ("x", "y", "z")]
+        if unmeasured and not any(cells):
+            raise DatasetError(f"{where}: point {pid} has no coordinate measured (expected at "
+                               "least one; a position nobody measured belongs in free/)")
+        for t, c in zip(cells, ("x", "y", "z")):
+            if not t and not unmeasured:
+                raise DatasetError(f"{where} {c}: expected a number, got an empty cell (a "
+                                   "coordinate left unmeasured belongs only in a free "
+                                   "survey's references, beside free/)")
+        xyz.append([math.nan if not t else _finite(t, f"{where} {c}")
+                    for t, c in zip(cells, ("x", "y", "z"))])
     if not ids and not allow_empty:
         raise DatasetError(f"{path}: no points")
     return ids, np.array(xyz, dtype=float).reshape(-1, 3)
@@ -281,7 +297,8 @@ def read_survey_bundle(root) -> SurveyBundle:
         else:
             hint = ""
         raise DatasetError(f"{path}: missing (a survey bundle needs points.csv){hint}")
-    ids, xyz = read_points(path)
+    # a free survey's references may leave coordinates unmeasured (frame marks)
+    ids, xyz = read_points(path, unmeasured=(root / "free").is_dir())
     known = set(ids)
     frames = {}
     fdir = root / "frames"
@@ -330,7 +347,7 @@ def _read_free(free: Path, bundle: SurveyBundle) -> None:
             raise DatasetError(f"{opath}: larger than {MAX_FREE_BYTES >> 20} MB (expected a "
                                "free survey's spots, set_id,camera_id,u,v: hours of motion fit "
                                "in less; a calibration uses at most 5000 sets)")
-        bundle.free_observations, order = read_observations(opath, "set_id")
+        bundle.free_observations, order = read_observations(opath, "set_id", several=True)
         ids.update(order)
     if not ids:
         raise DatasetError(f"{free}: no free sets (expected frames/<set_id>/<camera_id>.jpg "
@@ -338,10 +355,13 @@ def _read_free(free: Path, bundle: SurveyBundle) -> None:
     bundle.free_ids = sorted(ids, key=lambda t: (natural_key(t), t))
 
 
-def read_observations(path, id_column: str = "frame_id") -> tuple[dict, list[str]]:
+def read_observations(path, id_column: str = "frame_id", several: bool = False
+                      ) -> tuple[dict, list[str]]:
     """Spots reported by the cameras: ``<id_column>,camera_id,u,v`` (px).
 
-    Returns ``{(id, camera_id): (u, v)}`` and the ids in order of first appearance.
+    Returns ``{(id, camera_id): (u, v)}`` and the ids in order of first appearance. With
+    ``several`` (a wand's two LEDs), a camera may report two spots of one id, and an optional
+    ``led`` column names each spot's LED: values are lists of ``(u, v, led or None)``.
     """
     path = Path(path)
     out, order, seen = {}, [], set()
@@ -349,9 +369,23 @@ def read_observations(path, id_column: str = "frame_id") -> tuple[dict, list[str
         where = f"{path} line {n}"
         key = _check_id((row[id_column] or "").strip(), f"{where} {id_column}")
         cid = _check_id((row["camera_id"] or "").strip(), f"{where} camera_id")
-        if (key, cid) in out:
+        uv = (_finite(row["u"], f"{where} u"), _finite(row["v"], f"{where} v"))
+        if several:
+            led = (row.get("led") or "").strip() or None
+            if led is not None:
+                _check_id(led, f"{where} led")
+            spots = out.setdefault((key, cid), [])
+            if len(spots) == 2:
+                raise DatasetError(f"{where}: a third spot for {id_column} {key!r}, camera "
+                                   f"{cid!r} (a wand shows two)")
+            if led is not None and any(s[2] == led for s in spots):
+                raise DatasetError(f"{where}: a second spot of LED {led!r} for {id_column} "
+                                   f"{key!r}, camera {cid!r}")
+            spots.append((*uv, led))
+        elif (key, cid) in out:
             raise DatasetError(f"{where}: a second spot for {id_column} {key!r}, camera {cid!r}")
-        out[(key, cid)] = (_finite(row["u"], f"{where} u"), _finite(row["v"], f"{where} v"))
+        else:
+            out[(key, cid)] = uv
         if key not in seen:
             seen.add(key)
             order.append(key)

@@ -526,12 +526,16 @@ class PointSigma(click.ParamType):
 @click.option("--free-height", type=Finite(0, 1e4), default=None,
               help="A free survey's LED was always at this height, m (on a robot or a cart): "
                    "then two reference points suffice.")
+@click.option("--wand", type=Finite(1e-6, 1e4), default=None, metavar="LENGTH",
+              help="A free survey waved with a wand: two LEDs LENGTH m apart on a rigid bar "
+                   "(each free frame shows both); its length fixes the scale, so frame marks "
+                   "(O,0,0,0; X,,0,0; F1,,,0 …) can replace the tape.")
 @click.option("--test-points", "test_path", default=None, type=click.Path(file_okay=False),
               help="Test points the calibration never sees: a bundle folder (points.csv with "
                    "frames/ or observations.csv); their error is reported.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds, point_sigma,
-                     free_height, test_path, quiet):
+                     free_height, wand, test_path, quiet):
     """Calibrate the cameras from a survey and report held-out accuracy.
 
     Each camera's pose and as much of its lens as the survey supports and needs (--lens auto:
@@ -574,10 +578,11 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     _check_survey_positions(survey_path, dep, X, ids)
     if bundle.free_ids:
         return _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
-                               quiet, deployment_path, survey_path, test)
-    if free_height is not None:
-        raise UserError(f"{survey_path}: --free-height is for a free survey (a free/ folder); "
-                        "this bundle has none")
+                               quiet, deployment_path, survey_path, test, wand)
+    for value, name in ((free_height, "--free-height"), (wand, "--wand")):
+        if value is not None:
+            raise UserError(f"{survey_path}: {name} is for a free survey (a free/ folder); "
+                            "this bundle has none")
     try:
         with click.progressbar(length=folds + 1, label="calibrating (lens choice and all, "
                                "then k-fold)", hidden=quiet, file=sys.stderr) as bar:
@@ -682,42 +687,57 @@ def _report_test_points(result, test) -> None:
 
 
 def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes, quiet,
-                    deployment_path, survey_path, test=None) -> None:
-    """``survey calibrate`` on a bundle with a free survey (issue 15)."""
+                    deployment_path, survey_path, test=None, wand=None) -> None:
+    """``survey calibrate`` on a bundle with a free survey (issue 15), or a wand's (26)."""
     import math
     import sys
 
     import numpy as np
 
-    from ..survey import SurveyError, calibrate_free_survey, free_spots
+    from ..survey import SurveyError, calibrate_free_survey, free_spots, wand_spots
     from ..survey.calibration import format_length
+    from ..survey.free import WAND_PRECISION
 
     if free_height is not None and not (0 <= free_height < dep.ceiling_height):
         raise UserError(f"--free-height {free_height:g}: expected a height from the floor to "
                         f"below the ceiling ({dep.ceiling_height:g} m)")
-    uv_free, free_notes = free_spots(dep, bundle)
+    if wand is not None and wand > 2 * dep.size:
+        raise UserError(f"--wand {wand:g}: longer than the room ({dep.size:.3g} m across): "
+                        "expected the wand's length in metres")
+    labelled = False
+    try:
+        if wand is None:
+            uv_free, free_notes = free_spots(dep, bundle)
+        else:
+            found = wand_spots(dep, bundle)
+            uv_free, free_notes, labelled = found.uv, found.notes, found.labelled
+    except SurveyError as e:
+        raise UserError(str(e)) from None
     for k, cam in enumerate(dep.cameras):  # a spot outside its image is no spot of this camera
-        u, v = uv_free[k, :, 0], uv_free[k, :, 1]
+        u, v = uv_free[k, ..., 0], uv_free[k, ..., 1]
         off = np.isfinite(u) & ((u < -0.5) | (u > cam.width - 0.5) | (v < -0.5)
                                 | (v > cam.height - 0.5))
         if off.any():
-            i = int(np.flatnonzero(off)[0])
+            i = int(np.flatnonzero(off.reshape(len(off), -1).any(axis=1))[0])
+            j = np.flatnonzero(off[i])[0] if off.ndim > 1 else ()
             raise UserError(f"{survey_path}: free set {bundle.free_ids[i]}, camera {cam.id}: "
-                            f"spot ({u[i]:g}, {v[i]:g}) is outside its {cam.width}×{cam.height}"
-                            " image (expected pixels within it)")
+                            f"spot ({u[i][j]:g}, {v[i][j]:g}) is outside its "
+                            f"{cam.width}×{cam.height} image (expected pixels within it)")
     for note in free_notes:
         click.echo(note, err=True)
     n_ref = len(bundle.point_ids)
     try:
         from ..survey.free import MAX_LEFT_OUT
 
-        with click.progressbar(length=5 + min(n_ref, MAX_LEFT_OUT),
+        with click.progressbar(length=5 + min(n_ref, MAX_LEFT_OUT)
+                               + (3 if wand is not None and not labelled else 0),
                                label="calibrating from the free survey",
                                hidden=quiet, file=sys.stderr) as bar:
             result = calibrate_free_survey(
                 dep, bundle.xyz, uv, bundle.point_ids, uv_free, lens, point_sigma, free_height,
                 progress=lambda i, n: bar.update(1),
-                sources={"deployment": str(deployment_path), "survey": str(survey_path)})
+                sources={"deployment": str(deployment_path), "survey": str(survey_path)},
+                wand=wand, labelled=labelled)
     except SurveyError as e:
         raise UserError(f"{survey_path}: {e}") from None
     except np.linalg.LinAlgError:
@@ -756,9 +776,22 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                    f"over {len(loo)} points (their own tape, ±{tape:.1f} mm in 3D, included)")
     else:
         click.echo("\nreferences: too few to leave one out (the rest must still fix the room)")
-    click.echo(f"your {n_ref} reference points fix the room to about "
-               f"{cal.datum_floor * 1000:.1f} mm (the datum floor: no calibration does "
-               "better); measure more points, or more precisely, to do better")
+    marks = bool(np.isnan(bundle.xyz).any())
+    click.echo(f"your {n_ref} {'reference points and marks' if marks else 'reference points'}"
+               + (f" and the wand's length (±{WAND_PRECISION:.1%})" if wand else "")
+               + f" fix the room to about {cal.datum_floor * 1000:.1f} mm (the datum floor: no "
+               "calibration does better); measure more points, or more precisely, to do better")
+    if marks:
+        click.echo("the calibrated deployment is in the marks' frame: O is its origin, X on "
+                   "its +x axis, the floor marks at z = 0 (the room moved with the cameras)")
+    if cal.wand_error is not None:
+        w = cal.wand_error
+        worst = max(w.per_camera.items(), key=lambda t: -1 if np.isnan(t[1]) else t[1])
+        click.echo(f"wand: {w.sets} held-out sets (never in the fit) triangulate its "
+                   f"{wand * 1000:g} mm to ±{w.mean * 1000:.2f} mm on average (p95 "
+                   f"{w.p95 * 1000:.2f} mm; worst camera {worst[0]} {worst[1] * 1000:.2f} mm)"
+                   + (f"; {w.discarded} more whose spots do not meet (a reflection or another "
+                      "light taken for an end) left out" if w.discarded else ""))
     if math.isfinite(cal.predicted_error):
         click.echo(f"predicted: fixes with these cameras {format_length(cal.predicted_error)} "
                    "off on average over the floor (the survey's adjustment, linearised; exact "
@@ -864,9 +897,13 @@ def _check_survey_positions(survey_path, dep, X, ids) -> None:
     from shapely.geometry import Polygon
 
     margin = 0.2 * dep.size
-    room = Polygon(dep.room).buffer(margin)
-    inside = contains_xy(room, X[:, 0], X[:, 1]) & (X[:, 2] > -margin) \
-        & (X[:, 2] < dep.ceiling_height)
+    if np.isnan(X).any():  # frame marks: positions in the marks' own frame, not the room's
+        near = np.abs(np.nan_to_num(X[:, :2])).max(axis=1) <= dep.size + margin
+        inside = near & ~(X[:, 2] <= -margin) & ~(X[:, 2] >= dep.ceiling_height)
+    else:
+        room = Polygon(dep.room).buffer(margin)
+        inside = contains_xy(room, X[:, 0], X[:, 1]) & (X[:, 2] > -margin) \
+            & (X[:, 2] < dep.ceiling_height)
     if not inside.all():
         i = int(np.flatnonzero(~inside)[0])
         raise UserError(f"{survey_path}: point {ids[i]} at ({X[i, 0]:g}, {X[i, 1]:g}, "

@@ -41,7 +41,7 @@ from .plan import (
     plan_survey,
 )
 from .regions import learn_region_map, region_cell
-from .spots import free_spots, survey_spots
+from .spots import WandSpots, free_spots, survey_spots, wand_spots
 
 __all__ = [
     "FUSION_OF", "HELD_OUT", "LENS_MODELS", "MIN_POINTS_PLANNED", "MIN_POINTS_POSE",
@@ -50,6 +50,6 @@ __all__ = [
     "fit_camera", "fold_of", "held_out", "learn_region_map", "lens_params", "lens_support",
     "plan_survey", "plan_references", "free_route", "FreeRoute", "refine_jointly", "region_cell",
     "survey_spots",
-    "free_spots", "test_point_errors",
+    "free_spots", "test_point_errors", "wand_spots", "WandSpots",
     "calibrate_free_survey", "FreeSurveyResult",
 ]

@@ -251,10 +251,11 @@ def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[
 
 # -- every camera and position together -----------------------------------------------------
 
-def _pattern(npars, obs, n_pts):
+def _pattern(npars, obs, n_pts, pairs=None):
     """Rows and columns of the bundle adjustment's Jacobian, in the order :func:`refine_jointly`
     fills its values: per camera, each observation row against the camera's parameters, then
-    against its point's three coordinates; last, each position prior against its point."""
+    against its point's three coordinates; then each position prior against its point; last,
+    each length of ``pairs`` (i, j) against both points' coordinates."""
     rows, cols = [], []
     off = np.concatenate([[0], np.cumsum(npars)])
     base_pts = off[-1]
@@ -267,12 +268,19 @@ def _pattern(npars, obs, n_pts):
         row += 2 * len(idx)
     rows.append(row + np.arange(3 * n_pts))
     cols.append(base_pts + np.arange(3 * n_pts))
-    return np.concatenate(rows), np.concatenate(cols), (row + 3 * n_pts, base_pts + 3 * n_pts)
+    row += 3 * n_pts
+    if pairs is not None:
+        i, j = pairs
+        rows.append(np.repeat(row + np.arange(len(i)), 6))
+        cols.append((base_pts + np.c_[3 * i[:, None] + np.arange(3),
+                                      3 * j[:, None] + np.arange(3)]).ravel())
+        row += len(i)
+    return np.concatenate(rows), np.concatenate(cols), (row, base_pts + 3 * n_pts)
 
 
 def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
                    point_sigma=0.003, pixel_sigma: float = 0.1,
-                   models: list[str] | None = None, iterations: int = 60):
+                   models: list[str] | None = None, iterations: int = 60, lengths=None):
     """Bundle adjustment: every camera's pose (and the lens its model frees) and every
     surveyed position together, each position free within its measurement uncertainty
     (``point_sigma`` m per axis: one for all, or N×3 per coordinate, ``inf`` for a position
@@ -280,7 +288,9 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
     of ``pixel_sigma`` px.
 
     ``obs``: list per camera of (point indices, uv K×2) — the observations kept by
-    :func:`fit_camera`. Returns (cameras, adjusted positions N×3).
+    :func:`fit_camera`. ``lengths``: (i, j, length, sigma), arrays of pairs of points held
+    ``length`` m apart within ``sigma`` m (a wand's two LEDs). Returns (cameras, adjusted
+    positions N×3).
     """
 
     X = np.asarray(X, float)
@@ -291,7 +301,11 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
     off = np.concatenate([[0], np.cumsum(npars)])
     p0 = np.concatenate([*(to_vector(c, m) for c, m in zip(cameras, models)), X.ravel()])
 
-    rows, cols, shape = _pattern(npars, obs, len(X))
+    if lengths is not None:
+        li, lj = (np.asarray(a, int) for a in lengths[:2])
+        L, w_len = (np.broadcast_to(np.asarray(a, float), li.shape) for a in lengths[2:])
+        w_len = 1.0 / w_len
+    rows, cols, shape = _pattern(npars, obs, len(X), None if lengths is None else (li, lj))
 
     def unpack(p):
         pts = p[off[-1]:].reshape(-1, 3)
@@ -303,6 +317,8 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
         out = [np.nan_to_num((c.project(pts[idx])[0] - uv) / pixel_sigma, nan=1e4).ravel()
                for c, (idx, uv) in zip(cams, obs)]
         out.append((pts - X).ravel() * prior)
+        if lengths is not None:
+            out.append((np.linalg.norm(pts[li] - pts[lj], axis=1) - L) * w_len)
         return np.concatenate(out)
 
     def jac(p):
@@ -314,6 +330,10 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
             _, Jc, Jp = project_with_jacobian(c, pts[idx], m)
             data += [Jc.reshape(-1) / pixel_sigma, Jp.reshape(-1) / pixel_sigma]
         data.append(prior)
+        if lengths is not None:
+            d = pts[li] - pts[lj]
+            u = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None] * w_len[:, None]
+            data.append(np.hstack([u, -u]).ravel())
         # a point beyond the lens's valid field has no derivative: no pull, not a NaN
         return csr_matrix((np.nan_to_num(np.concatenate(data), nan=0.0, posinf=0.0,
                                          neginf=0.0), (rows, cols)), shape=shape)
@@ -380,16 +400,23 @@ def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params,
         J = np.nan_to_num(cam.jacobian(adjusted[idx]))  # K×2×3
         np.add.at(info, idx, np.einsum("kai,kaj->kij", J, J) / pixel_sigma ** 2)
         n_px += 2 * len(idx)
+    info = np.nan_to_num(info, nan=0.0, posinf=0.0, neginf=0.0)  # a point at a camera
     sig = np.broadcast_to(np.asarray(point_sigma, float), (n, 3))
     M = info + np.eye(3)[None] / sig[:, None, :] ** 2
-    t = np.einsum("nij,nji->n", info, np.linalg.pinv(M))
+    Minv = np.linalg.pinv(M)
+    t = np.einsum("nij,nji->n", info, Minv)
+    # a prior's own redundancy: its coordinates less their share, tr(I_prior M⁻¹) (3 − t
+    # where all three were measured; an unmeasured coordinate has no prior to count)
+    known = np.isfinite(sig)
+    r_prior = known.sum(axis=1) - np.einsum("nii,ni->n", Minv, np.where(known, 1 / sig ** 2,
+                                                                        0.0))
     mine = slice(None) if measured is None else measured
-    return float(t[mine].sum()), float(n_px - n_cam_params - t.sum())
+    return float(r_prior[mine].sum()), float(n_px - n_cam_params - t.sum())
 
 
 def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: int = 5,
                        point_sigma: float | None = None, free=None,
-                       fixed_height: float | None = None):
+                       fixed_height: float | None = None, unmeasured=None, lengths=None):
     """The survey positions' measurement precision (m per axis) and the spots' (px), by
     variance components: refine jointly, compare each group's residuals with its redundancy,
     rescale, repeat. Bounded below by what the spots can resolve — a tenth of a point's
@@ -399,6 +426,8 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
 
     ``free`` (bool per point): positions nothing measured (a free survey's LED: ``X`` is only
     their start), at height ``fixed_height`` when one is stated (an LED on a robot).
+    ``unmeasured`` (N×3 bool): coordinates of measured points that were not measured (a frame
+    mark's empty cells). ``lengths``: as :func:`refine_jointly` takes them (a wand).
     Returns (point_sigma, pixel_sigma, cameras, adjusted)."""
     X = np.asarray(X, float)
     free = np.zeros(len(X), bool) if free is None else np.asarray(free, bool)
@@ -414,6 +443,8 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     def sigmas(s_x):
         sig = np.full(X.shape, float(s_x))
         sig[free] = np.inf
+        if unmeasured is not None:
+            sig[unmeasured] = np.inf
         if fixed_height is not None:
             sig[free, 2] = 1e-3 * floor  # stated: as good as exact
         return sig
@@ -421,12 +452,14 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     cams, adj = cameras, X
     for _ in range(iterations):
         cams, adj = refine_jointly(cams, X, obs, point_sigma=sigmas(s_x), pixel_sigma=s_px,
-                                   models=models)
+                                   models=models, lengths=lengths)
         r_x, r_px = _redundancy(cams, adj, obs, sigmas(s_x), s_px, npars, measured)
         v_px = np.concatenate([(c.project(adj[idx])[0] - uv).ravel()
                                for c, (idx, uv) in zip(cams, obs)])
-        v_px = np.clip(v_px, -3 * s_px, 3 * s_px)  # as robust as the fit's loss
-        v_x = np.clip((adj - X)[measured].ravel(), -3 * s_x, 3 * s_x)
+        # as robust as the fit's loss (a point past the lens's valid field: at the cap)
+        v_px = np.clip(np.nan_to_num(v_px, nan=3 * s_px), -3 * s_px, 3 * s_px)
+        known = np.isfinite(sigmas(s_x)) & measured[:, None]
+        v_x = np.clip((adj - X)[known], -3 * s_x, 3 * s_x)
         new_px = float(np.sqrt(np.sum(v_px ** 2) / max(r_px, 1.0)))
         new_x = float(np.sqrt(np.sum(v_x ** 2) / max(r_x, 1e-9))) if r_x > 0.5 else s_x
         new_x = max(new_x, floor) if point_sigma is None else point_sigma

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..geometry import Camera
 from .calibration import estimate_precision, refine_jointly
+from .datum import check_datum, datum_floor, unfixed_motions
 from .errors import SurveyError
 from .lens import LENS_MODELS
 
@@ -42,6 +43,62 @@ MAX_LEFT_OUT = 24
 WEAK_FACTOR = 2.0
 #: … else this precision (a tape measure, per axis, m) is assumed and said
 ASSUMED_TAPE = 0.003
+#: a wand's length, relative: a bar cut and measured to a millimetre per metre
+WAND_PRECISION = 1e-3
+#: a wand's spots are told apart within this many times the fitted spots' precision
+LABEL_TOLERANCE = 5.0
+#: every this many wand sets, one is held out of the fit and judged by its length
+HELD_OUT_EVERY = 10
+#: a start from the data replaces the nominal cameras when it fits the free sets this many
+#: times better (its median reprojection error)
+BETTER_START = 0.5
+
+
+@dataclass
+class WandError:
+    """How far the fitted cameras put a wand's two LEDs from its length, on sets the fit never
+    saw (m): what motion-capture suites report after a wand wave. Sets whose spots do not
+    meet in a point (a reflection taken for an end) are counted apart, as the fit's own
+    rejection would treat them."""
+
+    sets: int
+    mean: float  #: of |length − wand|
+    p95: float
+    rms: float
+    per_camera: dict  #: camera id → mean |length − wand| over the held-out sets it saw
+    discarded: int = 0  #: held-out sets whose spots disagree beyond the fit's rejection
+
+
+def wand_errors(cameras, uv, wand: float, ids, pixel_sigma: float = np.inf) -> WandError:
+    """The length errors of a wand's sets ``uv`` C×2M×2 (LEDs at 2m, 2m + 1), each LED
+    triangulated from the cameras that saw it (sets with an LED seen by fewer than two: not
+    judged; with a spot more than :data:`REJECT_SIGMAS` × ``pixel_sigma`` px off: discarded)."""
+    from ..triangulation import reprojection_errors, triangulate
+
+    seen = np.isfinite(uv).all(axis=2)
+    two = seen.sum(axis=0) >= 2
+    ok = two[0::2] & two[1::2]
+    e = np.full(len(ok), np.nan)
+    bad = np.zeros(len(ok), bool)
+    if ok.any():
+        cols = np.flatnonzero(np.repeat(ok, 2))
+        P = triangulate(cameras, uv[:, cols]).X
+        r = reprojection_errors(cameras, uv[:, cols], P)
+        worst = np.nanmax(np.where(np.isfinite(r), r, 0.0), axis=0)
+        bad[ok] = (worst[0::2] > REJECT_SIGMAS * pixel_sigma) | \
+            (worst[1::2] > REJECT_SIGMAS * pixel_sigma)
+        e[ok] = np.abs(np.linalg.norm(P[0::2] - P[1::2], axis=1) - wand)
+    e[bad] = np.nan
+    good = np.isfinite(e)
+    per = {}
+    for k, cid in enumerate(ids):
+        mine = good & (seen[k, 0::2] | seen[k, 1::2])
+        per[cid] = float(e[mine].mean()) if mine.any() else float("nan")
+    if not good.any():
+        return WandError(0, float("nan"), float("nan"), float("nan"), per, int(bad.sum()))
+    return WandError(int(good.sum()), float(e[good].mean()),
+                     float(np.percentile(e[good], 95)), float(np.sqrt(np.mean(e[good] ** 2))),
+                     per, int(bad.sum()))
 
 
 @dataclass
@@ -68,6 +125,10 @@ class FreeCalibration:
     #: linearised adjustment's draws, :func:`.budget.fix_errors`), and with exact cameras
     predicted_error: float = float("nan")
     exact_error: float = float("nan")
+    wand: float | None = None  #: m, the wand's length
+    wand_error: WandError | None = None  #: on held-out wand sets
+    #: C×M×2 the free positions' spots as fitted (a wand's LEDs at 2m, 2m + 1, matched)
+    free_uv: np.ndarray | None = None
 
     @property
     def weakly_fixed(self) -> bool:
@@ -76,35 +137,6 @@ class FreeCalibration:
         references' frame (the spot noise and the datum floor together)."""
         return bool(self.predicted_error > WEAK_FACTOR * np.hypot(self.exact_error,
                                                                   self.datum_floor))
-
-
-def datum_floor(references, sigma: float, where, free_height: bool = False) -> float:
-    """RMS displacement (m) at the points ``where`` of the frame that ``references`` measured to
-    ±``sigma`` per axis define: the similarity transform (translation, rotation, scale; with a
-    known floor plane only x, y, yaw and scale) fitted to their noise, linearised."""
-    R = np.asarray(references, float)
-    c = R.mean(axis=0)
-
-    def design(P):
-        d = np.asarray(P, float) - c
-        n = len(d)
-        rows = np.zeros((n, 3, 7))
-        rows[:, :, :3] = np.eye(3)
-        # small rotation ω × d: columns ω_x, ω_y, ω_z
-        rows[:, 0, 4], rows[:, 0, 5] = d[:, 2], -d[:, 1]
-        rows[:, 1, 3], rows[:, 1, 5] = -d[:, 2], d[:, 0]
-        rows[:, 2, 3], rows[:, 2, 4] = d[:, 1], -d[:, 0]
-        rows[:, :, 6] = d
-        if free_height:  # z, and the tilts ω_x, ω_y, are fixed by the plane
-            rows = rows[:, :2][:, :, [0, 1, 5, 6]]
-        return rows.reshape(-1, rows.shape[-1])
-
-    A = design(R)
-    cov = sigma ** 2 * np.linalg.pinv(A.T @ A)
-    B = design(where)
-    k = 2 if free_height else 3
-    per = np.einsum("ij,jk,ik->i", B, cov, B).reshape(-1, k).sum(axis=1)
-    return float(np.sqrt(per.mean()))
 
 
 def _linkage(camera_ids, seen) -> None:
@@ -131,24 +163,6 @@ def _linkage(camera_ids, seen) -> None:
         raise SurveyError(f"cameras {a} and {b} are not linked by shared sightings (fewer than "
                           f"{MIN_SHARED} free sets seen by one of each): move the LED through "
                           "where they overlap")
-
-
-def _check_references(X, seen_ref, free_height, scale: float) -> None:
-    """Refuse references that cannot fix the room's frame: too few, all at one place (within
-    1e-3 of ``scale``, the cameras' distance), or on one line."""
-    need = 2 if free_height is not None else 3
-    used = np.asarray(X, float)[seen_ref.any(axis=0)]
-    if len(used) < need:
-        raise SurveyError(f"{len(used)} reference point{'s' if len(used) != 1 else ''} seen by "
-                          f"a camera; fixing the room's frame needs at least {need}"
-                          + (" (or --free-height and 2)" if free_height is None else ""))
-    s = np.linalg.svd(used - used.mean(axis=0), compute_uv=False)
-    if not s[0] > 1e-3 * scale:
-        raise SurveyError("the reference points are all at one place: they cannot fix the "
-                          "room's scale and rotation (spread them over the room)")
-    if free_height is None and s[1] <= 1e-3 * s[0]:
-        raise SurveyError("the reference points lie on one line: they cannot fix the room's "
-                          "rotation about it (add a point off the line)")
 
 
 def _check_height(cameras, X, uv, uv_free, free_height) -> None:
@@ -198,7 +212,7 @@ def _check_inside(free_xyz, room, cameras) -> None:
 
 
 def _start(cameras, uv_free, free_height):
-    """Free positions from the nominal cameras: triangulated where two or more saw the LED,
+    """Free positions from the start cameras: triangulated where two or more saw the LED,
     the ray met with the plane z = ``free_height`` where one did (when stated)."""
     from ..triangulation import triangulate
 
@@ -218,60 +232,159 @@ def _start(cameras, uv_free, free_height):
     return X
 
 
+def _reference_start(cameras, X, uv) -> np.ndarray:
+    """The references' start: as measured, each unmeasured coordinate (a frame mark's empty
+    cell) from the cameras — triangulated where two saw it, else (or where the rays of a
+    rough start do not meet) the mean of its rays met with the plane of its measured height —
+    else the measured points' mean."""
+    from ..triangulation import triangulate
+
+    X = np.array(X, float)
+    if not np.isnan(X).any():
+        return X
+    seen = np.isfinite(uv).all(axis=2)
+    guess = np.full(X.shape, np.nan)
+    two = seen.sum(axis=0) >= 2
+    if two.any():
+        guess[two] = triangulate(cameras, uv[:, two]).X
+    for i in np.flatnonzero(~np.isfinite(guess).all(axis=1) & seen.any(axis=0)
+                            & np.isfinite(X[:, 2])):
+        hits = []
+        for k in np.flatnonzero(seen[:, i]):
+            d = cameras[k].rays(uv[k, i:i + 1])[0]
+            t = (X[i, 2] - cameras[k].center[2]) / d[2] if abs(d[2]) > 1e-9 else -1.0
+            if t > 0:
+                hits.append(cameras[k].center + t * d)
+        if hits:
+            guess[i] = np.mean(hits, axis=0)
+    mean = np.nanmean(np.where(np.isfinite(X), X, np.nan), axis=0)
+    guess = np.where(np.isfinite(guess), guess, np.nan_to_num(mean))
+    return np.where(np.isfinite(X), X, guess)
+
+
+def _reprojection(cameras, uv_free) -> float:
+    """Median RMS reprojection error (px) of the free sets two cameras or more saw,
+    triangulated with ``cameras``: how well a start fits the data, whatever its frame."""
+    from ..triangulation import reprojection_errors, triangulate
+
+    two = np.isfinite(uv_free).all(axis=2).sum(axis=0) >= 2
+    if not two.any():
+        return float("inf")
+    sub = uv_free[:, two]
+    if sub.shape[1] > 2000:
+        sub = sub[:, np.linspace(0, sub.shape[1] - 1, 2000).astype(int)]
+    r = reprojection_errors(cameras, sub, triangulate(cameras, sub).X)
+    use = np.isfinite(sub[..., 0]) & np.isfinite(r)
+    n = use.sum(axis=0)
+    per = np.sqrt((np.where(use, r, 0.0) ** 2).sum(axis=0) / np.maximum(n, 1))[n >= 2]
+    return float(np.median(per)) if len(per) else float("inf")
+
+
+def _wand_points(spots, order, labelled: bool) -> np.ndarray:
+    """A wand's spots C×M×2×2 as C×2M×2 points (set m's LEDs at 2m, 2m + 1), each camera's
+    slots put in the LEDs' order (``order`` C×M×2 from :func:`.network.network_start`;
+    unknown: not used) unless the spots are ``labelled``."""
+    if labelled:
+        lab = spots
+    else:
+        idx = np.maximum(order, 0)[..., None].repeat(2, axis=-1)
+        lab = np.take_along_axis(spots, idx, axis=2)
+        lab[order < 0] = np.nan
+    return lab.reshape(lab.shape[0], -1, 2)
+
+
 def _observations(uv_all, keep):
     return [(np.flatnonzero(keep[k]), uv_all[k, keep[k]]) for k in range(len(uv_all))]
 
 
 def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
                    point_sigma: float | str = "auto", free_height: float | None = None,
-                   room=None, progress=None) -> FreeCalibration:
-    """:func:`_calibrate_free`; a joint fit that cannot converge is a :class:`SurveyError`."""
+                   room=None, progress=None, wand: float | None = None,
+                   labelled: bool = False) -> FreeCalibration:
+    """:func:`_calibrate_free`; a joint fit that cannot converge is a :class:`SurveyError`
+    that says how far the fit got."""
     try:
         return _calibrate_free(nominal, X, uv, ids, uv_free, lens, point_sigma, free_height,
-                               room, progress)
+                               room, progress, wand, labelled)
     except np.linalg.LinAlgError:
-        raise SurveyError("the joint fit did not converge: the free spots do not fit these "
-                          "cameras (are the camera ids in free/ the deployment's? is the "
-                          "survey from this site?); nothing was written") from None
+        raise SurveyError("the joint fit did not converge: its equations became singular "
+                          "(cameras or references that nothing ties to the rest); nothing "
+                          "was written") from None
 
 
 def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
                     point_sigma: float | str = "auto", free_height: float | None = None,
-                    room=None, progress=None) -> FreeCalibration:
+                    room=None, progress=None, wand: float | None = None,
+                    labelled: bool = False) -> FreeCalibration:
     """Calibrate every camera from a free survey: ``X`` N×3 the references' measured
-    positions, ``uv`` C×N×2 their spots, ``uv_free`` C×M×2 the free sets' spots (NaN: not seen).
-    ``lens``: ``"auto"`` (one model for every camera, chosen by the free LED's held-out
-    consistency: :func:`_joint_lens_choice`) or a model of :data:`~.lens.LENS_MODELS`.
-    ``room``: the floor polygon the datum floor is judged over. ``progress(i, n)``."""
+    positions (NaN: a coordinate not measured, as a frame mark's), ``uv`` C×N×2 their spots,
+    ``uv_free`` C×M×2 the free sets' spots (NaN: not seen) — with a ``wand`` of that length
+    (m), C×M×2×2, each camera's two spots in the LEDs' order if ``labelled``, else matched
+    across cameras here. ``lens``: ``"auto"`` (one model for every camera, chosen by the
+    free LED's held-out consistency: :func:`_joint_lens_choice`) or a model of
+    :data:`~.lens.LENS_MODELS`. ``room``: the floor polygon the datum floor is judged over.
+    ``progress(i, n)``."""
+    from .network import align_to_references, label_wand, network_start
+
     X, uv, uv_free = np.asarray(X, float), np.asarray(uv, float), np.asarray(uv_free, float)
     C, N = len(nominal), len(X)
     ids_c = [c.id for c in nominal]
-    seen_f = np.isfinite(uv_free).all(axis=2)
+    spots = uv_free if wand is not None else uv_free[:, :, None]
+    if wand is not None and (uv_free.ndim != 4 or uv_free.shape[2] != 2):
+        raise ValueError("uv_free: a wand's spots are C×M×2×2")
+    seen_f = np.isfinite(spots[..., 0]).any(axis=2)
     seen_r = np.isfinite(uv).all(axis=2)
+    measured = np.isfinite(X)
     _linkage(ids_c, seen_f)
     scale = float(np.median([c.position[2] for c in nominal])) or 1.0
-    _check_references(X, seen_r, free_height, scale)
+    X0 = _reference_start(nominal, X, uv)
+    used_r = seen_r.any(axis=0)
+    check_datum(X0[used_r], measured[used_r], free_height is not None, wand is not None,
+                scale)
     if free_height is not None:
-        _check_height(nominal, X, uv, uv_free, free_height)
+        _check_height(nominal, X0, uv, uv_free, free_height)
     estimated = isinstance(point_sigma, str)
     stated = None if estimated else float(point_sigma)
     notes: list = []
     assumed = False
-    n_ref = int(seen_r.any(axis=0).sum())
-    datum = 4 if free_height is not None else 7  # what the references must fix first
-    if estimated and 3 * n_ref - datum < MIN_REDUNDANT:
+    n_ref = int(used_r.sum())
+    coords = int(measured[used_r].sum())
+    # what the references must fix first: the frame's motions, but the scale a wand fixes
+    datum = (4 if free_height is not None else 7) - (wand is not None)
+    if estimated and coords - datum < MIN_REDUNDANT:
         # too few references to show their own scatter: a tape's precision is assumed
         stated, estimated, assumed = ASSUMED_TAPE, False, True
         notes.append(f"{n_ref} reference points cannot show how precisely they were measured "
-                     f"(they have {max(3 * n_ref - datum, 0)} coordinates beyond what fixes the "
-                     f"room): ±{ASSUMED_TAPE * 1000:g} mm (a tape) assumed; state --point-sigma, "
-                     "or measure more points")
+                     f"(they have {max(coords - datum, 0)} coordinates beyond what fixes the "
+                     f"room): ±{ASSUMED_TAPE * 1000:g} mm (a tape) assumed; state their "
+                     "precision, or measure more points")
+    # the start: the nominal cameras, or the cameras placed from the data where those fit
+    # the free sets far better (a hand-hung install), moved onto the references
+    net = network_start(nominal, spots, labelled or wand is None, wand)
+    if wand is not None:
+        if net is None and not labelled:
+            raise SurveyError("the wand's two spots could not be matched across the cameras: "
+                              f"fewer than {MIN_SHARED} clear sightings link them (wave it "
+                              "where neighbouring cameras both see it, across their view)")
+        pts_free = _wand_points(spots, None if net is None else net.order, labelled)
+    else:
+        pts_free = uv_free
+    # both moved onto the references first (marks define a frame of their own)
+    start = align_to_references(list(nominal), uv, X)
+    if net is not None:
+        placed = align_to_references(net.cameras, uv, X, scale_fixed=wand is not None)
+        e_nom, e_net = _reprojection(start, pts_free), _reprojection(placed, pts_free)
+        if e_net < BETTER_START * e_nom:
+            start = placed
+            notes.append(f"the cameras' start placed from the free sets (they fit them to "
+                         f"{e_net:.2g} px, the deployment's cameras to {e_nom:.2g} px)")
+    X0 = _reference_start(start, X, uv)
     kept = ""
     if lens == "auto" and free_height is not None:
         # a robot's LED shows each camera one plane: the references must fix the rest of its
         # lens, which needs three or more of them in its view at two heights or more
         weak = [ids_c[k] for k in range(C)
-                if seen_r[k].sum() < 3 or np.ptp(X[seen_r[k], 2]) <= 0]
+                if seen_r[k].sum() < 3 or np.ptp(X0[seen_r[k], 2]) <= 0]
         if weak:
             lens = "pose"
             kept = (f"camera{'s' if len(weak) > 1 else ''} {', '.join(weak)} "
@@ -279,7 +392,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
                     "at two heights, and a robot's LED at one height cannot fix a lens alone")
             notes.append(f"lens kept as in the deployment (pose only): {kept}")
     step = 0
-    total = 5 + min(N, MAX_LEFT_OUT)
+    total = 5 + min(N, MAX_LEFT_OUT) + (3 if wand is not None and not labelled else 0)
 
     def tick():
         nonlocal step
@@ -287,61 +400,120 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         if progress:
             progress(step, total)
 
-    F0 = _start(nominal, uv_free, free_height)
-    usable = np.isfinite(F0).all(axis=1)
-    if free_height is None:
-        usable &= seen_f.sum(axis=0) >= 2
-    free_idx = np.flatnonzero(usable)
-    if len(free_idx) > MAX_FREE_SETS:  # time and memory bounded: an even sample of them
-        notes.append(f"{len(free_idx)} free sets usable: {MAX_FREE_SETS} of them, evenly "
-                     "spread in time, calibrate the cameras (more add little and cost much)")
-        free_idx = free_idx[np.linspace(0, len(free_idx) - 1, MAX_FREE_SETS).round()
-                            .astype(int)]
-    P0 = np.vstack([X, F0[free_idx]])
-    free = np.r_[np.zeros(N, bool), np.ones(len(free_idx), bool)]
-    uv_all = np.concatenate([uv, uv_free[:, free_idx]], axis=1)
-    keep = np.isfinite(uv_all).all(axis=2)
+    per_set = 2 if wand is not None else 1
+    wand_sigma = None if wand is None else WAND_PRECISION * wand
     rejected = dict.fromkeys(ids_c, 0)
+    dropped = 0
+    P0 = free = unmeasured = uv_all = pair_i = free_idx = held_out = None
+
+    def prepare(pts_free, cams):
+        """The joint fit's unknowns from the free points' spots ``pts_free`` (C×M×2), started
+        from ``cams``: the references, then the usable free points (two views, or one at a
+        stated height; a wand's set whole, every tenth set held out to judge it; an even
+        sample of at most :data:`MAX_FREE_SETS` sets). Returns the spots kept (C×P)."""
+        nonlocal P0, free, unmeasured, uv_all, pair_i, free_idx, held_out, dropped
+        seen_p = np.isfinite(pts_free).all(axis=2)
+        F0 = _start(cams, pts_free, free_height)
+        usable = np.isfinite(F0).all(axis=1)
+        if free_height is None:
+            usable &= seen_p.sum(axis=0) >= 2
+        possible = F0[:, 2] > -0.05 * scale  # not under the floor (a floor's mirror image)
+        for k, cam in enumerate(cams):  # in front of every camera that saw it (cheirality)
+            depth = cam.to_camera(np.nan_to_num(F0))[:, 2]
+            possible &= ~seen_p[k] | (depth > 0.05 * scale)
+        # two views that cannot both be of the LED are dropped here; of three or more, the
+        # fit's rejection finds the one that is not
+        impossible = usable & ~possible & (seen_p.sum(axis=0) <= 2)
+        dropped += int(impossible.sum())
+        usable &= ~impossible
+        held_out = np.zeros(len(usable), bool)
+        if wand is not None:
+            whole = usable[0::2] & usable[1::2]
+            out = np.zeros(len(whole), bool)
+            out[np.flatnonzero(whole)[HELD_OUT_EVERY - 1::HELD_OUT_EVERY]] = True
+            held_out = np.repeat(out, 2)
+            usable = np.repeat(whole & ~out, 2)
+        free_idx = np.flatnonzero(usable)
+        if len(free_idx) > MAX_FREE_SETS * per_set:  # time and memory bounded
+            sets = free_idx[::per_set]
+            note = (f"{len(sets)} free sets usable: {MAX_FREE_SETS} of them, evenly spread in "
+                    "time, calibrate the cameras (more add little and cost much)")
+            notes[:] = [n for n in notes if not n.endswith("(more add little and cost much)")]
+            notes.append(note)
+            sets = sets[np.linspace(0, len(sets) - 1, MAX_FREE_SETS).round().astype(int)]
+            free_idx = (sets[:, None] + np.arange(per_set)).ravel()
+        P0 = np.vstack([X0, F0[free_idx]])
+        free = np.r_[np.zeros(N, bool), np.ones(len(free_idx), bool)]
+        unmeasured = np.r_[~measured, np.zeros((len(free_idx), 3), bool)]
+        uv_all = np.concatenate([uv, pts_free[:, free_idx]], axis=1)
+        pair_i = N + np.arange(0, len(free_idx), 2) if wand is not None else np.zeros(0, int)
+        return np.isfinite(uv_all).all(axis=2)
+
+    def lengths_of(keep):
+        """The wand's lengths between LEDs that two cameras still see each."""
+        if wand is None:
+            return None
+        ok = (keep[:, pair_i].sum(axis=0) >= 2) & (keep[:, pair_i + 1].sum(axis=0) >= 2)
+        return pair_i[ok], pair_i[ok] + 1, wand, wand_sigma
+
+    def prior(s_x):
+        """Per coordinate, how well it is known (m): the references' precision where they
+        were measured, nothing for a free LED, the stated height as good as exact."""
+        sig = np.full((len(free), 3), float(s_x))
+        sig[free] = np.inf
+        sig[unmeasured] = np.inf
+        if free_height is not None:
+            sig[free, 2] = 1e-3 * s_x
+        return sig
 
     def adjust(cams, models, keep):
         obs = _observations(uv_all, keep)
         s_px0 = 0.1
         return obs, estimate_precision(cams, P0, obs, models, s_px0, point_sigma=stated,
-                                       free=free, fixed_height=free_height)
+                                       free=free, fixed_height=free_height,
+                                       unmeasured=unmeasured, lengths=lengths_of(keep))
+
+    def reject(cams, models, keep):
+        """Fit; reject what does not fit; fit again (three rounds at most)."""
+        nonlocal dropped
+        for _ in range(3):
+            obs, (s_x, s_px, cams, adj) = adjust(cams, models, keep)
+            tick()
+            err = np.full(keep.shape, 0.0)
+            for k, cam in enumerate(cams):
+                idx = np.flatnonzero(keep[k])
+                e = np.linalg.norm(cam.project(adj[idx])[0] - uv_all[k, idx], axis=1)
+                err[k, idx] = np.nan_to_num(e, nan=np.inf)
+            wrong = err.max(axis=0) > REJECT_SIGMAS * s_px
+            long = _wrong_lengths(adj, pair_i, keep, wand, wand_sigma)
+            if long.any():  # a wand set whose two "LEDs" are not the bar's ends
+                keep[:, pair_i[long]] = keep[:, pair_i[long] + 1] = False
+                wrong[pair_i[long]] = wrong[pair_i[long] + 1] = False
+                dropped += int(long.sum())
+            if not wrong.any() and not long.any():
+                break
+            views = keep.sum(axis=0)
+            # three views or more (or a reference, which its record holds): the worst spot is
+            # the one that disagrees; two views of a free LED that disagree cannot say which
+            blame = wrong & ((views >= 3) | ~free | (free_height is not None))
+            worst = err.argmax(axis=0)
+            for j in np.flatnonzero(blame):
+                keep[worst[j], j] = False
+                rejected[ids_c[worst[j]]] += 1
+            pair = wrong & ~blame
+            keep[:, pair] = False
+            dropped += int(pair.sum())
+            if free_height is None:  # a free set left with one view fixes nothing
+                keep[:, N:] &= keep[:, N:].sum(axis=0) >= 2
+        return obs, s_x, s_px, cams, adj, keep
 
     models = ["pose"] * C
-    cams = list(nominal)
-    dropped = 0
-    for _ in range(3):  # fit; reject what does not fit; fit again
-        obs, (s_x, s_px, cams, adj) = adjust(cams, models, keep)
-        tick()
-        err = np.full(keep.shape, 0.0)
-        for k, cam in enumerate(cams):
-            idx = np.flatnonzero(keep[k])
-            e = np.linalg.norm(cam.project(adj[idx])[0] - uv_all[k, idx], axis=1)
-            err[k, idx] = np.nan_to_num(e, nan=np.inf)
-        wrong = err.max(axis=0) > REJECT_SIGMAS * s_px
-        if not wrong.any():
-            break
-        views = keep.sum(axis=0)
-        # three views or more (or a reference, which its record holds): the worst spot is the
-        # one that disagrees; two views of a free LED that disagree cannot say which is wrong
-        blame = wrong & ((views >= 3) | ~free | (free_height is not None))
-        worst = err.argmax(axis=0)
-        for j in np.flatnonzero(blame):
-            keep[worst[j], j] = False
-            rejected[ids_c[worst[j]]] += 1
-        pair = wrong & ~blame
-        keep[:, pair] = False
-        dropped += int(pair.sum())
-        if free_height is None:  # a free set left with one view fixes nothing
-            keep[:, N:] &= keep[:, N:].sum(axis=0) >= 2
+    keep = prepare(pts_free, start)
+    obs, s_x, s_px, cams, adj, keep = reject(list(start), models, keep)
     choices = []
     if lens == "auto":
-        sig = np.where(free[:, None], np.inf, np.full((len(free), 3), s_x))
-        if free_height is not None:
-            sig[free, 2] = 1e-3 * s_x
-        chosen, held = _joint_lens_choice(cams, adj, sig, uv_all, keep, free, s_px)
+        chosen, held = _joint_lens_choice(cams, adj, prior(s_x), uv_all, keep, free, s_px,
+                                          lengths=lengths_of(keep))
         models = [chosen] * C
         from .calibration import _lens_choice, fit_camera
 
@@ -359,30 +531,43 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     tick()
     obs, (s_x, s_px, cams, adj) = adjust(cams, models, keep)
     tick()
+    if wand is not None and not labelled:
+        # the ends named again with the fitted cameras: every set's views at once (the start's
+        # pairwise matching leaves the sets no tree pair shares unnamed), then fitted again
+        order = label_wand(cams, spots, wand, LABEL_TOLERANCE * s_px)
+        pts_free = _wand_points(spots, order, False)
+        dropped = 0
+        rejected = dict.fromkeys(ids_c, 0)
+        keep = prepare(pts_free, cams)
+        obs, s_x, s_px, cams, adj, keep = reject(cams, models, keep)
+    _check_fit(cams, adj[N:], uv_all[:, N:], keep[:, N:], s_px, ids_c)
+    _check_references_fit(seen_r, keep[:, :N], ids_c)
     _check_inside(adj[N:], room, cams)
-    # each reference left out: its prior removed (its spots kept), where the rest put it; of
-    # many, an even sample (each costs a joint fit)
+    # each reference left out: its prior removed (its spots kept), where the rest put it —
+    # when the rest still fix the frame; of many, an even sample (each costs a joint fit)
     loo = np.full(N, np.nan)
-    need = 2 if free_height is not None else 3
-    if seen_r.any(axis=0).sum() > need:
-        base = np.where(free[:, None], np.inf, np.full((len(free), 3), s_x))
-        if free_height is not None:
-            base[free, 2] = 1e-3 * s_x  # stated: as good as exact
-        left_out = np.unique(np.linspace(0, N - 1, min(N, MAX_LEFT_OUT)).round().astype(int))
-        if len(left_out) < N:
-            notes.append(f"{len(left_out)} of the {N} references left out in turn (an even "
-                         "sample: each costs a joint fit)")
-        for i in left_out:
-            tick()
-            if keep[:, i].sum() < (1 if free_height is not None else 2):
-                continue
-            sig = base.copy()
-            sig[i] = np.inf
-            _, moved = refine_jointly(cams, np.vstack([X[:i], adj[i:i + 1], X[i + 1:N],
-                                                       adj[N:]]), obs, point_sigma=sig,
-                                      pixel_sigma=s_px, models=models, iterations=6)
-            loo[i] = float(np.linalg.norm(moved[i] - X[i]))
-    free_xyz = np.full((uv_free.shape[1], 3), np.nan)
+    base = prior(s_x)
+    left_out = np.unique(np.linspace(0, N - 1, min(N, MAX_LEFT_OUT)).round().astype(int))
+    if len(left_out) < N:
+        notes.append(f"{len(left_out)} of the {N} references left out in turn (an even "
+                     "sample: each costs a joint fit)")
+    for i in left_out:
+        tick()
+        rest = used_r.copy()
+        rest[i] = False
+        if keep[:, i].sum() < (1 if free_height is not None else 2) or unfixed_motions(
+                adj[:N][rest], measured[rest], free_height is not None, wand is not None,
+                scale):
+            continue
+        sig = base.copy()
+        sig[i] = np.inf
+        _, moved = refine_jointly(cams, np.vstack([X0[:i], adj[i:i + 1], X0[i + 1:N],
+                                                   adj[N:]]), obs, point_sigma=sig,
+                                  pixel_sigma=s_px, models=models, iterations=6,
+                                  lengths=lengths_of(keep))
+        off = np.where(measured[i], moved[i] - X0[i], 0.0)
+        loo[i] = float(np.linalg.norm(off))
+    free_xyz = np.full((pts_free.shape[1], 3), np.nan)
     free_xyz[free_idx] = adj[N:]
     spread = {}
     for k, cam in enumerate(cams):
@@ -390,14 +575,14 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         err = np.linalg.norm(cam.project(adj[idx])[0] - uv_all[k, idx], axis=1)
         spread[ids_c[k]] = float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan")
     where = adj[N:] if room is None else _floor_points(room, adj[N:])
-    floor = datum_floor(X[seen_r.any(axis=0)], s_x, where, free_height is not None)
+    floor = datum_floor(adj[:N][used_r], s_x, where, free_height is not None,
+                        measured=measured[used_r],
+                        wand_sigma=None if wand is None else WAND_PRECISION)
     # what the whole survey leaves in the cameras, predicted by the linearised adjustment
+    # (a wand's lengths are not in it: its prediction is that of the references alone)
     from .budget import fix_errors
 
-    sig = np.where(free[:, None], np.inf, np.full((len(free), 3), s_x))
-    if free_height is not None:
-        sig[free, 2] = 1e-3 * s_x
-    errs = fix_errors(cams, adj, where, sig, s_px, models[0])
+    errs = fix_errors(cams, adj, where, prior(s_x), s_px, models[0])
     exact, predicted = (float("nan"),) * 2 if errs is None else map(
         lambda e: float(np.median(e)), errs)
     while step < total:  # the steps that had nothing to do (a reference no camera pair saw)
@@ -413,19 +598,67 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
             if kept:
                 choice.reason = f"kept as in the deployment, as {kept}"
             choices.append(choice)
+    wand_error = None if wand is None else wand_errors(cams, pts_free[:, held_out], wand, ids_c,
+                                                        s_px)
     return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
-                           estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum()),
-                           rejected, spread, loo, floor, dropped, notes,
-                           assumed, predicted, exact)
+                           estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum())
+                           // per_set, rejected, spread, loo, floor, dropped, notes,
+                           assumed, predicted, exact, wand, wand_error, pts_free)
 
 
+def _wrong_lengths(adj, pair_i, keep, wand, wand_sigma) -> np.ndarray:
+    """Per wand set (``pair_i``: its first LED's index), whether the fit puts its two LEDs
+    further from the wand's length than its sets' own scatter allows (median absolute
+    deviation, and the bar's precision, times :data:`REJECT_SIGMAS`)."""
+    if wand is None or not len(pair_i):
+        return np.zeros(len(pair_i), bool)
+    active = (keep[:, pair_i].sum(axis=0) >= 2) & (keep[:, pair_i + 1].sum(axis=0) >= 2)
+    res = np.abs(np.linalg.norm(adj[pair_i] - adj[pair_i + 1], axis=1) - wand)
+    if not active.any():
+        return np.zeros(len(pair_i), bool)
+    scatter = 1.4826 * float(np.median(res[active]))
+    return active & (res > REJECT_SIGMAS * max(scatter, wand_sigma))
+
+
+def _check_references_fit(seen, kept, ids) -> None:
+    """Refuse a fit that threw out most of a camera's sightings of the references: where the
+    free LED places that camera, the references it saw are not — its free spots are another
+    camera's, or the survey is another site's."""
+    lost = seen & ~kept
+    for k in np.flatnonzero((lost.sum(axis=1) >= 2) & (lost.sum(axis=1) > seen.sum(axis=1) / 2)):
+        raise SurveyError(f"the free spots do not fit these cameras: where they place camera "
+                          f"{ids[k]}, {int(lost[k].sum())} of the {int(seen[k].sum())} "
+                          "reference points it saw are not (are the camera ids in free/ the "
+                          "deployment's? is the survey from this site?); nothing was written")
+
+
+def _check_fit(cams, X, uv, keep, s_px, ids) -> None:
+    """Refuse a joint fit that left the free spots far from the LED positions it placed —
+    a start outside its reach, or spots of other cameras — naming the cameras and how far."""
+    per = {}
+    for k, cam in enumerate(cams):
+        idx = np.flatnonzero(keep[k])
+        if len(idx):
+            e = np.linalg.norm(cam.project(X[idx])[0] - uv[k, idx], axis=1)
+            per[ids[k]] = float(np.nanmedian(np.nan_to_num(e, nan=np.inf)))
+    typical = float(np.median(list(per.values()))) if per else 0.0
+    bad = {c: e for c, e in per.items() if e > REJECT_SIGMAS * max(s_px, 0.2 * typical)
+           and e > 2 * typical}
+    if bad:
+        names = ", ".join(f"{c} {e:.1f} px" for c, e in sorted(bad.items(), key=lambda t: -t[1]))
+        raise SurveyError(f"the joint fit left camera(s) {names} from the free LED positions "
+                          f"(the others {typical:.2f} px): their free spots do not fit the "
+                          "rest — another camera's id, a moved camera, or a start too far off; "
+                          "nothing was written")
 def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 1200,
-                       folds: int = 2):
+                       folds: int = 2, lengths=None):
     """One lens model for every camera, chosen by held-out consistency of the free LED: per
     model, the joint fit on the references and all but a fold of (a sample of) the free sets,
     then the held-out sets triangulated with the fitted cameras and their reprojection error —
     with two views, how far the spots are from seeing one point. The simplest model within one
-    standard error of the best (paired over the sets). Returns (model, {model: held-out px})."""
+    standard error of the best (paired over the sets). ``lengths``: a wand's (as
+    :func:`~.calibration.refine_jointly` takes them), kept where both LEDs are in a fold's
+    fit. Returns (model, {model: held-out px})."""
     from ..triangulation import reprojection_errors, triangulate
 
     C = len(cams)
@@ -441,9 +674,17 @@ def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 1200,
             test = sub[fold == f]
             kk = keep[:, train]
             obs = [(np.flatnonzero(kk[k]), uv_all[k, train][kk[k]]) for k in range(C)]
+            held = None
+            if lengths is not None:
+                at = np.full(len(P), -1)
+                at[train] = np.arange(len(train))
+                a, b = at[lengths[0]], at[lengths[1]]
+                both = (a >= 0) & (b >= 0)
+                held = (a[both], b[both], *lengths[2:])
             try:
                 fitted, _ = refine_jointly(cams, P[train], obs, point_sigma=sig[train],
-                                           pixel_sigma=s_px, models=[m] * C, iterations=25)
+                                           pixel_sigma=s_px, models=[m] * C, iterations=25,
+                                           lengths=held)
             except (ValueError, np.linalg.LinAlgError):
                 break
             uvt = np.where(keep[:, test, None], uv_all[:, test], np.nan)

@@ -155,9 +155,39 @@ class FreeSurveyResult:
                               "estimated": cal.point_sigma_estimated,
                               "pixel_sigma_px": cal.pixel_sigma},
                 "notes": list(notes) + list(cal.notes)}
+        if cal.wand_error is not None:
+            w = cal.wand_error
+            out["wand"] = {"length_m": cal.wand, "held_out_sets": w.sets,
+                           "held_out_discarded": w.discarded,
+                           "length_error_mean_m": _finite(w.mean),
+                           "length_error_p95_m": _finite(w.p95),
+                           "length_error_rms_m": _finite(w.rms),
+                           "per_camera_mean_m": {c: _finite(v) for c, v in
+                                                 w.per_camera.items()}}
         if self.test_points is not None:
             out["test_points"] = self.test_points
         return out
+
+
+def _site_moved(nominal, calibrated, room, keep_out):
+    """The room and keep-out polygons moved with the cameras into the frame that frame marks
+    define (DESIGN.md: the nominal room is taken as roughly placed): the similarity that puts
+    the nominal cameras' centres, and a point along each optical axis, on the calibrated
+    ones, applied to the floor."""
+    from .network import similarity
+
+    reach = float(np.median([c.position[2] for c in nominal])) or 1.0
+
+    def marks(cams):
+        return np.vstack([[c.center for c in cams], [c.center + reach * c.axis for c in cams]])
+
+    s, R, t = similarity(marks(nominal), marks(calibrated))
+
+    def move(poly):
+        P = np.c_[np.asarray(poly, float), np.zeros(len(poly))]
+        return [[float(x), float(y)] for x, y in (s * P @ R.T + t)[:, :2]]
+
+    return move(room), [move(p) for p in keep_out]
 
 
 def _finite(x: float) -> float | None:
@@ -166,11 +196,15 @@ def _finite(x: float) -> float | None:
 
 def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                           point_sigma: float | str = "auto", free_height: float | None = None,
-                          progress=None, sources: dict | None = None) -> FreeSurveyResult:
+                          progress=None, sources: dict | None = None,
+                          wand: float | None = None, labelled: bool = False
+                          ) -> FreeSurveyResult:
     """Calibrate ``dep``'s cameras from a free survey (:func:`~.free.calibrate_free`): the
     references ``X``/``uv``/``ids`` and the free sets' spots ``uv_free``; the region map
     learned from the fitted free positions, the all-camera fusion, the residual limit from
-    the free spots' spread. Returns the calibrated deployment and its report."""
+    the free spots' spread. With a ``wand`` (m), ``uv_free`` is C×M×2×2 (each camera's two
+    spots, in the LEDs' order if ``labelled``). Returns the calibrated deployment and its
+    report."""
     from ..deployment import Deployment, provenance
     from ..geometry import rodrigues
     from .calibration import lens_sentence
@@ -179,9 +213,12 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
 
     cams = dep.cameras
     cal = calibrate_free(cams, X, uv, ids, uv_free, lens=lens, point_sigma=point_sigma,
-                         free_height=free_height, room=dep.room, progress=progress)
+                         free_height=free_height, room=dep.room, progress=progress, wand=wand,
+                         labelled=labelled)
     ok = np.isfinite(cal.free_xyz).all(axis=1)
-    rmap = learn_region_map(cal.cameras, np.asarray(uv_free)[:, ok], cal.free_xyz[ok], dep.room,
+    n_sets = int(np.shape(uv_free)[1])
+    uv_free = cal.free_uv
+    rmap = learn_region_map(cal.cameras, uv_free[:, ok], cal.free_xyz[ok], dep.room,
                             pair_method=dep.pair_method)
     worst = max((v for v in cal.spread_px.values() if np.isfinite(v)), default=1.0)
     extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
@@ -189,10 +226,10 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                        "max_residual": RESIDUAL_LIMIT * worst, "region_map": rmap.to_dict()}
     extra["provenance"] = provenance(
         "vlpcal survey calibrate", **{"from": {**(sources or {}), "references": len(ids),
-                                                "free_sets": int(np.shape(uv_free)[1])}},
+                                                "free_sets": n_sets}},
         lens={c.camera_id: c.chosen for c in cal.lens}, point_sigma_m=cal.point_sigma,
         point_sigma_estimated=cal.point_sigma_estimated, datum_floor_m=cal.datum_floor,
-        free_height_m=free_height)
+        free_height_m=free_height, wand_m=wand)
     rows, words = [], []
     for nom, c, choice in zip(cams, cal.cameras, cal.lens):
         dR = rodrigues(c.rotation) @ rodrigues(nom.rotation).T
@@ -203,7 +240,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
         seen = int(np.isfinite(mine).all(axis=1).sum())
         moved = float(np.linalg.norm(np.subtract(c.position, nom.position)))
         there = np.isfinite(cal.free_xyz).all(axis=1) & np.isfinite(mine).all(axis=1)
-        where = cal.free_xyz[there] if there.any() else np.asarray(X, float)
+        where = cal.free_xyz[there] if there.any() else cal.references
         distance = float(np.median(np.linalg.norm(where - np.asarray(c.position), axis=1)))
         rows.append({"camera": c.id, "spread_px": cal.spread_px[c.id], "free_sets_seen": seen,
                      "coverage": camera_words(nom, mine, dep.room),
@@ -212,10 +249,12 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                      "moved_m": moved, "moved_share": moved / max(distance, 1e-300),
                      "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
                      "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
-    calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
-                            extra)
+    room, keep_out = dep.room, dep.keep_out
+    if np.isnan(np.asarray(X, float)).any():  # frame marks: the deployment in their frame
+        room, keep_out = _site_moved(cams, cal.cameras, dep.room, dep.keep_out)
+    calibrated = Deployment(dep.name, dep.ceiling_height, room, cal.cameras, keep_out, extra)
     return FreeSurveyResult(calibrated, cal, rows, words, list(ids), np.asarray(X, float),
-                            int(np.shape(uv_free)[1]), free_height)
+                            n_sets, free_height)
 
 
 def test_point_errors(dep, X, uv, ids) -> dict:

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
+
+from .errors import SurveyError
 
 
 def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
@@ -19,12 +23,80 @@ def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
 
 
 def free_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
-    """The free survey's spots ``C×M×2`` (M: the bundle's free sets), and notes."""
+    """The free survey's spots ``C×M×2`` (M: the bundle's free sets), and notes. A survey
+    whose sightings mostly show two spots is a wand's: refused, to be read by
+    :func:`wand_spots`."""
     notes: list = []
+    obs = bundle.free_observations
+    doubles = sum(len(v) > 1 for v in obs.values())
+    if obs and doubles > len(obs) / 2:
+        raise SurveyError(f"{bundle.root / 'free' / 'observations.csv'}: {doubles} of its "
+                          f"{len(obs)} sightings show two spots, a wand's: calibrate it as a "
+                          "wand survey (with the wand's length)")
+    if doubles:
+        notes.append(f"{doubles} free sightings with two spots not used (which is the LED: "
+                     "unknown)")
+    single = {k: v[0][:2] for k, v in obs.items() if len(v) == 1}
     uv = _spots(deployment, bundle.free_ids,
-                bundle.free_frame if bundle.free_frames else None,
-                bundle.free_observations, notes, "free ")
+                bundle.free_frame if bundle.free_frames else None, single, notes, "free ")
     return uv, notes
+
+
+@dataclass
+class WandSpots:
+    """A wand survey's spots: ``uv`` C×M×2×2 (camera, set, LED, pixel; NaN: not seen).
+    ``labelled``: the LED slot is the same LED in every camera (observations with an ``led``
+    column); otherwise each camera's two spots are in no particular order and are matched
+    across cameras by the calibration."""
+
+    uv: np.ndarray
+    labelled: bool
+    notes: list = field(default_factory=list)
+
+
+def wand_spots(deployment, bundle) -> WandSpots:
+    """The wand survey's two spots per camera and set, from its frames (the two most LED-like
+    blobs) or its observations (an ``led`` column, if any, names each spot's LED)."""
+    from ..detection import detect_several
+
+    cams = deployment.cameras
+    ids = bundle.free_ids
+    uv = np.full((len(cams), len(ids), 2, 2), np.nan)
+    notes: list = []
+    labelled = False
+    if bundle.free_frames:
+        for k, cam in enumerate(cams):
+            frames = [bundle.free_frame(p, cam.id) for p in ids]
+            found, why = detect_several(frames, 2, "blob", deployment.detector_settings,
+                                        shape=(cam.height, cam.width), reasons=True)
+            uv[k] = found
+            bad = [f"{p} {r.replace('_', ' ')}" for p, r in zip(ids, why)
+                   if r not in (None, "missing", "no_spot")]
+            if bad:
+                notes.append(f"camera {cam.id}: {len(bad)} free frames not used: "
+                             + ", ".join(bad[:8]) + (" …" if len(bad) > 8 else ""))
+    else:
+        leds = sorted({s[2] for v in bundle.free_observations.values() for s in v
+                       if s[2] is not None})
+        if len(leds) > 2:
+            raise SurveyError(f"{bundle.root / 'free' / 'observations.csv'}: its led column "
+                              f"names {len(leds)} LEDs ({', '.join(leds[:4])}); a wand has two")
+        labelled = bool(leds)
+        slot = {name: i for i, name in enumerate(leds)}
+        row = {p: i for i, p in enumerate(ids)}
+        for k, cam in enumerate(cams):
+            for p in ids:
+                spots = bundle.free_observations.get((p, cam.id), ())
+                for j, (u, v, led) in enumerate(spots):
+                    if labelled and led is None:
+                        raise SurveyError(f"{bundle.root / 'free' / 'observations.csv'}: set "
+                                          f"{p}, camera {cam.id}: a spot with no led while "
+                                          "others have one")
+                    uv[k, row[p], slot[led] if labelled else j] = (u, v)
+    offsets = deployment.pixel_offsets
+    for k, cam in enumerate(cams):
+        uv[k] -= offsets.get(cam.id, (0.0, 0.0))
+    return WandSpots(uv, labelled, notes)
 
 
 def _spots(deployment, ids, frame_of, observations, notes, what) -> np.ndarray:
