@@ -144,7 +144,12 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
         from ..survey import SurveyError, plan_references
 
         try:
-            refs = plan_references(deployment_of(scene, "nominal"), references)
+            if wand is not None:  # no tape: frame marks, and the install in their frame
+                from ..survey.plan import plan_marks
+
+                refs = plan_marks(deployment_of(scene, "nominal"))
+            else:
+                refs = plan_references(deployment_of(scene, "nominal"), references)
         except SurveyError as e:
             raise UserError(f"--free-sets: {e}") from None
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -215,6 +220,20 @@ def _publish_spots(profile, seed, url, speed, seconds) -> None:
                   if unsent else ""), err=True)
 
 
+def _into_frame(points, o, x):
+    """``points`` N×3 in the frame whose origin is ``o`` and +x the direction to ``x`` (the
+    floor's, z kept), with the exact zeros that frame gives ``o`` and ``x`` where it should."""
+    import math
+
+    import numpy as np
+
+    a = math.atan2(x[1] - o[1], x[0] - o[0])
+    c, s = math.cos(a), math.sin(a)
+    d = np.asarray(points, float) - [o[0], o[1], 0.0]
+    out = np.c_[c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]]
+    return np.where(np.abs(out) < 1e-12, 0.0, out)
+
+
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
                    refs, wand, trajectory, test_points, own: bool) -> None:
     """Write the simulated install into ``stage`` (``out`` once renamed), saying what goes
@@ -236,6 +255,28 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
     )
 
     write_deployments(scene, stage)
+    marks = None
+    if free_sets and wand is not None:
+        # the marks define the room's frame: O its origin, X on its +x axis, the floor z = 0;
+        # truth.yaml and everything simulated are in that frame, nominal.yaml as planned
+        import math
+
+        from ..sim.scene import in_frame
+        from ..sim.writers import deployment_of
+
+        o, x = refs.xyz[0], refs.xyz[1]
+        scene = in_frame(scene, o[:2], math.atan2(x[1] - o[1], x[0] - o[0]))
+        from ..deployment import save
+
+        save(deployment_of(scene, "true"), stage / "truth.yaml",
+             header=f"Simulated {scene.profile.name} install (seed {scene.seed}): the cameras "
+                    "as they really are, in the frame the wand survey's marks define (for "
+                    "evaluation only).")
+        marks = (refs.ids, np.isfinite(refs.recorded))
+        pts = _into_frame(pts, o, x)
+        click.echo(f"the wand survey's marks define the frame: O at ({o[0]:.2f}, {o[1]:.2f}) m "
+                   f"of the plan is (0, 0, 0), X at ({x[0]:.2f}, {x[1]:.2f}) m on its +x axis; "
+                   "truth.yaml and every position written are in that frame")
     simulate_survey(scene, stage / "survey", pts, seed=seed, overwrite=True)
     n_cams = len(scene.true)
     click.echo(f"{profile.name} (seed {seed}): {out / 'nominal.yaml'}, {out / 'truth.yaml'}")
@@ -251,9 +292,10 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
     if free_sets:
         from ..sim.writers import simulate_free_survey
 
-        simulate_free_survey(scene, stage / "free-survey", refs.xyz, free_sets, seed=seed,
-                             height=free_height, overwrite=True, wand=wand,
-                             truth=stage / "free-survey.truth.csv")
+        simulate_free_survey(scene, stage / "free-survey",
+                             refs.xyz if marks is None else _into_frame(refs.xyz, *refs.xyz[:2]),
+                             free_sets, seed=seed, height=free_height, overwrite=True,
+                             wand=wand, truth=stage / "free-survey.truth.csv", marks=marks)
         sets = list((stage / "free-survey" / "free" / "frames").iterdir())
         jpegs = sum(len(os.listdir(d)) for d in sets)
         what = (f"(a robot at h = {free_height:g} m)" if free_height is not None else

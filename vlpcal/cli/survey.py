@@ -636,14 +636,18 @@ def _read_test_points(dep, test_path, survey_path, survey):
     if not set(tb.camera_ids()) & {c.id for c in dep.cameras}:
         raise UserError(f"{test_path}: none of its cameras ({', '.join(tb.camera_ids()[:6])}) "
                         "is in the deployment (expected its camera ids)")
-    _check_survey_positions(test_path, dep, tb.xyz, tb.point_ids)
-    if len(survey.xyz):
-        import numpy as np
+    import numpy as np
+
+    # in a marks' frame the room is known only once calibrated: judged as the marks are
+    _check_survey_positions(test_path, dep, tb.xyz, tb.point_ids,
+                            frame_marks=bool(np.isnan(survey.xyz).any()))
+    whole = survey.xyz[np.isfinite(survey.xyz).all(axis=1)]
+    if len(whole):
         from scipy.spatial import cKDTree
 
         same = sorted(set(tb.point_ids) & set(survey.point_ids))
-        gap = cKDTree(survey.xyz).query(tb.xyz)[0]  # each test point's nearest reference
-        spread = float(np.ptp(survey.xyz, axis=0).max()) or 1.0
+        gap = cKDTree(whole).query(tb.xyz)[0]  # each test point's nearest reference
+        spread = float(np.ptp(whole, axis=0).max()) or 1.0
         at = [p for p, g in zip(tb.point_ids, gap) if g <= 1e-6 * spread]
         if same or at:
             raise UserError(f"--test-points {test_path}: point {(same or at)[0]} is also "
@@ -780,7 +784,10 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     click.echo(f"your {n_ref} {'reference points and marks' if marks else 'reference points'}"
                + (f" and the wand's length (±{WAND_PRECISION:.1%})" if wand else "")
                + f" fix the room to about {cal.datum_floor * 1000:.1f} mm (the datum floor: no "
-               "calibration does better); measure more points, or more precisely, to do better")
+               "calibration does better); "
+               + ("place the LED on the marks more carefully (--point-sigma says how well), or "
+                  "add floor marks, to do better" if marks else
+                  "measure more points, or more precisely, to do better"))
     if marks:
         click.echo("the calibrated deployment is in the marks' frame: O is its origin, X on "
                    "its +x axis, the floor marks at z = 0 (the room moved with the cameras)")
@@ -889,15 +896,16 @@ def _print_calibration(result, folds: int) -> None:
             click.echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
 
 
-def _check_survey_positions(survey_path, dep, X, ids) -> None:
+def _check_survey_positions(survey_path, dep, X, ids, frame_marks: bool = False) -> None:
     """Refuse positions that cannot be in this room (millimetres read as metres, a typo): a
-    margin of a fifth of the room's size around it, and under its ceiling."""
+    margin of a fifth of the room's size around it, and under its ceiling; in a frame that
+    marks define (``frame_marks``, or an empty cell), within the room's size of the origin."""
     import numpy as np
     from shapely import contains_xy
     from shapely.geometry import Polygon
 
     margin = 0.2 * dep.size
-    if np.isnan(X).any():  # frame marks: positions in the marks' own frame, not the room's
+    if frame_marks or np.isnan(X).any():  # positions in the marks' frame, not the room's
         near = np.abs(np.nan_to_num(X[:, :2])).max(axis=1) <= dep.size + margin
         inside = near & ~(X[:, 2] <= -margin) & ~(X[:, 2] >= dep.ceiling_height)
     else:

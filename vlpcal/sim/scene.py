@@ -294,3 +294,32 @@ def render_scene(scene: Scene, points, seed: int = 0, distractors: bool = True,
         frames[cam.id] = jpegs
         seen.append(inside if several else inside[:, 0])
     return frames, np.array(seen)
+
+
+def in_frame(scene: Scene, origin, yaw: float) -> Scene:
+    """The same install described in another floor frame: ``origin`` (x, y, m) becomes
+    (0, 0) and the direction ``yaw`` (rad from +x) the new +x — the frame a wand survey's
+    marks define. Cameras (true and nominal), room, keep-outs and the lamp move with it."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    Rz = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # world → frame
+    o = np.array([origin[0], origin[1], 0.0])
+
+    def point(p):
+        return Rz @ (np.asarray(p, float) - o)
+
+    def camera(cam: Camera) -> Camera:
+        return replace(cam, position=tuple(point(cam.position)),
+                       rotation=tuple(rotation_vector(cam.R @ Rz.T)))
+
+    def polygon(poly):
+        return tuple(tuple(point([x, y, 0.0])[:2]) for x, y in poly)
+
+    prof = scene.profile
+    look = prof.look
+    if look.lamp is not None:
+        look = replace(look, lamp=(*point(look.lamp[:3]), *look.lamp[3:]))
+    prof = replace(prof, nominal=tuple(camera(c) for c in prof.nominal),
+                   room=polygon(prof.room), look=look,
+                   keep_out=tuple(polygon(p) for p in prof.keep_out))
+    return replace(scene, profile=prof, true=tuple(camera(c) for c in scene.true),
+                   nominal=tuple(camera(c) for c in scene.nominal))

@@ -579,10 +579,11 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
                         measured=measured[used_r],
                         wand_sigma=None if wand is None else WAND_PRECISION)
     # what the whole survey leaves in the cameras, predicted by the linearised adjustment
-    # (a wand's lengths are not in it: its prediction is that of the references alone)
     from .budget import fix_errors
 
-    errs = fix_errors(cams, adj, where, prior(s_x), s_px, models[0])
+    # (a wand's lengths are not in the linearised model: without them its scale is free)
+    errs = None if wand is not None else fix_errors(cams, adj, where, prior(s_x), s_px,
+                                                    models[0])
     exact, predicted = (float("nan"),) * 2 if errs is None else map(
         lambda e: float(np.median(e)), errs)
     while step < total:  # the steps that had nothing to do (a reference no camera pair saw)

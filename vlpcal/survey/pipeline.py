@@ -169,11 +169,10 @@ class FreeSurveyResult:
         return out
 
 
-def _site_moved(nominal, calibrated, room, keep_out):
-    """The room and keep-out polygons moved with the cameras into the frame that frame marks
-    define (DESIGN.md: the nominal room is taken as roughly placed): the similarity that puts
-    the nominal cameras' centres, and a point along each optical axis, on the calibrated
-    ones, applied to the floor."""
+def _marks_similarity(nominal, calibrated):
+    """The similarity (s, R, t) that puts the nominal cameras' centres, and a point along each
+    optical axis, on the calibrated ones: the plan's frame to the frame marks define (the
+    nominal room is taken as roughly placed, DESIGN.md)."""
     from .network import similarity
 
     reach = float(np.median([c.position[2] for c in nominal])) or 1.0
@@ -181,7 +180,24 @@ def _site_moved(nominal, calibrated, room, keep_out):
     def marks(cams):
         return np.vstack([[c.center for c in cams], [c.center + reach * c.axis for c in cams]])
 
-    s, R, t = similarity(marks(nominal), marks(calibrated))
+    return similarity(marks(nominal), marks(calibrated))
+
+
+def _in_marks_frame(nominal, calibrated) -> list:
+    """The nominal cameras moved into the frame the marks define."""
+    from dataclasses import replace
+
+    from ..geometry import rotation_vector
+
+    s, R, t = _marks_similarity(nominal, calibrated)
+    return [replace(c, position=tuple(s * R @ c.center + t),
+                    rotation=tuple(rotation_vector(c.R @ R.T))) for c in nominal]
+
+
+def _site_moved(nominal, calibrated, room, keep_out):
+    """The room and keep-out polygons moved with the cameras into the frame that frame marks
+    define."""
+    s, R, t = _marks_similarity(nominal, calibrated)
 
     def move(poly):
         P = np.c_[np.asarray(poly, float), np.zeros(len(poly))]
@@ -231,14 +247,17 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
         point_sigma_estimated=cal.point_sigma_estimated, datum_floor_m=cal.datum_floor,
         free_height_m=free_height, wand_m=wand)
     rows, words = [], []
-    for nom, c, choice in zip(cams, cal.cameras, cal.lens):
-        dR = rodrigues(c.rotation) @ rodrigues(nom.rotation).T
+    marks = bool(np.isnan(np.asarray(X, float)).any())
+    # in the marks' frame, each camera's move is judged against the plan moved into it
+    planned = _in_marks_frame(cams, cal.cameras) if marks else cams
+    for nom, plan, c, choice in zip(cams, planned, cal.cameras, cal.lens):
+        dR = rodrigues(c.rotation) @ rodrigues(plan.rotation).T
         angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
         sentence = lens_sentence(choice, c, nom)
         words.append(sentence)
         mine = np.asarray(uv_free)[cams.index(nom)]
         seen = int(np.isfinite(mine).all(axis=1).sum())
-        moved = float(np.linalg.norm(np.subtract(c.position, nom.position)))
+        moved = float(np.linalg.norm(np.subtract(c.position, plan.position)))
         there = np.isfinite(cal.free_xyz).all(axis=1) & np.isfinite(mine).all(axis=1)
         where = cal.free_xyz[there] if there.any() else cal.references
         distance = float(np.median(np.linalg.norm(where - np.asarray(c.position), axis=1)))
@@ -250,7 +269,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                      "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
                      "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
     room, keep_out = dep.room, dep.keep_out
-    if np.isnan(np.asarray(X, float)).any():  # frame marks: the deployment in their frame
+    if marks:  # frame marks: the deployment in their frame
         room, keep_out = _site_moved(cams, cal.cameras, dep.room, dep.keep_out)
     calibrated = Deployment(dep.name, dep.ceiling_height, room, cal.cameras, keep_out, extra)
     return FreeSurveyResult(calibrated, cal, rows, words, list(ids), np.asarray(X, float),
