@@ -115,7 +115,7 @@ points.csv                         point_id,x,y,z — measured LED positions, m
 frames/<point_id>/<camera_id>.jpg  what each camera saw with the LED there (missing = not seen)
 observations.csv                   optional: point_id,camera_id,u,v — spots cameras reported
 free/frames/<set_id>/<camera_id>.jpg  optional, a free survey: the LED somewhere unknown, one folder per moment
-free/observations.csv              or instead: set_id,camera_id,u,v
+free/observations.csv              or instead: set_id,camera_id,u,v[,led]
 ```
 
 Written by `vlpcal simulate` (and by a survey capture), read by `vlpcal survey calibrate`.
@@ -124,6 +124,15 @@ With `free/`, `points.csv` holds the reference points (at least 3, not on one li
 `--free-height`) and the free LED calibrates the cameras with them (a bundle adjustment);
 without it the bundle is calibrated from its points alone. `vlpcal survey capture --free`
 writes `free/observations.csv`; `vlpcal survey plan --free --out refs.csv` the references.
+A cell of a free survey's `points.csv` may be empty: that coordinate was not measured. Frame
+marks set the frame with no tape: `O,0,0,0` (the LED on the origin mark), `X,,0,0` (on a mark
+along +x), `F1,,,0` … (on the floor); the calibrated deployment (cameras, room, keep-outs) is
+then in their frame. A wand survey (`vlpcal survey calibrate --wand LENGTH`, m: two LEDs that
+far apart on a rigid bar) has both LEDs in each free frame, or two rows per camera and set in
+`free/observations.csv`, whose optional `led` column names each spot's LED (without it the
+spots are matched across cameras); its report's `wand` block gives the length error on
+held-out sets. `vlpcal simulate --wand` also writes `free-survey.truth.csv`
+(`set_id,led,x,y,z`: where each LED, `A` and `B`, really was).
 `vlpcal survey calibrate --test-points DIR` reads a second bundle (`points.csv` with `frames/`
 or `observations.csv`) of measured points the calibration never sees.
 Example: `surveys/paper-2024/survey/`.
