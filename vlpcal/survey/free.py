@@ -49,8 +49,9 @@ WAND_PRECISION = 1e-3
 LABEL_TOLERANCE = 5.0
 #: every this many wand sets, one is held out of the fit and judged by its length
 HELD_OUT_EVERY = 10
-#: a start from the data replaces the nominal cameras when it fits the free sets this many
-#: times better (its median reprojection error)
+#: a start from the data is tried when it fits the free sets this many times better than the
+#: nominal cameras (median reprojection error), and kept when the fit from it is this many
+#: times better again (:func:`_misfit`, with a k1 lens)
 BETTER_START = 0.5
 
 
@@ -324,7 +325,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     free LED's held-out consistency: :func:`_joint_lens_choice`) or a model of
     :data:`~.lens.LENS_MODELS`. ``room``: the floor polygon the datum floor is judged over.
     ``progress(i, n)``."""
-    from .network import align_to_references, label_wand, network_start
+    from .network import EPIPOLAR_SHARE, align_to_references, label_wand, network_start
 
     X, uv, uv_free = np.asarray(X, float), np.asarray(uv, float), np.asarray(uv_free, float)
     C, N = len(nominal), len(X)
@@ -361,24 +362,35 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     # the start: the nominal cameras, or the cameras placed from the data where those fit
     # the free sets far better (a hand-hung install), moved onto the references
     net = network_start(nominal, spots, labelled or wand is None, wand)
-    if wand is not None:
-        if net is None and not labelled:
-            raise SurveyError("the wand's two spots could not be matched across the cameras: "
-                              f"fewer than {MIN_SHARED} clear sightings link them (wave it "
-                              "where neighbouring cameras both see it, across their view)")
-        pts_free = _wand_points(spots, None if net is None else net.order, labelled)
-    else:
-        pts_free = uv_free
-    # both moved onto the references first (marks define a frame of their own)
-    start = align_to_references(list(nominal), uv, X)
+    # the starts: the deployment's cameras, and those placed from the free sets, both moved
+    # onto the references first (marks define a frame of their own)
+    starts = [align_to_references(list(nominal), uv, X)]
     if net is not None:
-        placed = align_to_references(net.cameras, uv, X, scale_fixed=wand is not None)
-        e_nom, e_net = _reprojection(start, pts_free), _reprojection(placed, pts_free)
-        if e_net < BETTER_START * e_nom:
-            start = placed
-            notes.append(f"the cameras' start placed from the free sets (they fit them to "
-                         f"{e_net:.2g} px, the deployment's cameras to {e_nom:.2g} px)")
-    X0 = _reference_start(start, X, uv)
+        starts.append(align_to_references(net.cameras, uv, X, scale_fixed=wand is not None))
+
+    def points_of(cams):
+        """The free points' spots for a start: a wand's ends named per set by the pairwise
+        matching where two of its cameras have it, else by ``cams``."""
+        if wand is None:
+            return uv_free
+        if labelled:
+            return _wand_points(spots, None, True)
+        if net is not None:  # within a few times the start's own misfit
+            tol = LABEL_TOLERANCE * _reprojection(cams, _wand_points(spots, net.order, False))
+        else:  # a share of the image (the epipolar bound of the pairwise matching)
+            tol = EPIPOLAR_SHARE * float(np.median([np.hypot(c.width, c.height)
+                                                    for c in nominal]))
+        order = label_wand(cams, spots, wand, tol if np.isfinite(tol) else np.inf)
+        if net is not None:
+            tree = (net.order >= 0).any(axis=2).sum(axis=0) >= 2
+            order[:, tree] = net.order[:, tree]
+        return _wand_points(spots, order, False)
+
+    tries = [(cams, points_of(cams)) for cams in starts]
+    errs = [_reprojection(cams, pts) for cams, pts in tries]
+    if len(tries) > 1 and not errs[1] < BETTER_START * errs[0]:
+        tries, errs = tries[:1], errs[:1]
+    X0 = _reference_start(tries[0][0], X, uv)
     kept = ""
     if lens == "auto" and free_height is not None:
         # a robot's LED shows each camera one plane: the references must fix the rest of its
@@ -392,7 +404,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
                     "at two heights, and a robot's LED at one height cannot fix a lens alone")
             notes.append(f"lens kept as in the deployment (pose only): {kept}")
     step = 0
-    total = 5 + min(N, MAX_LEFT_OUT) + (3 if wand is not None and not labelled else 0)
+    total = 5 + min(N, MAX_LEFT_OUT) + (3 if wand is not None and not labelled else 0) \
+        + 3 * (len(tries) - 1)
 
     def tick():
         nonlocal step
@@ -473,6 +486,13 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
                                        free=free, fixed_height=free_height,
                                        unmeasured=unmeasured, lengths=lengths_of(keep))
 
+    def _adjust_state(state, cams, models, keep):
+        """:func:`adjust` on a saved fit's unknowns."""
+        nonlocal P0, free, unmeasured, uv_all, pair_i
+        P0, free, unmeasured, uv_all, pair_i = (state[k] for k in (
+            "P0", "free", "unmeasured", "uv_all", "pair_i"))
+        return adjust(cams, models, keep)
+
     def reject(cams, models, keep):
         """Fit; reject what does not fit; fit again (three rounds at most)."""
         nonlocal dropped
@@ -508,8 +528,55 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         return obs, s_x, s_px, cams, adj, keep
 
     models = ["pose"] * C
-    keep = prepare(pts_free, start)
-    obs, s_x, s_px, cams, adj, keep = reject(list(start), models, keep)
+
+    def fitted_from(cams, pts):
+        """The pose-only fit, with rejection, from a start; and the state it fitted."""
+        nonlocal X0, dropped, rejected
+        X0 = _reference_start(cams, X, uv)
+        dropped, rejected = 0, dict.fromkeys(ids_c, 0)
+        keep = prepare(pts, cams)
+        got = reject(list(cams), models, keep)
+        return got, dict(X0=X0, P0=P0, free=free, unmeasured=unmeasured, uv_all=uv_all,
+                         pair_i=pair_i, free_idx=free_idx, held_out=held_out, dropped=dropped,
+                         rejected=rejected, pts_free=pts)
+
+    # from each start (the free sets' start only where it fits them far better): the fit
+    # whose spots then scatter least, which is the deeper minimum of the same data
+    fits = [fitted_from(cams, pts) for cams, pts in tries]
+    if len(fits) > 1:
+        # judged with a lens (k1) fitted from each: a pose-only fit leaves the lenses' error in
+        # the references of both alike, and cannot tell the minima apart
+        judged = []
+        for (got, state) in fits:
+            obs_, (s_x_, s_px_, cams_, adj_) = _adjust_state(state, got[3], ["k1"] * C, got[5])
+            judged.append(((obs_, s_x_, s_px_, cams_, adj_, got[5]), state))
+        # one scale for both: the finer fit's (a start that diverged has none)
+        s_x0 = float(np.nanmin([j[0][1] for j in judged] + [np.inf]))
+        s_px0 = float(np.nanmin([j[0][2] for j in judged] + [np.inf]))
+        # the deployment's start is kept unless its fit is far worse: where both fit alike,
+        # the data's start has shown no better minimum (and, on a carefully hung install,
+        # can lead the lens choice astray)
+        m = [_misfit(j, s_x0, s_px0) for j in judged]
+        m = [v if np.isfinite(v) else np.inf for v in m]
+        best = 1 if m[1] < BETTER_START * m[0] else 0
+    else:
+        best = 0
+    (obs, s_x, s_px, cams, adj, keep), state = fits[best]
+    X0, P0, free, unmeasured, uv_all, pair_i, free_idx, held_out, dropped, rejected, \
+        pts_free = state.values()
+    if best == 1:
+        notes.append(f"the cameras' start placed from the free sets (they fit them to "
+                     f"{errs[1]:.2g} px, the deployment's cameras to {errs[0]:.2g} px; the "
+                     f"fit from them to ±{s_px:.2g} px, from the deployment's to "
+                     f"±{fits[0][0][2]:.2g} px)")
+    if wand is not None and not labelled:
+        # the ends named again with the fitted cameras, every set's views at once, and
+        # fitted again
+        order = label_wand(cams, spots, wand, LABEL_TOLERANCE * s_px)
+        (obs, s_x, s_px, cams, adj, keep), state = fitted_from(
+            cams, _wand_points(spots, order, False))
+        X0, P0, free, unmeasured, uv_all, pair_i, free_idx, held_out, dropped, rejected, \
+            pts_free = state.values()
     choices = []
     if lens == "auto":
         chosen, held = _joint_lens_choice(cams, adj, prior(s_x), uv_all, keep, free, s_px,
@@ -531,15 +598,6 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     tick()
     obs, (s_x, s_px, cams, adj) = adjust(cams, models, keep)
     tick()
-    if wand is not None and not labelled:
-        # the ends named again with the fitted cameras: every set's views at once (the start's
-        # pairwise matching leaves the sets no tree pair shares unnamed), then fitted again
-        order = label_wand(cams, spots, wand, LABEL_TOLERANCE * s_px)
-        pts_free = _wand_points(spots, order, False)
-        dropped = 0
-        rejected = dict.fromkeys(ids_c, 0)
-        keep = prepare(pts_free, cams)
-        obs, s_x, s_px, cams, adj, keep = reject(cams, models, keep)
     _check_fit(cams, adj[N:], uv_all[:, N:], keep[:, N:], s_px, ids_c)
     _check_references_fit(seen_r, keep[:, :N], ids_c)
     _check_inside(adj[N:], room, cams)
@@ -631,6 +689,26 @@ def _check_references_fit(seen, kept, ids) -> None:
                           f"{ids[k]}, {int(lost[k].sum())} of the {int(seen[k].sum())} "
                           "reference points it saw are not (are the camera ids in free/ the "
                           "deployment's? is the survey from this site?); nothing was written")
+
+
+def _misfit(fit, s_x: float, s_px: float) -> float:
+    """How badly a pose-only fit (:func:`_calibrate_free`'s ``fitted_from``) explains its
+    data, on one scale for every start (``s_x`` m, ``s_px`` px): the squared residuals of
+    every spot and every measured reference coordinate in units of those, each capped at
+    three (a rejected spot counts as the cap), so that a start whose fit throws data out or
+    strains the references loses to one that explains them."""
+    (_, _, _, cams, adj, keep), state = fit
+    uv_all, X0, free, unmeasured = (state[k] for k in ("uv_all", "X0", "free", "unmeasured"))
+    total = 0.0
+    for k, cam in enumerate(cams):
+        seen = np.isfinite(uv_all[k]).all(axis=1)
+        r = np.linalg.norm(cam.project(adj[seen])[0] - uv_all[k, seen], axis=1) / s_px
+        r = np.where(keep[k, seen], np.nan_to_num(r, nan=3.0), 3.0)
+        total += float(np.sum(np.minimum(r, 3.0) ** 2))
+    n = len(X0)
+    known = ~unmeasured[:n]
+    r = np.abs(adj[:n] - X0)[known] / s_x
+    return total + float(np.sum(np.minimum(r, 3.0) ** 2))
 
 
 def _check_fit(cams, X, uv, keep, s_px, ids) -> None:
