@@ -46,15 +46,18 @@ def _place_labels(ax, labels, avoid=()) -> list:
     the figure's layout is final: text keeps its size in points while the axes scale."""
     renderer = ax.figure.canvas.get_renderer()
     frame = ax.get_window_extent(renderer)
-    taken = list(avoid)
+    taken = np.zeros((len(avoid) + len(labels), 4))  # x0, y0, x1, y1 of each box so far
+    taken[: len(avoid)] = [(b.x0, b.y0, b.x1, b.y1) for b in avoid]
+    n = len(avoid)
     placed = []
 
     def overlap(bb):  # with other labels and points, and what sticks out of the panel
         inside = max(0.0, min(bb.x1, frame.x1) - max(bb.x0, frame.x0)) \
             * max(0.0, min(bb.y1, frame.y1) - max(bb.y0, frame.y0))
-        return bb.width * bb.height - inside + sum(
-            max(0.0, min(bb.x1, o.x1) - max(bb.x0, o.x0))
-            * max(0.0, min(bb.y1, o.y1) - max(bb.y0, o.y0)) for o in taken)
+        o = taken[:n]
+        w = (np.minimum(bb.x1, o[:, 2]) - np.maximum(bb.x0, o[:, 0])).clip(0)
+        h = (np.minimum(bb.y1, o[:, 3]) - np.maximum(bb.y0, o[:, 1])).clip(0)
+        return bb.width * bb.height - inside + float(w @ h)
 
     for xy, text, style in labels:
         best = None
@@ -72,8 +75,10 @@ def _place_labels(ax, labels, avoid=()) -> list:
                 t.remove()
             if cost == 0:
                 break
-        taken.append(best[2])
-        placed.append(best[2])
+        b = best[2]
+        taken[n] = (b.x0, b.y0, b.x1, b.y1)
+        n += 1
+        placed.append(b)
     return placed
 
 

@@ -161,16 +161,14 @@ class Reach:
 
     def score(self, a, b) -> PairScore:
         """:class:`PairScore` of cameras ``a``, ``b`` (indices into :attr:`cameras`, or ``L×Y×X``
-        sightings of cameras not in it); kept for indices."""
-        key = (min(a, b), max(a, b)) if isinstance(a, (int, np.integer)) else None
+        sightings of cameras not in it, bare or with their span); kept for indices."""
+        key = ((min(a, b), max(a, b)) if all(isinstance(x, (int, np.integer)) for x in (a, b))
+               else None)
         if key is not None and key in self._scores:
             return self._scores[key]
-        sa = self.seen[a] if key is not None else a
-        sb = self.seen[b] if key is not None else b
+        (sa, (ra, ca)), (sb, (rb, cb)) = self._sighting(a), self._sighting(b)
         L = len(self.levels)
         s = PairScore(np.zeros(L), np.zeros((L, 2), int), 0)
-        (ra, ca), (rb, cb) = (self._span(a) if key is not None else _span(a),
-                              self._span(b) if key is not None else _span(b))
         v0, v1, u0, u1 = max(ra[0], rb[0]), min(ra[1], rb[1]), max(ca[0], cb[0]), min(ca[1], cb[1])
         if v0 < v1 and u0 < u1:  # their views' boxes meet: the work in that window only
             w = self.reach
@@ -190,10 +188,16 @@ class Reach:
             self._scores[key] = s
         return s
 
-    def _span(self, k):
-        if ("span", k) not in self._scores:
-            self._scores[("span", k)] = _span(self.seen[k])
-        return self._scores[("span", k)]
+    def _sighting(self, x):
+        """``(L×Y×X sightings, their span)`` of a camera index (span kept), a camera's
+        sightings, or a pair ``(sightings, span)`` already spanned."""
+        if isinstance(x, (int, np.integer)):
+            if ("span", x) not in self._scores:
+                self._scores[("span", x)] = _span(self.seen[x])
+            return self.seen[x], self._scores[("span", x)]
+        if isinstance(x, tuple):
+            return x
+        return x, _span(x)
 
     def stop_sets(self, cell, m: int, pairs) -> np.ndarray:
         """Expected moments each of ``pairs`` (index pairs) shares at a stop at ``cell`` whose
@@ -469,11 +473,13 @@ def _remedy(r: Reach, group, main) -> Remedy:
             for g in group for h in main
             if (np.maximum.accumulate(r.score(g, h).best) >= need).any()]
     sweep_top = float(r.levels[min(tops)]) if tops else float("nan")
-    centres = {k: _view_centre(r, r.seen[k]) for k in (*group, *main)}
+    if "views" not in r._scores:  # each camera's centre and hull at the foot, once per reach
+        r._scores["views"] = ({k: _view_centre(r, r.seen[k]) for k in range(len(cams))},
+                              {k: _view_hull(r, r.seen[k]) for k in range(len(cams))})
+    centres, hulls = r._scores["views"]
     near = sorted(((np.linalg.norm(centres[g] - centres[h]), g, h) for g in group for h in main
                    if np.isfinite(centres[g]).all() and np.isfinite(centres[h]).all()),
                   key=lambda t: t[0])
-    hulls = {k: _view_hull(r, r.seen[k]) for k in (*group, *main)}
     gaps = [hulls[g].distance(hulls[h]) for g in group for h in main
             if not hulls[g].is_empty and not hulls[h].is_empty]
     gap = float(min(gaps)) if gaps else float("nan")
@@ -491,7 +497,8 @@ def _remedy(r: Reach, group, main) -> Remedy:
             new = Camera("new", model.width, model.height, model.fx, model.fy, model.cx,
                          model.cy, model.dist, (*(xy + offset), z), model.rotation)
             seen = r.seen_by(new)
-            links = [r.score(seen, r.seen[k]).best[: T + 1].max() >= need for k in (*group, *main)]
+            spanned = (seen, _span(seen))
+            links = [r.score(spanned, k).best[: T + 1].max() >= need for k in (*group, *main)]
             if any(links[: len(group)]) and any(links[len(group):]):
                 at = (round(float(xy[0] + offset[0]), 2), round(float(xy[1] + offset[1]), 2))
                 break
