@@ -240,3 +240,36 @@ def test_refusals_are_one_line(six, tmp_path, args, words):
     for w in words:
         assert w in res.output, res.output
     assert not (tmp_path / "o").exists()
+
+
+def test_own_site_free_survey_walks_the_planned_route_and_links_every_camera(tmp_path):
+    """From a newcomer's walk: 12 level cameras as vlpcal plan laid them over a 6 × 4 m office
+    (two rows whose views meet in a strip ~20 cm wide at the floor). The plan says a free LED
+    links them all; the simulated surveyor carries it along that plan's route, so every camera
+    is linked by shared sightings, each stop swept between the route's foot and its top."""
+    from vlpcal.sim.writers import deployment_of, route_path
+    from vlpcal.survey import free_route
+    from vlpcal.survey.free import MIN_SHARED
+    from vlpcal.survey.linkage import _components
+
+    cams = [Camera(f"C{j * 6 + i + 1}", 160, 120, 153.3, 153.3, 79.5, 59.5, (0,) * 5,
+                   (1.2 * i, (1.0, 2.9)[j], 2.8), NADIR) for j in range(2) for i in range(6)]
+    pillar = [[2.8, 1.8], [3.2, 1.8], [3.2, 2.2], [2.8, 2.2]]
+    dep = deployment.Deployment("office", 2.8, ROOM, cams, [pillar])
+    scene = make_scene(profile_of_deployment(dep, DEMO_ERRORS), 0)
+    route = free_route(deployment_of(scene, "nominal"))
+    assert route.linkage.all_linked
+    path = route_path(scene, route, 1800)
+    assert path.shape == (1800, 3)
+    assert (path[:, 2] >= route.low - 1e-9).all() and (path[:, 2] <= route.tops.max() + 1e-9).all()
+    assert np.ptp(path[:, 2]) > 0.8 * (route.high - route.low)  # swept, not carried level
+    assert not contains_xy(Polygon(pillar), path[:, 0], path[:, 1]).any()
+    seen = np.array([c.project(path, margin=2.0)[2] for c in scene.true])  # C×N, as installed
+    shared = (seen[:, None] & seen[None]).sum(axis=2)
+    assert len(_components(shared >= MIN_SHARED)) == 1
+    # and the CLI says it walked the route
+    deployment.save(dep, tmp_path / "office.yaml")
+    out = run("-d", tmp_path / "office.yaml", "--free-sets", 600, "--test-points", 5,
+              "--out", tmp_path / "o")
+    assert out.exit_code == 0, out.output
+    assert "along survey plan's route" in out.output

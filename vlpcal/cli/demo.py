@@ -138,25 +138,35 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
         raise click.BadParameter(f"expected 3 or more (2 or more with --free-height: fewer "
                                  f"cannot fix the room's frame), got {references}",
                                  param_hint="--references")
-    refs = None
+    refs = route = None
     if free_sets:  # the references the free survey's planner asks for, before any work
         from ..sim.writers import deployment_of
-        from ..survey import SurveyError, plan_references
+        from ..survey import SurveyError, free_route, plan_references
 
+        nominal = deployment_of(scene, "nominal")
         try:
             if wand is not None:  # no tape: frame marks, and the install in their frame
                 from ..survey.plan import plan_marks
 
-                refs = plan_marks(deployment_of(scene, "nominal"))
+                refs = plan_marks(nominal)
             else:
-                refs = plan_references(deployment_of(scene, "nominal"), references)
+                refs = plan_references(nominal, references)
         except SurveyError as e:
             raise UserError(f"--free-sets: {e}") from None
+        if deployment_path is not None and free_height is None:
+            # your own site: the LED carried along the route survey plan gives it
+            top = 0.4 * nominal.ceiling_height + (wand / 2 if wand is not None else 0.0)
+            top = min(round(top, 2), round(0.99 * 0.9 * min(c.position[2]
+                                                              for c in nominal.cameras), 2))
+            try:
+                route = free_route(nominal, (0.0, top))
+            except SurveyError as e:
+                click.echo(f"free survey: no route ({e}); the LED wanders the room instead")
     out.parent.mkdir(parents=True, exist_ok=True)
     with OutputSet(out, folders=True) as (stage,):
         stage.chmod(0o755)
         _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
-                       refs, wand, trajectory, test_points, deployment_path is not None)
+                       refs, wand, trajectory, test_points, deployment_path is not None, route)
         if robot_speed:
             from ..sim.streams import robot_path, simulate_streams
 
@@ -235,10 +245,11 @@ def _into_frame(points, o, x):
 
 
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
-                   refs, wand, trajectory, test_points, own: bool) -> None:
+                   refs, wand, trajectory, test_points, own: bool, route=None) -> None:
     """Write the simulated install into ``stage`` (``out`` once renamed), saying what goes
     where (``refs``: the free survey's planned references; ``own``: a user's deployment,
-    whose install and look are said too)."""
+    whose install and look are said too; ``route``: the free survey's planned route, as
+    planned, or None: the LED wanders the room)."""
     import os
 
     import numpy as np
@@ -274,6 +285,11 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
                     "evaluation only).")
         marks = (refs.ids, np.isfinite(refs.recorded))
         pts = _into_frame(pts, o, x)
+        if route is not None:
+            from dataclasses import replace
+
+            moved = _into_frame(np.c_[route.stops, np.zeros(len(route.stops))], o, x)
+            route = replace(route, stops=moved[:, :2])
         click.echo(f"the wand survey's marks define the frame: O at ({o[0]:.2f}, {o[1]:.2f}) m "
                    f"of the plan is (0, 0, 0), X at ({x[0]:.2f}, {x[1]:.2f}) m on its +x axis; "
                    "truth.yaml and every position written are in that frame")
@@ -295,12 +311,16 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
         simulate_free_survey(scene, stage / "free-survey",
                              refs.xyz if marks is None else _into_frame(refs.xyz, *refs.xyz[:2]),
                              free_sets, seed=seed, height=free_height, overwrite=True,
-                             wand=wand, truth=stage / "free-survey.truth.csv", marks=marks)
+                             wand=wand, truth=stage / "free-survey.truth.csv", marks=marks,
+                             route=route)
         sets = list((stage / "free-survey" / "free" / "frames").iterdir())
         jpegs = sum(len(os.listdir(d)) for d in sets)
         what = (f"(a robot at h = {free_height:g} m)" if free_height is not None else
                 f"(a wand: two LEDs {wand:g} m apart, waved by hand)" if wand is not None
                 else "(an LED on a pole)")
+        if route is not None:
+            what += (f" along survey plan's route ({len(route.stops)} stops, swept from "
+                     f"{route.low:g} to {route.high:g} m)")
         click.echo(f"free survey: {len(refs.ids)} reference points and {free_sets} free sets "
                    f"{what} → {out / 'free-survey'}; {len(sets)} of the sets have frames "
                    f"({jpegs} in all: a camera saw "

@@ -104,6 +104,31 @@ def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
 WALL_CLEARANCE = 0.1
 
 
+def route_path(scene: Scene, route, n: int, seed: int = 0) -> np.ndarray:
+    """A free survey's LED (``n×3``) carried as a planned route says (``route``: a
+    :class:`~vlpcal.survey.plan.FreeRoute` in the scene's frame): the ``n`` sets shared
+    equally by the stops, in walking order; at each stop the LED swept from the route's foot to
+    the stop's top and back, a sweep every :data:`~vlpcal.survey.linkage.SWEEP_SETS` sets,
+    landing anywhere within the square the plan allows a stop found by eye; kept off the walls
+    and keep-outs."""
+    from ..survey.linkage import SWEEP_SETS
+
+    stops = np.asarray(route.stops, float).reshape(-1, 2)
+    if not len(stops) or n < 1:
+        return np.zeros((0, 3))
+    rng = np.random.default_rng([scene.seed, seed, STREAM_PATH, 4])
+    at = np.minimum(np.arange(n) * len(stops) // n, len(stops) - 1)  # each set's stop
+    r = route.linkage.reach if route.linkage is not None else None
+    half = r.reach * r.step if r is not None else 0.0
+    xy = stops[at] + rng.uniform(-half, half, (n, 2))
+    xy = onto_floor(free_floor(scene.profile, WALL_CLEARANCE), xy)
+    first = np.searchsorted(at, at)  # the set each stop starts with
+    phase = (np.arange(n) - first) / SWEEP_SETS + rng.uniform(0, 1, len(stops))[at]
+    rise = 1.0 - np.abs(1.0 - 2.0 * (phase % 1.0))  # 0 → 1 → 0 over a sweep
+    tops = np.asarray(route.tops, float)[at]
+    return np.c_[xy, route.low + (tops - route.low) * rise]
+
+
 def wand_fits(profile, length: float) -> bool:
     """Whether a wand ``length`` m long can be held somewhere with both ends on the free floor
     whatever its direction (its centre :data:`WALL_CLEARANCE` + half its length from every
@@ -120,13 +145,16 @@ def longest_wand(profile) -> float:
     return np.floor(lo * 100) / 100
 
 
-def wand_path(scene: Scene, n: int, length: float, seed: int = 0) -> np.ndarray:
+def wand_path(scene: Scene, n: int, length: float, seed: int = 0, centre=None
+              ) -> np.ndarray:
     """A wand's two LEDs (``n×2×3``, LED A then B, ``length`` m apart) waved through the room
     by a person: its centre follows :func:`free_path` (squeezed so that both ends stay on the
     free floor, :func:`wand_fits`), its direction wanders smoothly and at random over the
     sphere (its elevation and heading sums of slow sines), and both LEDs stay between the
     floor and 40 % of the ceiling's height — a direction too steep for that is flattened, and
-    the centre rides as high as the ends allow. ``ValueError`` when the wand cannot fit."""
+    the centre rides as high as the ends allow. ``centre``: the path (``n×3``, from the floor
+    to 40 % of the ceiling) the centre follows instead, e.g. :func:`route_path`'s. ``ValueError``
+    when the wand cannot fit."""
     p = scene.profile
     if not (np.isfinite(length) and length > 0):
         raise ValueError(f"a wand's length must be a positive number of metres, got {length}")
@@ -135,7 +163,7 @@ def wand_path(scene: Scene, n: int, length: float, seed: int = 0) -> np.ndarray:
                          "cross a wall or a keep-out wherever it is held (at most "
                          f"{longest_wand(p):.2f} m here)")
     top = 0.4 * p.ceiling_height
-    centre = free_path(scene, n, None, seed)
+    centre = free_path(scene, n, None, seed) if centre is None else np.asarray(centre, float)
     # the free path's rectangle mapped onto the one the centre may use, then onto its floor
     floor = free_floor(p, WALL_CLEARANCE + length / 2, length / 2)
     a0, b0, a1, b1 = free_floor(p, WALL_CLEARANCE).bounds
@@ -157,7 +185,7 @@ def wand_path(scene: Scene, n: int, length: float, seed: int = 0) -> np.ndarray:
     dz = np.clip(np.sin(elevation), -0.9 * top / length, 0.9 * top / length)
     d = np.c_[np.c_[np.cos(heading), np.sin(heading)] * np.sqrt(1 - dz ** 2)[:, None], dz]
     half = 0.5 * length * np.abs(dz)
-    z = half + (top - 2 * half) * centre[:, 2] / top
+    z = half + (top - 2 * half) * np.clip(centre[:, 2] / top, 0.0, 1.0)
     mid = np.c_[xy, z]
     return np.stack([mid - 0.5 * length * d, mid + 0.5 * length * d], axis=1)
 
@@ -165,7 +193,7 @@ def wand_path(scene: Scene, n: int, length: float, seed: int = 0) -> np.ndarray:
 def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int = 0,
                          height: float | None = None, overwrite: bool = False,
                          carrier_radius: float | None = None, wand: float | None = None,
-                         marks=None, truth=None):
+                         marks=None, truth=None, route=None):
     """A free survey bundle (issue 15): the ``references`` (true positions) taped to
     ± ``profile.tape`` per axis with their frames, and ``n_free`` free sets of the LED moved
     along :func:`free_path` (its positions unrecorded, as in life; a robot's body hides the
@@ -183,6 +211,10 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
     the LED misses its mark by ± ``profile.tape`` instead; any other measured coordinate is
     taped (written ± ``profile.tape``). Without ``marks``: ids ``R01``…, every coordinate taped.
 
+    ``route``: a planned route (:class:`~vlpcal.survey.plan.FreeRoute`, in the scene's frame)
+    the LED — or the wand's centre — follows (:func:`route_path`) instead of wandering the
+    room; not with ``height``.
+
     ``truth``: a CSV to write the free LED's true positions to (``set_id,led,x,y,z``, LED
     ``A``, and ``B`` for a wand's other; every set, seen or not), or None.
     """
@@ -191,8 +223,11 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
     ids, measured = _marks(marks, n)
     if wand is not None and height is not None:
         raise ValueError("a wand is waved by hand: it has no height of its own")
-    path = free_path(scene, n_free, height, seed) if wand is None \
-        else wand_path(scene, n_free, wand, seed)
+    if route is not None and height is not None:
+        raise ValueError("a route is walked with the LED on a pole: it has no height of its own")
+    walked = route_path(scene, route, n_free, seed) if route is not None else None
+    path = (free_path(scene, n_free, height, seed) if walked is None else walked) \
+        if wand is None else wand_path(scene, n_free, wand, seed, centre=walked)
     if carrier_radius is None:
         carrier_radius = 0.0 if height is None else ROBOT_RADIUS
     carrier = np.r_[np.zeros(n), np.full(n_free, carrier_radius)]
