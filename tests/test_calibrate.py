@@ -261,3 +261,26 @@ def test_hostile_surveys_and_outputs_are_refused_in_one_line(tmp_path, rng):
         assert res.exit_code == 2 and why in res.output and len(res.output.splitlines()) == 1
     assert {p: p.read_bytes() for p in before} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["nominal.yaml", "survey"]
+
+
+@pytest.mark.parametrize("wand", [False, True])
+def test_the_schur_step_is_the_sparse_solve_step(rng, wand):
+    """The bundle adjustment's step by eliminating the points (their 3×3 blocks, 6×6 for a
+    wand's two ends) equals a general sparse solve of the same damped normal equations."""
+    from scipy.sparse import csr_matrix, diags
+    from scipy.sparse.linalg import spsolve
+
+    from vlpcal.survey.calibration import _pattern, _SchurSolver
+
+    npars, n_pts = [6, 9, 7], 40
+    obs = [(np.sort(rng.choice(n_pts, 25, replace=False)), None) for _ in npars]
+    pairs = (np.arange(0, 20, 2), np.arange(1, 20, 2)) if wand else None
+    rows, cols, shape = _pattern(npars, obs, n_pts, pairs)
+    J = csr_matrix((rng.normal(size=len(rows)), (rows, cols)), shape=shape)
+    A = (J.T @ J).tocsc()
+    g = rng.normal(size=shape[1])
+    damping = 1e-3 * np.maximum(A.diagonal(), 1.0)
+    want = spsolve((A + diags(damping)).tocsc(), -g)
+    got = _SchurSolver(sum(npars), n_pts, pairs)(A, g, damping)
+    assert got is not None
+    np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-9 * np.abs(want).max())
