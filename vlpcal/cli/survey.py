@@ -749,13 +749,16 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                         "far from any consistent camera; check free/ and the deployment)") \
             from None
     cal = result.calibration
+    marks = bool(np.isnan(bundle.xyz).any())  # frame marks, not taped points
+    marks_only = marks and bool((bundle.xyz[np.isfinite(bundle.xyz)] == 0).all())
+    refs = "marks" if marks_only else "references"
     click.echo(f"free survey: {result.free_sets} sets (moments a camera saw the LED), "
                f"{cal.used_sets} used (seen by "
                + ("a camera at the stated height" if free_height is not None else
                   "two or more cameras")
                + f"); {sum(cal.rejected.values())} spots rejected, {cal.dropped_sets} sets of "
-               "two views that disagree dropped; references ±"
-               f"{cal.point_sigma * 1000:.2g} mm per axis ("
+               f"two views that disagree dropped; {refs} ±"
+               f"{cal.point_sigma * 1000:.2g} mm {'in height' if marks_only else 'per axis'} ("
                + ("estimated" if cal.point_sigma_estimated else
                   "assumed" if cal.point_sigma_assumed else "as stated")
                + f"), spots ±{cal.pixel_sigma:.3g} px")
@@ -775,13 +778,16 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     loo = cal.leave_one_out[np.isfinite(cal.leave_one_out)]
     if len(loo):
         tape = cal.point_sigma * 1000 * math.sqrt(3)
-        click.echo(f"\nreferences, each left out in turn (the others fix the room, its spots "
-                   f"place it): mean {loo.mean() * 1000:.1f} mm, max {loo.max() * 1000:.1f} mm "
-                   f"over {len(loo)} points (their own tape, ±{tape:.1f} mm in 3D, included)")
+        own = (f"the floor's unevenness under them, ±{cal.point_sigma * 1000:.1f} mm, included"
+               if marks_only else f"their own tape, ±{tape:.1f} mm in 3D, included")
+        click.echo(f"\n{refs}, each left out in turn where the rest still fix the room (its "
+                   f"spots place it): mean {loo.mean() * 1000:.1f} mm, max "
+                   f"{loo.max() * 1000:.1f} mm over {len(loo)} of them ({own})")
     else:
-        click.echo("\nreferences: too few to leave one out (the rest must still fix the room)")
-    marks = bool(np.isnan(bundle.xyz).any())
-    click.echo(f"your {n_ref} {'reference points and marks' if marks else 'reference points'}"
+        click.echo(f"\n{refs}: too few to leave one out (the rest must still fix the room)")
+    click.echo(f"your {n_ref} "
+               + ("marks" if marks_only else "reference points and marks" if marks else
+                  "reference points")
                + (f" and the wand's length (±{WAND_PRECISION:.1%})" if wand else "")
                + f" fix the room to about {cal.datum_floor * 1000:.1f} mm (the datum floor: no "
                "calibration does better); "

@@ -100,6 +100,9 @@ def free_path(scene: Scene, n: int, height: float | None = None, seed: int = 0
     return np.c_[xy, z]
 
 
+#: m (σ): a floor's height about the plane its marks set — a finished floor's flatness
+#: tolerance (DIN 18202, table 3: 4 mm over 1 m, 10 mm over 4 m at most) as a scatter
+FLOOR_UNEVENNESS = 0.002
 #: m: how close to a wall a hand keeps the LED (a pole's, a wand's ends)
 WALL_CLEARANCE = 0.1
 
@@ -207,9 +210,11 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
     ``marks``: ``(ids, measured)``: the references' point ids (N) and which coordinates the
     survey records (``N×3`` booleans) — frame marks (DESIGN.md): an unmeasured coordinate is
     written NaN (an empty cell). A measured coordinate that is 0 (the origin mark, the x mark's
-    y and z, the floor) is set by definition, not read off a tape: it is written 0 exactly and
-    the LED misses its mark by ± ``profile.tape`` instead; any other measured coordinate is
-    taped (written ± ``profile.tape``). Without ``marks``: ids ``R01``…, every coordinate taped.
+    y and z, the floor) is set by definition, not read off a tape: it is written 0 exactly. A
+    mark is where the LED stood (its x and y define the frame), but the floor under it is not
+    a plane: a height of 0 is off by ± :data:`FLOOR_UNEVENNESS`. Any other measured coordinate
+    is taped (written ± ``profile.tape``). Without ``marks``: ids ``R01``…, every coordinate
+    taped.
 
     ``route``: a planned route (:class:`~vlpcal.survey.plan.FreeRoute`, in the scene's frame)
     the LED — or the wand's centre — follows (:func:`route_path`) instead of wandering the
@@ -237,7 +242,8 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
         placed, record = refs, refs + noise
     else:
         defined = measured & (refs == 0.0)
-        placed = refs + np.where(defined, noise, 0.0)
+        floor = rng.normal(0.0, FLOOR_UNEVENNESS, n)
+        placed = refs + np.where(defined & [False, False, True], floor[:, None], 0.0)
         record = np.where(measured, refs + np.where(defined, 0.0, noise), np.nan)
     if wand is None:
         frames, seen = render_scene(scene, np.vstack([placed, path]), seed=seed,

@@ -503,7 +503,8 @@ def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params,
 
 def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: int = 5,
                        point_sigma: float | None = None, free=None,
-                       fixed_height: float | None = None, unmeasured=None, lengths=None):
+                       fixed_height: float | None = None, unmeasured=None, lengths=None,
+                       share=None):
     """The survey positions' measurement precision (m per axis) and the spots' (px), by
     variance components: refine jointly, compare each group's residuals with its redundancy,
     rescale, repeat. Bounded below by what the spots can resolve — a tenth of a point's
@@ -515,6 +516,8 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     their start), at height ``fixed_height`` when one is stated (an LED on a robot).
     ``unmeasured`` (N×3 bool): coordinates of measured points that were not measured (a frame
     mark's empty cells). ``lengths``: as :func:`refine_jointly` takes them (a wand).
+    ``share`` (N×3): each coordinate's precision as a multiple of the points' (a frame mark's
+    coordinate set by definition: a small share); default 1.
     Returns (point_sigma, pixel_sigma, cameras, adjusted)."""
     X = np.asarray(X, float)
     free = np.zeros(len(X), bool) if free is None else np.asarray(free, bool)
@@ -528,7 +531,7 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     s_x = point_sigma if point_sigma is not None else max(per_px * pixel_sigma, floor)
 
     def sigmas(s_x):
-        sig = np.full(X.shape, float(s_x))
+        sig = np.full(X.shape, float(s_x)) * (1.0 if share is None else share)
         sig[free] = np.inf
         if unmeasured is not None:
             sig[unmeasured] = np.inf

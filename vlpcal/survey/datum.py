@@ -117,15 +117,16 @@ def check_datum(points, measured=None, free_height: bool = False, wand: bool = F
 def datum_floor(references, sigma: float, where, free_height: bool = False, measured=None,
                 wand_sigma: float | None = None) -> float:
     """RMS displacement (m) at the points ``where`` of the frame that ``references`` define,
-    their ``measured`` coordinates (default all) known to ±``sigma`` per axis, and a wand's
-    length to a relative ±``wand_sigma`` (one error for the whole survey: the bar's): the
-    similarity transform fitted to their noise, linearised."""
+    their ``measured`` coordinates (default all) known to ±``sigma`` per axis (one for all, or
+    N×3), and a wand's length to a relative ±``wand_sigma`` (one error for the whole survey: the
+    bar's): the similarity transform fitted to their noise, linearised."""
     R = np.asarray(references, float)
     c = R.mean(axis=0)
     m = np.ones(R.shape, bool) if measured is None else np.asarray(measured, bool)
+    sig = np.broadcast_to(np.asarray(sigma, float), R.shape)
     if free_height:
-        m = m[:, :2]
-    A = similarity_design(R, c, free_height)[m] / sigma
+        m, sig = m[:, :2], sig[:, :2]
+    A = similarity_design(R, c, free_height)[m] / sig[m][:, None]
     if wand_sigma is not None:
         s = np.zeros((1, A.shape[1]))
         s[0, -1] = 1.0 / wand_sigma

@@ -43,6 +43,12 @@ MAX_LEFT_OUT = 24
 WEAK_FACTOR = 2.0
 #: … else this precision (a tape measure, per axis, m) is assumed and said
 ASSUMED_TAPE = 0.003
+#: … or, where every reference is a frame mark, this one (m per axis): a mark is where the LED
+#: stood, so only its height is in doubt — the floor's unevenness under it
+MARK_PRECISION = 0.002
+#: a frame mark's coordinate set by definition (the origin's x and y, the x mark's y: the frame
+#: is where the LED stood) is held to this share of :data:`MARK_PRECISION`
+DEFINED_SHARE = 0.01
 #: a wand's length, relative: a bar cut and measured to a millimetre per metre
 WAND_PRECISION = 1e-3
 #: a wand's spots are told apart within this many times the fitted spots' precision
@@ -352,13 +358,24 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     coords = int(measured[used_r].sum())
     # what the references must fix first: the frame's motions, but the scale a wand fixes
     datum = (4 if free_height is not None else 7) - (wand is not None)
+    # frame marks: a horizontal zero is the frame's own definition (where the LED stood)
+    marks = bool((~measured).any())
+    share = np.ones(X.shape)
+    if marks:
+        share[:, :2][measured[:, :2] & (X[:, :2] == 0.0)] = DEFINED_SHARE
+    marks_only = marks and bool((X[measured] == 0.0).all())
     if estimated and coords - datum < MIN_REDUNDANT:
-        # too few references to show their own scatter: a tape's precision is assumed
-        stated, estimated, assumed = ASSUMED_TAPE, False, True
-        notes.append(f"{n_ref} reference points cannot show how precisely they were measured "
-                     f"(they have {max(coords - datum, 0)} coordinates beyond what fixes the "
-                     f"room): ±{ASSUMED_TAPE * 1000:g} mm (a tape) assumed; state their "
-                     "precision, or measure more points")
+        # too few references to show their own scatter: a precision is assumed
+        stated, estimated, assumed = (MARK_PRECISION if marks_only else ASSUMED_TAPE), False, True
+        notes.append(
+            f"{n_ref} marks cannot show how precisely the LED stood on them (they have "
+            f"{max(coords - datum, 0)} coordinates beyond what fixes the room): "
+            f"±{MARK_PRECISION * 1000:g} mm in height (a floor's unevenness) assumed; state "
+            "it, or add floor marks" if marks_only else
+            f"{n_ref} reference points cannot show how precisely they were measured "
+            f"(they have {max(coords - datum, 0)} coordinates beyond what fixes the "
+            f"room): ±{ASSUMED_TAPE * 1000:g} mm (a tape) assumed; state their "
+            "precision, or measure more points")
     # the start: the nominal cameras, or the cameras placed from the data where those fit
     # the free sets far better (a hand-hung install), moved onto the references
     net = network_start(nominal, spots, labelled or wand is None, wand)
@@ -473,6 +490,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         """Per coordinate, how well it is known (m): the references' precision where they
         were measured, nothing for a free LED, the stated height as good as exact."""
         sig = np.full((len(free), 3), float(s_x))
+        sig[:N] *= share
         sig[free] = np.inf
         sig[unmeasured] = np.inf
         if free_height is not None:
@@ -484,7 +502,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         s_px0 = 0.1
         return obs, estimate_precision(cams, P0, obs, models, s_px0, point_sigma=stated,
                                        free=free, fixed_height=free_height,
-                                       unmeasured=unmeasured, lengths=lengths_of(keep))
+                                       unmeasured=unmeasured, lengths=lengths_of(keep),
+                                       share=np.r_[share, np.ones((len(free) - N, 3))])
 
     def _adjust_state(state, cams, models, keep):
         """:func:`adjust` on a saved fit's unknowns."""
@@ -633,7 +652,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         err = np.linalg.norm(cam.project(adj[idx])[0] - uv_all[k, idx], axis=1)
         spread[ids_c[k]] = float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan")
     where = adj[N:] if room is None else _floor_points(room, adj[N:])
-    floor = datum_floor(adj[:N][used_r], s_x, where, free_height is not None,
+    floor = datum_floor(adj[:N][used_r], s_x * share[used_r], where, free_height is not None,
                         measured=measured[used_r],
                         wand_sigma=None if wand is None else WAND_PRECISION)
     # what the whole survey leaves in the cameras, predicted by the linearised adjustment
