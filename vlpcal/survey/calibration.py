@@ -280,7 +280,8 @@ def _pattern(npars, obs, n_pts, pairs=None):
 
 def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
                    point_sigma=0.003, pixel_sigma: float = 0.1,
-                   models: list[str] | None = None, iterations: int = 60, lengths=None):
+                   models: list[str] | None = None, iterations: int = 60, lengths=None,
+                   aspect=None):
     """Bundle adjustment: every camera's pose (and the lens its model frees) and every
     surveyed position together, each position free within its measurement uncertainty
     (``point_sigma`` m per axis: one for all, or N×3 per coordinate, ``inf`` for a position
@@ -289,8 +290,11 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
 
     ``obs``: list per camera of (point indices, uv K×2) — the observations kept by
     :func:`fit_camera`. ``lengths``: (i, j, length, sigma), arrays of pairs of points held
-    ``length`` m apart within ``sigma`` m (a wand's two LEDs). Returns (cameras, adjusted
-    positions N×3).
+    ``length`` m apart within ``sigma`` m (a wand's two LEDs). ``aspect``: (ratios, sigma):
+    each freed pair of focal lengths keeps its ratio fx / fy near the camera's ratio (C, e.g.
+    the deployment's) within the relative spread ``sigma`` — pixels are square, and a camera
+    that sees the LED over part of its image cannot otherwise tell a stretched focal length
+    from a shifted pose. Returns (cameras, adjusted positions N×3).
     """
 
     X = np.asarray(X, float)
@@ -306,6 +310,15 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
         L, w_len = (np.broadcast_to(np.asarray(a, float), li.shape) for a in lengths[2:])
         w_len = 1.0 / w_len
     rows, cols, shape = _pattern(npars, obs, len(X), None if lengths is None else (li, lj))
+    stretch = ([k for k, m in enumerate(models) if "fy" in lens_params(m)]
+               if aspect is not None else [])
+    if stretch:  # a row per camera: fx − a₀ fy, in units of the ratio's spread
+        ratio = np.asarray(aspect[0], float)[stretch]
+        unit = np.array([aspect[1] * cameras[k].fy for k in stretch])
+        at_fx = off[stretch] + 6  # fx, then fy, follow the pose in the vector
+        rows = np.r_[rows, np.repeat(shape[0] + np.arange(len(stretch)), 2)]
+        cols = np.r_[cols, np.c_[at_fx, at_fx + 1].ravel()]
+        shape = (shape[0] + len(stretch), shape[1])
 
     def unpack(p):
         pts = p[off[-1]:].reshape(-1, 3)
@@ -319,6 +332,8 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
         out.append((pts - X).ravel() * prior)
         if lengths is not None:
             out.append((np.linalg.norm(pts[li] - pts[lj], axis=1) - L) * w_len)
+        if stretch:
+            out.append((p[at_fx] - ratio * p[at_fx + 1]) / unit)
         return np.concatenate(out)
 
     def jac(p):
@@ -334,6 +349,8 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
             d = pts[li] - pts[lj]
             u = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None] * w_len[:, None]
             data.append(np.hstack([u, -u]).ravel())
+        if stretch:
+            data.append(np.c_[1.0 / unit, -ratio / unit].ravel())
         # a point beyond the lens's valid field has no derivative: no pull, not a NaN
         return csr_matrix((np.nan_to_num(np.concatenate(data), nan=0.0, posinf=0.0,
                                          neginf=0.0), (rows, cols)), shape=shape)
@@ -504,7 +521,7 @@ def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params,
 def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: int = 5,
                        point_sigma: float | None = None, free=None,
                        fixed_height: float | None = None, unmeasured=None, lengths=None,
-                       share=None):
+                       share=None, aspect=None):
     """The survey positions' measurement precision (m per axis) and the spots' (px), by
     variance components: refine jointly, compare each group's residuals with its redundancy,
     rescale, repeat. Bounded below by what the spots can resolve — a tenth of a point's
@@ -517,7 +534,8 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     ``unmeasured`` (N×3 bool): coordinates of measured points that were not measured (a frame
     mark's empty cells). ``lengths``: as :func:`refine_jointly` takes them (a wand).
     ``share`` (N×3): each coordinate's precision as a multiple of the points' (a frame mark's
-    coordinate set by definition: a small share); default 1.
+    coordinate set by definition: a small share); default 1. ``aspect``: as
+    :func:`refine_jointly` takes it.
     Returns (point_sigma, pixel_sigma, cameras, adjusted)."""
     X = np.asarray(X, float)
     free = np.zeros(len(X), bool) if free is None else np.asarray(free, bool)
@@ -542,7 +560,7 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     cams, adj = cameras, X
     for _ in range(iterations):
         cams, adj = refine_jointly(cams, X, obs, point_sigma=sigmas(s_x), pixel_sigma=s_px,
-                                   models=models, lengths=lengths)
+                                   models=models, lengths=lengths, aspect=aspect)
         r_x, r_px = _redundancy(cams, adj, obs, sigmas(s_x), s_px, npars, measured)
         v_px = np.concatenate([(c.project(adj[idx])[0] - uv).ravel()
                                for c, (idx, uv) in zip(cams, obs)])

@@ -53,6 +53,10 @@ DEFINED_SHARE = 0.01
 WAND_PRECISION = 1e-3
 #: a wand's spots are told apart within this many times the fitted spots' precision
 LABEL_TOLERANCE = 5.0
+#: pixels are square: a camera's fx / fy stays the deployment's within this relative spread
+#: (a lens's anamorphism or a sensor's scaling, about 1 %, as a scatter; without it a camera
+#: that sees the LED over part of its image stretches one focal length against its pose)
+ASPECT_SPREAD = 0.02
 #: every this many wand sets, one is held out of the fit and judged by its length
 HELD_OUT_EVERY = 10
 #: a start from the data is tried when it fits the free sets this many times better than the
@@ -359,6 +363,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     # what the references must fix first: the frame's motions, but the scale a wand fixes
     datum = (4 if free_height is not None else 7) - (wand is not None)
     # frame marks: a horizontal zero is the frame's own definition (where the LED stood)
+    aspect = (np.array([c.fx / c.fy for c in nominal]), ASPECT_SPREAD)
     marks = bool((~measured).any())
     share = np.ones(X.shape)
     if marks:
@@ -503,7 +508,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         return obs, estimate_precision(cams, P0, obs, models, s_px0, point_sigma=stated,
                                        free=free, fixed_height=free_height,
                                        unmeasured=unmeasured, lengths=lengths_of(keep),
-                                       share=np.r_[share, np.ones((len(free) - N, 3))])
+                                       share=np.r_[share, np.ones((len(free) - N, 3))],
+                                       aspect=aspect)
 
     def _adjust_state(state, cams, models, keep):
         """:func:`adjust` on a saved fit's unknowns."""
@@ -599,7 +605,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     choices = []
     if lens == "auto":
         chosen, held = _joint_lens_choice(cams, adj, prior(s_x), uv_all, keep, free, s_px,
-                                          lengths=lengths_of(keep))
+                                          lengths=lengths_of(keep), aspect=aspect)
         models = [chosen] * C
         from .calibration import _lens_choice, fit_camera
 
@@ -641,7 +647,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         _, moved = refine_jointly(cams, np.vstack([X0[:i], adj[i:i + 1], X0[i + 1:N],
                                                    adj[N:]]), obs, point_sigma=sig,
                                   pixel_sigma=s_px, models=models, iterations=6,
-                                  lengths=lengths_of(keep))
+                                  lengths=lengths_of(keep), aspect=aspect)
         off = np.where(measured[i], moved[i] - X0[i], 0.0)
         loo[i] = float(np.linalg.norm(off))
     free_xyz = np.full((pts_free.shape[1], 3), np.nan)
@@ -749,14 +755,15 @@ def _check_fit(cams, X, uv, keep, s_px, ids) -> None:
                           "rest — another camera's id, a moved camera, or a start too far off; "
                           "nothing was written")
 def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 1200,
-                       folds: int = 2, lengths=None):
+                       folds: int = 2, lengths=None, aspect=None):
     """One lens model for every camera, chosen by held-out consistency of the free LED: per
     model, the joint fit on the references and all but a fold of (a sample of) the free sets,
     then the held-out sets triangulated with the fitted cameras and their reprojection error —
     with two views, how far the spots are from seeing one point. The simplest model within one
     standard error of the best (paired over the sets). ``lengths``: a wand's (as
     :func:`~.calibration.refine_jointly` takes them), kept where both LEDs are in a fold's
-    fit. Returns (model, {model: held-out px})."""
+    fit; ``aspect``: the focal lengths' ratios, as it takes them too. Returns (model,
+    {model: held-out px})."""
     from ..triangulation import reprojection_errors, triangulate
 
     C = len(cams)
@@ -782,7 +789,7 @@ def _joint_lens_choice(cams, P, sig, uv_all, keep, free, s_px, sets: int = 1200,
             try:
                 fitted, _ = refine_jointly(cams, P[train], obs, point_sigma=sig[train],
                                            pixel_sigma=s_px, models=[m] * C, iterations=25,
-                                           lengths=held)
+                                           lengths=held, aspect=aspect)
             except (ValueError, np.linalg.LinAlgError):
                 break
             uvt = np.where(keep[:, test, None], uv_all[:, test], np.nan)
