@@ -121,7 +121,7 @@ WAND = 0.5
 
 def wand_run(scene, tmp: Path, seed: int) -> dict:
     """No tape at all (issue 26): the frame marks ``survey plan --free --wand`` asks for (O,
-    X, F1-F3, the LED put on each by hand to the profile's tape precision), a 0.5 m wand waved
+    X, F1-F3: the LED stood on each, the floor uneven under it), a 0.5 m wand waved
     for FREE_SETS sets, default flags. The install described in the marks' frame (as
     ``simulate --wand`` does); test frames rendered there. The datum floor here: the true
     cameras in the frame the LED's placings on the marks define."""
@@ -130,7 +130,8 @@ def wand_run(scene, tmp: Path, seed: int) -> dict:
     from scipy.optimize import least_squares
 
     from vlpcal.geometry import rodrigues
-    from vlpcal.sim.scene import STREAM_TAPE, in_frame
+    from vlpcal.sim.scene import in_frame
+    from vlpcal.sim.writers import reference_placings
     from vlpcal.survey import wand_spots
     from vlpcal.survey.plan import plan_marks
 
@@ -156,9 +157,7 @@ def wand_run(scene, tmp: Path, seed: int) -> dict:
     secs = time.perf_counter() - t0
     # where the LED really sat on each mark (as simulate_free_survey draws it), and the frame
     # those placings define: the rigid motion putting them on the marks' recorded coordinates
-    rng = np.random.default_rng([framed.seed, seed, STREAM_TAPE])
-    noise = rng.normal(0.0, framed.profile.tape, refs.shape)
-    placed = refs + np.where(measured & (refs == 0.0), noise, 0.0)
+    placed, _ = reference_placings(framed, refs, measured, seed)
     want = np.where(measured, refs, np.nan)
 
     def resid(q):

@@ -236,15 +236,7 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
     if carrier_radius is None:
         carrier_radius = 0.0 if height is None else ROBOT_RADIUS
     carrier = np.r_[np.zeros(n), np.full(n_free, carrier_radius)]
-    rng = np.random.default_rng([scene.seed, seed, STREAM_TAPE])
-    noise = rng.normal(0.0, scene.profile.tape, refs.shape)
-    if measured is None:
-        placed, record = refs, refs + noise
-    else:
-        defined = measured & (refs == 0.0)
-        floor = rng.normal(0.0, FLOOR_UNEVENNESS, n)
-        placed = refs + np.where(defined & [False, False, True], floor[:, None], 0.0)
-        record = np.where(measured, refs + np.where(defined, 0.0, noise), np.nan)
+    placed, record = reference_placings(scene, refs, measured, seed)
     if wand is None:
         frames, seen = render_scene(scene, np.vstack([placed, path]), seed=seed,
                                     carrier_radius=carrier, only_seen=True)
@@ -265,6 +257,22 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
     if truth is not None:
         write_led_truth(truth, free_ids, path)
     return record, path
+
+
+def reference_placings(scene: Scene, refs, measured=None, seed: int = 0):
+    """Where the LED really stood at each reference (``N×3``) and what the survey records (NaN:
+    not measured), as :func:`simulate_free_survey` draws them: taped points off by
+    ± ``profile.tape`` in the record; marks (``measured`` N×3) exact where they define the
+    frame, their height off by the floor's unevenness."""
+    refs = np.asarray(refs, float)
+    rng = np.random.default_rng([scene.seed, seed, STREAM_TAPE])
+    noise = rng.normal(0.0, scene.profile.tape, refs.shape)
+    if measured is None:
+        return refs, refs + noise
+    defined = measured & (refs == 0.0)
+    floor = rng.normal(0.0, FLOOR_UNEVENNESS, len(refs))
+    placed = refs + np.where(defined & [False, False, True], floor[:, None], 0.0)
+    return placed, np.where(measured, refs + np.where(defined, 0.0, noise), np.nan)
 
 
 def _marks(marks, n: int):
