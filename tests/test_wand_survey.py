@@ -214,3 +214,18 @@ def test_simulate_and_calibrate_a_wand_survey_from_the_command_line(tmp_path):
     report = json.loads(out.with_suffix(".report.json").read_text())
     assert report["wand"]["held_out_sets"] >= 20
     assert report["wand"]["length_error_mean_m"] < 0.003
+
+
+def test_only_a_marks_own_zeros_define_the_frame():
+    """From a hostile probe: a taped point whose x reads 0 beside the marks is a reading (held
+    to the tape), not the frame's definition; O's and X's horizontal zeros are."""
+    from vlpcal.survey.free import DEFINED_SHARE, mark_shares
+
+    nan = np.nan
+    X = np.array([[0, 0, 0], [nan, 0, 0], [nan, nan, 0], [0.0, 1.2, 0.5], [1.0, 0, 0]])
+    share, marks_only = mark_shares(X)
+    assert not marks_only
+    assert share[0, 0] == share[0, 1] == share[1, 1] == DEFINED_SHARE
+    assert (share[3] == 1).all() and (share[4] == 1).all() and (share[:, 2] == 1).all()
+    assert mark_shares(X[:3])[1]  # O, X and a floor mark: marks only
+    assert (mark_shares(np.array([[0.0, 0, 0], [2, 0, 0], [0, 1, 0]]))[0] == 1).all()  # tape

@@ -107,8 +107,13 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
     scene = make_scene(profile, seed)
     pts = grid_points(scene, survey_step, heights)
     if not len(pts):
-        raise click.BadParameter("no camera sees any point of that survey grid",
-                                 param_hint="--survey-step")
+        step_given = click.get_current_context().get_parameter_source("survey_step") \
+            == click.core.ParameterSource.COMMANDLINE
+        if step_given:
+            raise click.BadParameter("no camera sees any point of that survey grid",
+                                     param_hint="--survey-step")
+        raise UserError("no camera sees any point of the room's free floor (cameras that look "
+                        "away from the room, or keep-outs that cover it)")
     # --overwrite replaces what this command writes, all of it, as one folder (never
     # anything else: a folder holding other files is refused)
     import os
@@ -319,8 +324,9 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
                 f"(a wand: two LEDs {wand:g} m apart, waved by hand)" if wand is not None
                 else "(an LED on a pole)")
         if route is not None:
-            what += (f" along survey plan's route ({len(route.stops)} stops, swept from "
-                     f"{route.low:g} to {route.high:g} m)")
+            stops = len(route.stops)
+            what += (f" along survey plan's route ({stops} stops)" if free_sets >= stops else
+                     f" at {free_sets} of survey plan's {stops} stops")
         click.echo(f"free survey: {len(refs.ids)} reference points and {free_sets} free sets "
                    f"{what} → {out / 'free-survey'}; {len(sets)} of the sets have frames "
                    f"({jpegs} in all: a camera saw "

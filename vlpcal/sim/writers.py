@@ -49,6 +49,8 @@ def grid_points(scene: Scene, step: float, heights, margin: float = 0.05,
     from shapely import contains_xy
 
     room = free_floor(scene.profile, margin)
+    if room.is_empty:  # keep-outs over the whole floor
+        return np.zeros((0, 3))
     x0, y0, x1, y1 = room.bounds
     gx, gy = np.meshgrid(np.arange(x0, x1 + 1e-9, step), np.arange(y0, y1 + 1e-9, step))
     xy = np.c_[gx.ravel(), gy.ravel()]

@@ -308,6 +308,22 @@ def _observations(uv_all, keep):
     return [(np.flatnonzero(keep[k]), uv_all[k, keep[k]]) for k in range(len(uv_all))]
 
 
+def mark_shares(X) -> tuple[np.ndarray, bool]:
+    """Each reference coordinate's precision as a share of the references' (N×3), and whether
+    every reference is a frame mark. A mark — a point with an empty cell, or the origin's
+    zeros, in a survey that has empty cells — is where the LED stood: its horizontal zeros
+    define the frame (:data:`DEFINED_SHARE`); a taped point's zero is a reading like any
+    other."""
+    X = np.asarray(X, float)
+    measured = np.isfinite(X)
+    share = np.ones(X.shape)
+    if not (~measured).any():
+        return share, False
+    is_mark = (~measured).any(axis=1) | (X == 0.0).all(axis=1)
+    share[:, :2][is_mark[:, None] & measured[:, :2] & (X[:, :2] == 0.0)] = DEFINED_SHARE
+    return share, bool((X[measured] == 0.0).all())
+
+
 def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
                    point_sigma: float | str = "auto", free_height: float | None = None,
                    room=None, progress=None, wand: float | None = None,
@@ -362,13 +378,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     coords = int(measured[used_r].sum())
     # what the references must fix first: the frame's motions, but the scale a wand fixes
     datum = (4 if free_height is not None else 7) - (wand is not None)
-    # frame marks: a horizontal zero is the frame's own definition (where the LED stood)
     aspect = (np.array([c.fx / c.fy for c in nominal]), ASPECT_SPREAD)
-    marks = bool((~measured).any())
-    share = np.ones(X.shape)
-    if marks:
-        share[:, :2][measured[:, :2] & (X[:, :2] == 0.0)] = DEFINED_SHARE
-    marks_only = marks and bool((X[measured] == 0.0).all())
+    share, marks_only = mark_shares(X)
     if estimated and coords - datum < MIN_REDUNDANT:
         # too few references to show their own scatter: a precision is assumed
         stated, estimated, assumed = (MARK_PRECISION if marks_only else ASSUMED_TAPE), False, True
