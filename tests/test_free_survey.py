@@ -419,3 +419,23 @@ def test_a_free_survey_that_contradicts_itself_is_refused(free_case, tmp_path):
         f.truncate(40 << 20)  # sparse: 40 MB in name only
     with pytest.raises(DatasetError, match="larger than 32 MB"):
         read_survey_bundle(tmp_path / "b")
+
+
+@pytest.mark.parametrize("loo_mm,tape_mm,predicted_mm,exact_mm,floor_mm,weak",
+                         [(7.3, 3.9, 3.24, 1.76, 1.7, False), (19.1, 5.8, 4.77, 1.48, 3.0, True)])
+def test_references_left_out_far_beyond_their_noise_call_the_survey_weak(
+        loo_mm, tape_mm, predicted_mm, exact_mm, floor_mm, weak):
+    """From a newcomer's site (10 cameras, 12 references): the linearised prediction said
+    4.77 mm, the test frames were 9.35 mm off, and the references left out in turn landed
+    19.1 mm from their records against ±5.8 mm (3D) of their own tape — the survey's own check,
+    so it is called weak. A planned lab whose references land 7.3 mm off (tape ±3.9 mm,
+    predicted 3.24 mm; test frames 2.7 mm) is not."""
+    from vlpcal.survey.free import FreeCalibration
+
+    n = 12
+    loo = np.full(n, loo_mm / 1000) * np.linspace(0.5, 1.5, n)
+    cal = FreeCalibration([], [], [], np.zeros((0, 3)), np.zeros((n, 3)),
+                          tape_mm / 1000 / np.sqrt(3), True, 0.05, 600, {}, {}, loo,
+                          floor_mm / 1000, predicted_error=predicted_mm / 1000,
+                          exact_error=exact_mm / 1000)
+    assert cal.references_disagree is weak and cal.weakly_fixed is weak

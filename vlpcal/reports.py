@@ -382,8 +382,14 @@ def free_calibration_figure(path, result) -> None:
                          cmap=plt.get_cmap("viridis", most), vmin=0.5, vmax=most + 0.5)
         fig.colorbar(sc, ax=top, label="cameras that see the fitted LED position",
                      ticks=range(1, most + 1))
-    top.plot(result.points[:, 0], result.points[:, 1], "r^", ms=7, label="reference points")
-    for pid, p, e in zip(result.reference_ids, result.points, cal.leave_one_out):
+    recorded = np.asarray(result.points, float)
+    marks_only = bool(np.isnan(recorded).any()) and bool((recorded[np.isfinite(recorded)]
+                                                           == 0).all())
+    what = "marks" if marks_only else "reference points"
+    # where the fit put them: a mark's empty cells have no record to draw
+    placed = np.where(np.isfinite(recorded), recorded, cal.references)
+    top.plot(placed[:, 0], placed[:, 1], "r^", ms=7, label=what)
+    for pid, p, e in zip(result.reference_ids, placed, cal.leave_one_out):
         top.annotate(pid + (f" {e * 1000:.1f} mm" if np.isfinite(e) else ""), p[:2],
                      fontsize=7, xytext=(4, 4), textcoords="offset points", color="r")
     for c in dep.cameras:
@@ -396,11 +402,14 @@ def free_calibration_figure(path, result) -> None:
     top.set_title(f"{dep.name}: {cal.used_sets} free LED positions fitted of "
                   f"{result.free_sets} sets", fontsize=9)
     e = cal.leave_one_out * 1000
-    bars.bar(range(len(e)), np.nan_to_num(e), color="#2a7ab0")
+    shown = np.isfinite(e)  # a reference the rest cannot do without has no bar
+    bars.bar(np.flatnonzero(shown), e[shown], color="#2a7ab0")
     bars.axhline(cal.datum_floor * 1000, color="r", ls="--",
                  label=f"datum floor {cal.datum_floor * 1000:.1f} mm")
-    bars.axhline(cal.point_sigma * 1000 * np.sqrt(3), color="0.5", ls=":",
-                 label=f"the tape's own 3D noise {cal.point_sigma * 1000 * np.sqrt(3):.1f} mm")
+    own = cal.point_sigma * 1000 * (1.0 if marks_only else np.sqrt(3))
+    bars.axhline(own, color="0.5", ls=":",
+                 label=(f"the floor's unevenness under them {own:.1f} mm" if marks_only else
+                        f"the tape's own 3D noise {own:.1f} mm"))
     if np.isfinite(cal.predicted_error):
         bars.axhline(cal.predicted_error * 1000, color="#d07000", ls="-.",
                      label=f"fixes predicted {cal.predicted_error * 1000:.1f} mm off"
@@ -408,7 +417,7 @@ def free_calibration_figure(path, result) -> None:
     bars.set_xticks(range(len(e)), result.reference_ids, rotation=90, fontsize=7)
     bars.set_ylabel("left-out error (mm)")
     bars.legend(fontsize=7)
-    bars.set_title("each reference fitted without it, against its record", fontsize=9)
+    bars.set_title(f"each of the {what} fitted without it, against its record", fontsize=9)
     save_figure(fig, path, dpi=110)
 
 

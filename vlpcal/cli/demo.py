@@ -327,7 +327,9 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
             stops = len(route.stops)
             what += (f" along survey plan's route ({stops} stops)" if free_sets >= stops else
                      f" at {free_sets} of survey plan's {stops} stops")
-        click.echo(f"free survey: {len(refs.ids)} reference points and {free_sets} free sets "
+        click.echo(f"free survey: {len(refs.ids)} "
+                   f"{'marks' if marks is not None else 'reference points'} and {free_sets} "
+                   "free sets "
                    f"{what} → {out / 'free-survey'}; {len(sets)} of the sets have frames "
                    f"({jpegs} in all: a camera saw "
                    f"{'an LED' if wand is not None else 'the LED'}; the others are left out, "

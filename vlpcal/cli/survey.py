@@ -790,7 +790,7 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                   "reference points")
                + (f" and the wand's length (±{WAND_PRECISION:.1%})" if wand else "")
                + f" fix the room to about {cal.datum_floor * 1000:.1f} mm (the datum floor: no "
-               "calibration does better); "
+               "calibration does better on average); "
                + ("place the LED on the marks more carefully (--point-sigma says how well), or "
                   "add floor marks, to do better" if marks else
                   "measure more points, or more precisely, to do better"))
@@ -809,7 +809,16 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
         click.echo(f"predicted: fixes with these cameras {format_length(cal.predicted_error)} "
                    "off on average over the floor (the survey's adjustment, linearised; exact "
                    f"cameras: {format_length(cal.exact_error)})")
-    if cal.weakly_fixed:
+    if cal.references_disagree:
+        loo_mm = float(np.nanmean(cal.leave_one_out)) * 1000
+        allowed = math.hypot(math.sqrt(3) * cal.point_sigma, cal.predicted_error) * 1000
+        click.echo(f"warning: this survey fixes the cameras weakly: its references, each left "
+                   f"out in turn, land {loo_mm:.1f} mm from their records on average where "
+                   f"their own noise and the predicted error allow about {allowed:.1f} mm — "
+                   "cameras whose lens and pose the free LED could not tell apart; measure "
+                   "references where those cameras see, wave a wand (--wand), or give "
+                   "--test-points to see")
+    elif cal.weakly_fixed:
         from ..survey import plan_references
 
         asked = len(plan_references(dep).ids)

@@ -147,7 +147,20 @@ class FreeCalibration:
         predicted more than :data:`WEAK_FACTOR` times the error of exact cameras placed in the
         references' frame (the spot noise and the datum floor together)."""
         return bool(self.predicted_error > WEAK_FACTOR * np.hypot(self.exact_error,
-                                                                  self.datum_floor))
+                                                                  self.datum_floor)) \
+            or self.references_disagree
+
+    @property
+    def references_disagree(self) -> bool:
+        """Whether the references, each left out in turn, land farther from their records
+        than their own noise and the predicted error of fixes together allow, by more than
+        :data:`WEAK_FACTOR` on average: the survey's own check on a prediction that cannot see
+        a lens and a pose trading off where the free LED could not tell them apart."""
+        loo = self.leave_one_out[np.isfinite(self.leave_one_out)]
+        if len(loo) < 3 or not np.isfinite(self.predicted_error):
+            return False
+        allowed = np.hypot(np.sqrt(3) * self.point_sigma, self.predicted_error)
+        return bool(loo.mean() > WEAK_FACTOR * allowed)
 
 
 def _linkage(camera_ids, seen) -> None:

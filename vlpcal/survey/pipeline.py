@@ -149,6 +149,7 @@ class FreeSurveyResult:
                 "predicted_error_m": _finite(cal.predicted_error),
                 "exact_cameras_error_m": _finite(cal.exact_error),
                 "weakly_fixed": cal.weakly_fixed,
+                "references_disagree": cal.references_disagree,
                 "cameras": self.cameras, "lens": self.lens,
                 "fusion": self.fusion,
                 "precision": {"point_sigma_m": cal.point_sigma,
