@@ -229,3 +229,14 @@ def test_only_a_marks_own_zeros_define_the_frame():
     assert (share[3] == 1).all() and (share[4] == 1).all() and (share[:, 2] == 1).all()
     assert mark_shares(X[:3])[1]  # O, X and a floor mark: marks only
     assert (mark_shares(np.array([[0.0, 0, 0], [2, 0, 0], [0, 1, 0]]))[0] == 1).all()  # tape
+
+
+def test_a_wand_length_the_cameras_contradict_is_refused_naming_both():
+    """From a hostile probe: ``--wand 1e-6`` (a unit slip) ended with every camera turned
+    180° and 0.2–0.5 m off, and exit 0. The planned cameras show the ends about 0.5 m apart."""
+    rng = np.random.default_rng(7)
+    scene, true, nominal, uv_marks, uv_free, _ = _wand_case("paper-2024", rng, sets=300)
+    ids = ["O", "X", "F1", "F2", "F3"]
+    for wrong in (1e-6, 500.0, 0.1):
+        with pytest.raises(SurveyError, match=r"appear about 5\d\.\d\d cm apart .* not "):
+            calibrate_free(nominal, MARKS, uv_marks, ids, uv_free, wand=wrong)

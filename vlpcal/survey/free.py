@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import Camera
-from .calibration import estimate_precision, refine_jointly
+from .calibration import estimate_precision, format_length, refine_jointly
 from .datum import check_datum, datum_floor, unfixed_motions
 from .errors import SurveyError
 from .lens import LENS_MODELS
@@ -51,6 +51,9 @@ MARK_PRECISION = 0.002
 DEFINED_SHARE = 0.01
 #: a wand's length, relative: a bar cut and measured to a millimetre per metre
 WAND_PRECISION = 1e-3
+#: a stated wand length and the one the deployment's cameras show must agree within this
+#: factor (a unit slip is a thousand; a hand-hung install's scale is off by a few per cent)
+WAND_SCALE_RATIO = 3.0
 #: a wand's spots are told apart within this many times the fitted spots' precision
 LABEL_TOLERANCE = 5.0
 #: pixels are square: a camera's fx / fy stays the deployment's within this relative spread
@@ -317,6 +320,25 @@ def _wand_points(spots, order, labelled: bool) -> np.ndarray:
     return lab.reshape(lab.shape[0], -1, 2)
 
 
+def _check_wand_length(nominal, points, wand: float) -> None:
+    """Refuse a wand length the deployment's cameras contradict many times over (a length in
+    millimetres, or another bar's): its ends triangulated with the planned cameras, whose
+    scale a hand-hung install keeps to a few per cent, lie a median distance apart that the
+    stated length must be within :data:`WAND_SCALE_RATIO` of (``points``: C×2M×2, a set's
+    LEDs at 2m, 2m + 1)."""
+    X = _start(nominal, points, None)
+    d = np.linalg.norm(X[0::2] - X[1::2], axis=1)
+    d = d[np.isfinite(d)]
+    if len(d) < MIN_SHARED:
+        return
+    seen = float(np.median(d))
+    if not 1 / WAND_SCALE_RATIO < wand / seen < WAND_SCALE_RATIO:
+        raise SurveyError(f"the wand's two LEDs appear about {format_length(seen)} apart under "
+                          f"the deployment's cameras (the median of {len(d)} sets), not "
+                          f"{format_length(wand)}: is its length in metres, and the "
+                          "deployment this site's?")
+
+
 def _observations(uv_all, keep):
     return [(np.flatnonzero(keep[k]), uv_all[k, keep[k]]) for k in range(len(uv_all))]
 
@@ -408,6 +430,9 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     # the start: the nominal cameras, or the cameras placed from the data where those fit
     # the free sets far better (a hand-hung install), moved onto the references
     net = network_start(nominal, spots, labelled or wand is None, wand)
+    if wand is not None and (labelled or net is not None):
+        _check_wand_length(nominal, _wand_points(spots, None if labelled else net.order,
+                                                 labelled), wand)
     # the starts: the deployment's cameras, and those placed from the free sets, both moved
     # onto the references first (marks define a frame of their own)
     starts = [align_to_references(list(nominal), uv, X)]
