@@ -160,6 +160,11 @@ class Finite(click.FloatRange):
 
     name = "number"
 
+    def _describe_range(self) -> str:
+        if self.min is None and self.max is None:  # no bounds: only finite (not "x<=None")
+            return "finite"
+        return super()._describe_range()
+
     def convert(self, value, param, ctx):
         import math
 
