@@ -20,6 +20,7 @@ footprint, the heights to the sweep.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -106,7 +107,8 @@ class Reach:
     margin_px: float = MARGIN_PX
     obstacles: list = field(default_factory=list, repr=False)
     outline: object = field(default=None, repr=False)  #: the room, keep-outs included
-    _scores: dict = field(default_factory=dict, repr=False)
+    _scores: dict = field(default_factory=dict, repr=False)  #: (k, j) → PairScore
+    _spans: dict = field(default_factory=dict, repr=False)  #: k → its sightings' span
 
     @property
     def low(self) -> float:
@@ -192,12 +194,18 @@ class Reach:
         """``(L×Y×X sightings, their span)`` of a camera index (span kept), a camera's
         sightings, or a pair ``(sightings, span)`` already spanned."""
         if isinstance(x, (int, np.integer)):
-            if ("span", x) not in self._scores:
-                self._scores[("span", x)] = _span(self.seen[x])
-            return self.seen[x], self._scores[("span", x)]
+            if x not in self._spans:
+                self._spans[x] = _span(self.seen[x])
+            return self.seen[x], self._spans[x]
         if isinstance(x, tuple):
             return x
         return x, _span(x)
+
+    @cached_property
+    def views(self) -> tuple[list, list]:
+        """Each camera's floor centre and convex hull of where it sees the LED at the sweep's
+        foot (computed once: every group's remedy asks)."""
+        return [_view_centre(self, s) for s in self.seen], [_view_hull(self, s) for s in self.seen]
 
     def stop_sets(self, cell, m: int, pairs) -> np.ndarray:
         """Expected moments each of ``pairs`` (index pairs) shares at a stop at ``cell`` whose
@@ -473,10 +481,7 @@ def _remedy(r: Reach, group, main) -> Remedy:
             for g in group for h in main
             if (np.maximum.accumulate(r.score(g, h).best) >= need).any()]
     sweep_top = float(r.levels[min(tops)]) if tops else float("nan")
-    if "views" not in r._scores:  # each camera's centre and hull at the foot, once per reach
-        r._scores["views"] = ({k: _view_centre(r, r.seen[k]) for k in range(len(cams))},
-                              {k: _view_hull(r, r.seen[k]) for k in range(len(cams))})
-    centres, hulls = r._scores["views"]
+    centres, hulls = r.views
     near = sorted(((np.linalg.norm(centres[g] - centres[h]), g, h) for g in group for h in main
                    if np.isfinite(centres[g]).all() and np.isfinite(centres[h]).all()),
                   key=lambda t: t[0])
