@@ -383,8 +383,7 @@ def free_calibration_figure(path, result) -> None:
         fig.colorbar(sc, ax=top, label="cameras that see the fitted LED position",
                      ticks=range(1, most + 1))
     recorded = np.asarray(result.points, float)
-    marks_only = bool(np.isnan(recorded).any()) and bool((recorded[np.isfinite(recorded)]
-                                                           == 0).all())
+    marks_only = cal.marks_only
     what = "marks" if marks_only else "reference points"
     # where the fit put them: a mark's empty cells have no record to draw
     placed = np.where(np.isfinite(recorded), recorded, cal.references)

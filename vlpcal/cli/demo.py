@@ -160,11 +160,10 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
             raise UserError(f"--free-sets: {e}") from None
         if deployment_path is not None and free_height is None:
             # your own site: the LED carried along the route survey plan gives it
-            top = 0.4 * nominal.ceiling_height + (wand / 2 if wand is not None else 0.0)
-            top = min(round(top, 2), round(0.99 * 0.9 * min(c.position[2]
-                                                              for c in nominal.cameras), 2))
+            from ..survey.plan import free_sweep
+
             try:
-                route = free_route(nominal, (0.0, top))
+                route = free_route(nominal, free_sweep(nominal, wand))
             except SurveyError as e:
                 click.echo(f"free survey: no route ({e}); the LED wanders the room instead")
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -104,7 +104,9 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
                                  param_hint="--free-height")
     sweep = hs if heights else None
     if wand is not None and not heights:  # the wand's LEDs: from the floor to 40 % + half of it
-        sweep = (0.0, min(round(0.4 * dep.ceiling_height + wand / 2, 2), round(0.99 * top, 2)))
+        from ..survey.plan import free_sweep
+
+        sweep = free_sweep(dep, wand)
     route = None
     try:
         if wand is not None:
@@ -168,9 +170,9 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
     if plan.minutes >= 60:  # hours of work: a wand needs none of it
         try:
             from ..survey import free_route
+            from ..survey.plan import free_sweep
 
-            wand_route = free_route(dep, (0.0, min(round(0.4 * dep.ceiling_height + 0.25, 2),
-                                                   round(0.99 * top, 2))))
+            wand_route = free_route(dep, free_sweep(dep, 0.5))
         except SurveyError:
             wand_route = None
         if wand_route is not None:
@@ -749,8 +751,8 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                         "far from any consistent camera; check free/ and the deployment)") \
             from None
     cal = result.calibration
-    marks = bool(np.isnan(bundle.xyz).any())  # frame marks, not taped points
-    marks_only = marks and bool((bundle.xyz[np.isfinite(bundle.xyz)] == 0).all())
+    marks = bool(np.isnan(bundle.xyz).any())  # frame marks among the references
+    marks_only = cal.marks_only
     refs = "marks" if marks_only else "references"
     click.echo(f"free survey: {result.free_sets} sets (moments a camera saw the LED), "
                f"{cal.used_sets} used (seen by "
@@ -811,7 +813,7 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                    f"cameras: {format_length(cal.exact_error)})")
     if cal.references_disagree:
         loo_mm = float(np.nanmean(cal.leave_one_out)) * 1000
-        allowed = math.hypot(math.sqrt(3) * cal.point_sigma, cal.predicted_error) * 1000
+        allowed = cal.left_out_allowed * 1000
         click.echo(f"warning: this survey fixes the cameras weakly: its references, each left "
                    f"out in turn, land {loo_mm:.1f} mm from their records on average where "
                    f"their own noise and the predicted error allow about {allowed:.1f} mm — "

@@ -143,6 +143,9 @@ class FreeCalibration:
     wand_error: WandError | None = None  #: on held-out wand sets
     #: C×M×2 the free positions' spots as fitted (a wand's LEDs at 2m, 2m + 1, matched)
     free_uv: np.ndarray | None = None
+    #: every reference is a frame mark (:func:`mark_shares`): no tape, only the marks' heights
+    #: in doubt
+    marks_only: bool = False
 
     @property
     def weakly_fixed(self) -> bool:
@@ -162,8 +165,13 @@ class FreeCalibration:
         loo = self.leave_one_out[np.isfinite(self.leave_one_out)]
         if len(loo) < 3 or not np.isfinite(self.predicted_error):
             return False
-        allowed = np.hypot(np.sqrt(3) * self.point_sigma, self.predicted_error)
-        return bool(loo.mean() > WEAK_FACTOR * allowed)
+        return bool(loo.mean() > WEAK_FACTOR * self.left_out_allowed)
+
+    @property
+    def left_out_allowed(self) -> float:
+        """m: how far a reference left out may land from its record, by its own noise (3D)
+        and the predicted error of fixes together."""
+        return float(np.hypot(np.sqrt(3) * self.point_sigma, self.predicted_error))
 
 
 def _linkage(camera_ids, seen) -> None:
@@ -736,7 +744,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
                            estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum())
                            // per_set, rejected, spread, loo, floor, dropped, notes,
-                           assumed, predicted, exact, wand, wand_error, pts_free)
+                           assumed, predicted, exact, wand, wand_error, pts_free, marks_only)
 
 
 def _wrong_lengths(adj, pair_i, keep, wand, wand_sigma) -> np.ndarray:

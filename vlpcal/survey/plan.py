@@ -520,6 +520,15 @@ QUARTER_WORDS = {(0, 0): "top-left", (1, 0): "top-right", (0, 1): "bottom-left",
                  (1, 1): "bottom-right"}
 
 
+def free_sweep(deployment, wand: float | None = None) -> tuple[float, float]:
+    """m: the heights a free survey sweeps its LED between by default — from the floor to 40 %
+    of the ceiling, a wand's LEDs half its length higher — kept below nine tenths of the
+    lowest camera (the sweep stays under every camera's view)."""
+    top = 0.4 * deployment.ceiling_height + (wand / 2 if wand is not None else 0.0)
+    under = 0.99 * 0.9 * min(c.position[2] for c in deployment.cameras)
+    return 0.0, min(round(top, 2), round(under, 2))
+
+
 def free_route(deployment, heights=None, margin_px: float = 5.0, obstacles=None) -> FreeRoute:
     """A short walk for a free survey (issues 15, 26) that links every camera the geometry
     lets a free LED link and passes through every quarter of every camera's image: a stop in
@@ -535,7 +544,7 @@ def free_route(deployment, heights=None, margin_px: float = 5.0, obstacles=None)
 
     cams = deployment.cameras
     if heights is None:
-        heights = (0.0, round(0.4 * deployment.ceiling_height, 2))
+        heights = free_sweep(deployment)
     low, high = float(min(heights)), float(max(heights))
     at = reach(deployment, low, high, obstacles=obstacles)
     linkage = link_cameras(deployment, at=at)
