@@ -164,8 +164,12 @@ def wand_run(scene, tmp: Path, seed: int) -> dict:
         return ((placed @ rodrigues(q[:3]).T + q[3:]) - np.nan_to_num(want))[measured]
 
     q = least_squares(resid, np.zeros(6)).x
+    R, t = rodrigues(q[:3]), q[3:]
+    # the marks' frame: the calibrated cameras carried back by that motion, so that the test
+    # points' true positions are in the frame the marks define
     return {"result": res, "seconds": secs, "scene": framed,
-            "floor_cams": moved(framed.true, 1.0, rodrigues(q[:3]), q[3:])}
+            "floor_cams": moved(framed.true, 1.0, R, t),
+            "in_marks_frame": moved(res.deployment.cameras, 1.0, R.T, -R.T @ t)}
 
 
 def run_profile(name: str, seed: int, tmp: Path) -> list[dict]:
@@ -205,16 +209,18 @@ def run_profile(name: str, seed: int, tmp: Path) -> list[dict]:
     w = wand_run(scene, tmp, seed)
     wtest = Test(w["scene"], seed)
     cal = w["result"].calibration
-    free_err, floor, true_w = (wtest.error(w["result"].deployment.cameras),
-                               wtest.error(w["floor_cams"]), wtest.error(w["scene"].true))
+    free_err, room_err, floor, true_w = (
+        wtest.error(w["in_marks_frame"]), wtest.error(w["result"].deployment.cameras),
+        wtest.error(w["floor_cams"]), wtest.error(w["scene"].true))
     rows.append({"profile": name, "variant": f"wand {WAND:g} m, marks", "cameras":
                  len(scene.true), "references": len(w["result"].reference_ids),
                  "free_sets": FREE_SETS, "sets_used": cal.used_sets,
                  "calibrate_s": w["seconds"], "free_mm": free_err * 1000,
                  "floor_mm": floor * 1000, "predicted_floor_mm": cal.datum_floor * 1000,
-                 "vs_floor": free_err / floor, "tape_survey_mm": tape_err * 1000,
+                 "vs_floor": room_err / floor, "tape_survey_mm": tape_err * 1000,
                  "tape_points": len(survey), "true_mm": true_w * 1000,
-                 "vs_true": free_err / true_w, "lens": ",".join(cal.models), "stress": False,
+                 "vs_true": free_err / true_w, "room_frame_mm": room_err * 1000,
+                 "lens": ",".join(cal.models), "stress": False,
                  "wand_mean_mm": cal.wand_error.mean * 1000,
                  "wand_p95_mm": cal.wand_error.p95 * 1000,
                  "wand_held_out": cal.wand_error.sets,
@@ -278,9 +284,11 @@ def main(argv=None) -> int:
         refs = references_table(args.seed, Path(tmp), args.quick)
     with tempfile.TemporaryDirectory() as tmp:
         six = timing_six(args.seed, Path(tmp))
+    wands = [r for r in rows if r["variant"].startswith("wand")]
     print(f"Free survey: {FREE_SETS} free sets and the reference points survey plan --free "
           "asks for, default flags; mean 3D error on test frames never used, mm (one core)")
-    print(table(rows, [("profile", "profile", ""), ("variant", "LED", ""),
+    print(table([r for r in rows if r not in wands], [
+                       ("profile", "profile", ""), ("variant", "LED", ""),
                        ("cameras", "cams", "d"), ("references", "refs", "d"),
                        ("sets_used", "sets used", "d"), ("calibrate_s", "calibrate s", ".1f"),
                        ("lens", "lens", ""), ("free_mm", "free survey", ".2f"),
@@ -288,28 +296,33 @@ def main(argv=None) -> int:
                        ("predicted_floor_mm", "floor predicted", ".2f"),
                        ("vs_floor", "÷ floor", ".2f"), ("tape_survey_mm", "tape survey", ".2f"),
                        ("tape_points", "tape pts", "d"), ("true_mm", "true cams", ".2f")]))
-    wands = [r for r in rows if r["variant"].startswith("wand")]
-    print("\nno tape at all: marks O, X, F1-F3 and a wand; in the marks' frame, mm (the "
-          "floor: the true cameras in the frame the LED's placings on the marks define)")
-    print(table(wands, [("profile", "profile", ""), ("free_mm", "wand survey", ".2f"),
+    print("\nno tape at all: marks O, X, F1-F3 and a wand; mm. In the marks' frame: the one "
+          "the LED's placings on the marks define\n(their heights off by the floor's "
+          "unevenness). In the room's: the true floor's, where the true cameras in the\n"
+          "marks' frame are the marks floor")
+    print(table(wands, [("profile", "profile", ""), ("free_mm", "in marks' frame", ".2f"),
                         ("true_mm", "true cams", ".2f"), ("vs_true", "÷ true", ".2f"),
-                        ("floor_mm", "marks floor", ".2f"), ("vs_floor", "÷ floor", ".2f"),
+                        ("room_frame_mm", "in room's frame", ".2f"),
+                        ("floor_mm", "marks floor", ".2f"),
                         ("wand_mean_mm", "wand err mean", ".2f"),
                         ("wand_p95_mm", "wand err p95", ".2f"),
                         ("wand_held_out", "held-out sets", "d"),
                         ("calibrate_s", "calibrate s", ".1f"), ("lens", "lens", "")]))
+    print("wand survey within 1.2 × the true cameras, in the marks' frame, on every profile: "
+          + ("yes" if all(r["vs_true"] <= 1.2 for r in wands) else "NO"))
     print("wand survey below the 12-reference free survey and the tape survey on every "
           "profile: " + ("yes" if all(r["below_12_refs"] and r["below_tape"] for r in wands)
                          else "NO"))
     print("\npaper-2024, pole: held-out error against the references' count and precision, mm")
     print(table(refs, [("references", "refs", "d"), ("tape_mm", "tape ± mm", ".0f"),
                        ("free_mm", "free survey", ".2f"), ("floor_mm", "datum floor", ".2f")]))
-    ok = all(r["vs_floor"] <= 1.2 for r in rows if not r["stress"])
+    ok = all(r["vs_floor"] <= 1.2 for r in rows if not r["stress"] and r not in wands)
     print("\nbare: the LED at the robot's height with nothing under it, so the polished floor's "
           "mirror image\n(cheap-wide) sits a few pixels from the spot at every free position and "
           "pulls it towards the\nimage centre the same way each time: a stress case, not "
           "counted below (a robot's body hides it)")
-    print(f"within 1.2 × the datum floor on every profile and variant: {'yes' if ok else 'NO'}")
+    print("references (no wand) within 1.2 × the datum floor on every profile and variant: "
+          + ("yes" if ok else "NO"))
     total = six["spots_s"] + six["calibrate_s"]
     fast = total < 60
     print(f"{six['sets']} free sets × {six['cameras']} cameras (the demo's install, "

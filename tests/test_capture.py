@@ -473,3 +473,70 @@ def test_free_capture_then_references_calibrates_end_to_end(site, tmp_path):
     assert res.returncode == 0, res.stderr[-2000:]
     assert f"{len(bundle.free_ids)} sets already in" in res.stdout
     assert len(read_survey_bundle(survey).free_ids) == len(bundle.free_ids)
+
+
+class WandRig(MovingRig):
+    """A wand (two LEDs on a bar) waved along ``path`` (M×2×3) until a frame mark is asked
+    for; then one LED rests on the mark: the on-point hook writes the mark's id, and the
+    rig knows where each mark really lies (``marks``: id → x y z)."""
+
+    def __init__(self, scene, root: Path, path: np.ndarray, marks: dict, **kw):
+        super().__init__(scene, root, path[:, 0], **kw)
+        frames, _ = render_scene(scene, path, seed=11)
+        self.moving, self.marks = frames, marks
+
+    def frame(self, cid: str, variant: int) -> bytes:
+        if self.current.exists():
+            key = self.current.read_text().strip()
+            with self.lock:
+                if key not in self.cache:
+                    p = np.repeat([self.marks[key]], VARIANTS, axis=0)
+                    self.cache[key] = render_scene(self.scene, p, seed=zlib.crc32(
+                        key.encode()))[0]
+                return self.cache[key][cid][variant]
+        return super().frame(cid, variant)
+
+    def hook(self):
+        return f"printf '%s' {{id}} > {self.current}"
+
+
+def test_a_wand_survey_captured_live_calibrates_with_no_tape(site, tmp_path):
+    """`survey capture --wand`: the wand waved past simulated MJPEG cameras (both spots kept
+    per camera), then the LED resting on each frame mark of `survey plan --wand`'s file (a
+    burst each, the cells nobody measured left empty); `survey calibrate --wand` on the
+    bundle puts the cameras where they are, in the marks' frame."""
+    from vlpcal.sim.writers import wand_path
+    from vlpcal.survey.plan import plan_marks
+
+    scene, root = site
+    dep = deployment.load(root / "dep.yaml")
+    marks = plan_marks(dep)
+    (tmp_path / "marks.csv").write_text("point_id,x,y,z\nO,0,0,0\nX,,0,0\nF1,,,0\nF2,,,0\n"
+                                        "F3,,,0\n")
+    rig = WandRig(scene, tmp_path, wand_path(scene, 400, 0.5, 3),
+                  dict(zip(marks.ids, marks.xyz.tolist())), fps=30.0)
+    survey = tmp_path / "survey"
+    try:
+        cmd = capture_cmd(root, rig, survey, "--yes", "--delay", "0.2", "--wand", "0.5",
+                          "--duration", "25", "--rate", "8")
+        cmd[cmd.index("--points") + 1] = str(tmp_path / "marks.csv")
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    finally:
+        rig.close()
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "wave the wand (0.5 m)" in res.stdout and "place the LED on mark X" in res.stdout
+    assert "--wand 0.5 --out calibrated.yaml" in res.stdout
+    assert (survey / "points.csv").read_text().splitlines()[1:3] == ["O,0.0,0.0,0.0",
+                                                                     "X,,0.0,0.0"]
+    bursts = [d for d in (survey / "frames" / "O").iterdir()]  # every distinct frame kept
+    assert len(bursts) >= 2 and all(len(list(d.glob("*.jpg"))) == VARIANTS for d in bursts)
+    doubles = [r for r in (survey / "free" / "observations.csv").read_text().splitlines()[1:]]
+    assert len(doubles) > len({tuple(r.split(",")[:2]) for r in doubles})  # two spots per view
+    out = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(root / "dep.yaml"),
+                                    "--survey", str(survey), "--wand", "0.5",
+                                    "--out", str(tmp_path / "cal.yaml"), "-q"])
+    assert out.exit_code == 0, out.output
+    cal = deployment.load(tmp_path / "cal.yaml")
+    o = marks.xyz[0]
+    for c, t in zip(cal.cameras, scene.true):  # the marks' frame: O the origin, x along x
+        assert np.linalg.norm(np.subtract(c.position, np.subtract(t.position, o))) < 0.02

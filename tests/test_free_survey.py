@@ -391,7 +391,8 @@ def test_a_free_survey_that_contradicts_itself_is_refused(free_case, tmp_path):
     true, refs, measured, free, uv_r, uv_f = free_case
     ids = [f"R{i}" for i in range(len(refs))]
     room = [[0, 0], [2.8, 0], [2.8, 2.4], [0, 2.4]]
-    with pytest.raises(SurveyError, match="--free-height 0: .* the LED was not at that height"):
+    with pytest.raises(SurveyError, match=r"a free height of 0 m: .* the \d+ reference points "
+                                          "come out .* the LED was not at that height"):
         calibrate_free(true, measured, uv_r, ids, uv_f, free_height=0.0, room=room)
     # the paper's line of cameras with C1 and C2 swapped in free/ only: no camera pose fits
     from vlpcal.sim.profiles import get_profile

@@ -77,9 +77,6 @@ KNOWN_GAPS = {
     "weak); the wand's lengths fix it",
     ("corridor", "references"): "a line of cameras linked pair by pair: flagged weak (fixes "
     "predicted 4.4 mm off where exact cameras give 1.8 mm); measured 2.8 × the true cameras",
-    ("trapezoid", "references"): "slanted walls cut the outer cameras' views: 7 × the true "
-    "cameras (11.6 mm), not flagged",
-    ("trapezoid", "wand"): "3.2 × the true cameras (4.5 mm)",
 }
 CASES = [pytest.param(room, how, id=f"{room}-{how}",
                       marks=[pytest.mark.xfail(strict=True, reason=KNOWN_GAPS[room, how])]

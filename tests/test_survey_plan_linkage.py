@@ -215,7 +215,8 @@ def test_a_taller_sweep_is_named_where_the_shared_view_is_higher():
 
 def test_a_wand_survey_plans_frame_marks_with_empty_cells(tmp_path):
     """`survey plan --wand`: O, X and three floor marks, each in two cameras' view wherever
-    it lands by eye, O and X far apart along x, the marks spread; the file's unmeasured cells
+    it lands by eye, O where the most cameras see it and X far ahead of it along x, the marks
+    spread; the file's unmeasured cells
     empty; the wand waved to 40 % of the ceiling plus half its length."""
     from vlpcal.datasets import read_points
 
@@ -228,8 +229,12 @@ def test_a_wand_survey_plans_frame_marks_with_empty_cells(tmp_path):
         assert (np.stack([c.project(p, margin=5.0)[2] for c in dep.cameras]).sum(axis=0)
                 >= 2).all(), (dx, dy)
     o, x = marks.xyz[:2]
-    assert o[1] == x[1] and x[0] - o[0] > 0.8 * 6
-    assert hull_share(marks.xyz, dep) > 0.7
+    assert o[1] == x[1] and x[0] - o[0] > 0.4 * 6  # half the marks' zone ahead of O
+    views = marks.seen.sum(axis=0)
+    assert views[0] == views.max() >= 3  # the origin where the cameras agree best
+    # O and X on a middle row, the floor marks spread over the room in both directions
+    assert (np.ptp(marks.xyz[:, :2], axis=0) > 0.7 * np.array([6, 4])).all()
+    assert hull_share(marks.xyz, dep) > 0.5
     save(dep, tmp_path / "d.yaml")
     res = CliRunner().invoke(main, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--wand",
                                     "0.5", "--out", str(tmp_path / "marks.csv")])
@@ -290,3 +295,18 @@ def test_the_map_labels_do_not_collide(tmp_path):
         for i, a in enumerate(boxes):
             for b in boxes[i + 1:]:
                 assert not a.overlaps(b), (a, b)
+
+
+def test_a_plan_never_replaces_a_surveys_measured_points(tmp_path):
+    """From a hostile probe: `survey plan -o bundle/points.csv` wrote the plan over the
+    measurements of a survey bundle."""
+    dep = issue_office()
+    save(dep, tmp_path / "d.yaml")
+    bundle = tmp_path / "survey"
+    (bundle / "frames" / "P1").mkdir(parents=True)
+    record = "point_id,x,y,z\nP1,1.002,2.001,0\n"
+    (bundle / "points.csv").write_text(record)
+    res = CliRunner().invoke(main, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--wand",
+                                    "0.5", "--out", str(bundle / "points.csv")])
+    assert res.exit_code == 2 and "is a survey's record (it has frames beside it)" in res.output
+    assert (bundle / "points.csv").read_text() == record

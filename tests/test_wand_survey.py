@@ -214,6 +214,15 @@ def test_simulate_and_calibrate_a_wand_survey_from_the_command_line(tmp_path):
     report = json.loads(out.with_suffix(".report.json").read_text())
     assert report["wand"]["held_out_sets"] >= 20
     assert report["wand"]["length_error_mean_m"] < 0.003
+    assert abs(report["plan_scale"] - 1) < 0.02 and not report["scale_doubtful"]
+    # a wand length twice the bar's (within the 3× a unit slip is refused at): every camera
+    # twice as high, said, not refused (a plain bundle adjustment would take it)
+    run = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(sim / "nominal.yaml"),
+                                    "--survey", str(sim / "free-survey"), "--wand", "1.0",
+                                    "--out", str(tmp_path / "twice.yaml"), "-q"])
+    assert run.exit_code == 0, run.output
+    assert "warning: the calibrated cameras stand 2.00 × as high above the floor as the " \
+           "deployment's" in run.output and "check the wand's length (1.00 m)" in run.output
 
 
 def test_only_a_marks_own_zeros_define_the_frame():
@@ -240,3 +249,97 @@ def test_a_wand_length_the_cameras_contradict_is_refused_naming_both():
     for wrong in (1e-6, 500.0, 0.1):
         with pytest.raises(SurveyError, match=r"appear about 5\d\.\d\d cm apart .* not "):
             calibrate_free(nominal, MARKS, uv_marks, ids, uv_free, wand=wrong)
+
+
+def _spot_jpeg(u, v, shape=(120, 160)):
+    """A frame with one LED spot centred at pixel (u, v)."""
+    import cv2
+
+    y, x = np.mgrid[:shape[0], :shape[1]]
+    img = 20 + 200 * np.exp(-((x - u) ** 2 + (y - v) ** 2) / (2 * 1.5 ** 2))
+    return cv2.imencode(".jpg", img.astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes()
+
+
+def test_a_burst_of_frames_is_one_sighting_averaged_without_its_stray_frame(tmp_path):
+    """The LED rests on a mark for a burst of frames (frames/<point>/<camera>/*.jpg): their
+    spots are averaged, a frame that caught something else is left out; a camera may have a
+    frame or a burst at a point, not both."""
+    from vlpcal.datasets import write_survey_bundle
+    from vlpcal.deployment import Deployment
+    from vlpcal.detection import detect_spots
+    from vlpcal.geometry import paper_rig
+    from vlpcal.survey import survey_spots
+
+    rest = [_spot_jpeg(50.3, 40.2), _spot_jpeg(50.5, 40.0), _spot_jpeg(90.0, 90.0),
+            _spot_jpeg(50.4, 40.1)]
+    root = write_survey_bundle(tmp_path / "b", ["P1", "P2"], [[1, 1, 0], [2, 1, 0]],
+                               {"C1": [rest, _spot_jpeg(70.0, 60.0)], "C2": [None, None]})
+    assert sorted(p.name for p in (root / "frames" / "P1" / "C1").iterdir()) == [
+        "001.jpg", "002.jpg", "003.jpg", "004.jpg"]
+    assert (root / "frames" / "P2" / "C1.jpg").is_file()
+    bundle = read_survey_bundle(root)
+    assert len(bundle.frames_at("P1", "C1")) == 4 and len(bundle.frames_at("P2", "C1")) == 1
+    assert bundle.frames_at("P1", "C2") == []
+    dep = Deployment("lab", 2.3, [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]], paper_rig())
+    uv, _ = survey_spots(dep, bundle)
+    each = detect_spots(rest, dep.detector, dep.detector_settings, shape=(120, 160)).uv
+    assert np.allclose(uv[0, 0], each[[0, 1, 3]].mean(axis=0))
+    assert np.allclose(uv[0, 1], [70.0, 60.0], atol=0.05)
+    assert np.isnan(uv[1]).all()
+    (root / "frames" / "P2" / "C1").mkdir()
+    (root / "frames" / "P2" / "C1" / "001.jpg").write_bytes(_spot_jpeg(70, 60))
+    with pytest.raises(DatasetError, match="camera C1 has both a frame and a burst folder"):
+        read_survey_bundle(root)
+
+
+def test_a_burst_that_mostly_misses_the_led_is_no_sighting():
+    from vlpcal.survey.spots import burst_spot
+
+    nan = np.nan
+    assert np.isnan(burst_spot([[1.0, 2.0], [nan, nan], [nan, nan]])).all()
+    assert np.allclose(burst_spot([[1.0, 2.0], [1.2, 2.2], [nan, nan]]), [1.1, 2.1])
+    assert np.allclose(burst_spot([[3.0, 4.0]]), [3.0, 4.0])
+
+
+def test_marks_anywhere_in_the_room_calibrate_and_carry_the_room_into_their_frame(tmp_path):
+    """The plan's deployment is in the room's frame; the marks put the origin where the
+    cameras see it best (mid-room). The free positions are judged inside the room moved into
+    the marks' frame (a fit was refused as "outside the room" when O was not near the room's
+    origin), and the calibrated room is the plan's moved there."""
+    import math
+
+    from vlpcal.datasets import read_survey_bundle as read
+    from vlpcal.sim.scene import in_frame
+    from vlpcal.sim.writers import deployment_of, simulate_free_survey
+    from vlpcal.survey import calibrate_free_survey, survey_spots, wand_spots
+    from vlpcal.survey.plan import plan_marks
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    marks = plan_marks(deployment_of(scene, "nominal"))
+    o = marks.xyz[0]
+    assert 0.25 < o[0] / 3.6 < 0.75 and 0.25 < o[1] / 1.8 < 0.75  # mid-room
+    framed = in_frame(scene, o[:2], 0.0)
+    simulate_free_survey(framed, tmp_path / "s", marks.xyz - [o[0], o[1], 0], 600, seed=0,
+                         wand=0.5, marks=(marks.ids, np.isfinite(marks.recorded)))
+    plan = deployment_of(scene, "nominal")
+    b = read(tmp_path / "s")
+    uv, _ = survey_spots(plan, b)
+    ws = wand_spots(plan, b)
+    res = calibrate_free_survey(plan, b.xyz, uv, b.point_ids, ws.uv, wand=0.5)
+    room = np.asarray(res.deployment.room)
+    assert np.allclose(room, np.asarray(plan.room) - o[:2], atol=0.03), room
+    for cal, true in zip(res.deployment.cameras, framed.true):
+        assert np.linalg.norm(np.subtract(cal.position, true.position)) < 0.02
+    assert math.isclose(res.calibration.room[0][0], room[0][0])
+
+
+def test_a_survey_of_one_led_is_refused_as_a_wands():
+    """From a hostile probe: a one-LED free survey calibrated with a wand's length exited 0
+    with "0 held-out sets … ±nan mm"."""
+    rng = np.random.default_rng(7)
+    _, _, nominal, uv_marks, uv_free, _ = _wand_case("paper-2024", rng, sets=300)
+    one = uv_free.copy()
+    one[:, :, 1] = np.nan
+    with pytest.raises(SurveyError, match=r"0 of the 300 free sets show the wand's two LEDs "
+                                          r"to two cameras .* a survey of one LED"):
+        calibrate_free(nominal, MARKS, uv_marks, ["O", "X", "F1", "F2", "F3"], one, wand=0.5)

@@ -22,9 +22,11 @@ import numpy as np
 from .deployment import Deployment
 from .detection import detect_spots
 from .survey import MIN_POINTS_POSE, SurveyError, fit_camera, survey_spots
+from .survey.spots import REST_FRAMES
 
-#: frame sets grabbed per point, and sets skipped first (frames of the LED's old place)
-BURST, SETTLE = 5, 1
+#: frame sets grabbed per point (all kept: the calibration averages their spots), and sets
+#: skipped first (frames of the LED's old place)
+BURST, SETTLE = REST_FRAMES, 1
 #: px: a spot that wanders more than this over a burst (the LED moved, a flicker) is unsteady
 STEADY_PX = 0.5
 
@@ -41,7 +43,10 @@ class CameraView:
     blobs: int  #: most blobs competing in a frame (> 1: reflection or lamp)
     spread_px: float  #: RMS scatter of the spot over the burst
     verdict: str  #: ok, not seen, two blobs, unsteady, no frames, or a detection reason
-    frame: bytes | None  #: the stored frame: the one whose spot is nearest the median
+    frame: bytes | None  #: the frame whose spot is nearest the median
+    #: what is stored: every distinct frame of a burst that saw the LED (its spots are
+    #: averaged when calibrating), else ``frame``
+    stored: bytes | list | None = None
 
     def line(self) -> str:
         if self.uv is None:
@@ -68,8 +73,9 @@ def summarise(camera, frames: list, dep: Deployment, stopped: str | None = None)
         reasons = [r for r, good in zip(spots.reasons, ok) if not good]
         reason = max(set(reasons), key=reasons.count) if reasons else "no_spot"
         verdict = "not seen" if reason in ("no_spot", None) else reason.replace("_", " ")
+        first = min(distinct)  # by content
         return CameraView(camera.id, len(distinct), None, float(np.nanmax(spots.peak)),
-                          False, blobs, math.nan, verdict, min(distinct))  # by content
+                          False, blobs, math.nan, verdict, first, first)
     med = np.median(uv[ok], axis=0)
     dist = np.where(ok, np.linalg.norm(uv - med, axis=1), np.inf)
     # nearest the median; a tie (two frames either side) goes by content, not arrival order,
@@ -81,9 +87,11 @@ def summarise(camera, frames: list, dep: Deployment, stopped: str | None = None)
         verdict = "two blobs" if blobs == 2 else f"{blobs} blobs"
     elif spread > STEADY_PX:
         verdict = "unsteady"
+    # the burst stored in content order, so that the same frames always store alike
+    burst = sorted(distinct) if len(distinct) > 1 else distinct[best]
     return CameraView(camera.id, len(distinct), (float(med[0]), float(med[1])),
                       float(spots.peak[best]), bool(spots.saturated[best]), blobs, spread,
-                      verdict, distinct[best])
+                      verdict, distinct[best], burst)
 
 
 class Burst:
@@ -307,8 +315,11 @@ class CaptureSession:
             if pid in done or pid in self.appender.skipped():
                 i += 1
                 continue
-            where = f"{pid} ({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f} m)"
-            step = self.ask("place", f"[{i + 1}/{len(self.plan)}] place the LED at {where}")
+            if np.isnan(xyz).any():  # a frame mark: where it lies is what it records
+                place = f"on mark {pid} (where survey plan's map shows it)"
+            else:
+                place = f"at {pid} ({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f} m)"
+            step = self.ask("place", f"[{i + 1}/{len(self.plan)}] place the LED {place}")
             if step.action == "go":
                 step = self._burst_until_decided(pid, xyz)
             elif step.action == "extra":
@@ -353,7 +364,7 @@ class CaptureSession:
             if step.action == "redo":
                 continue
             if step.action in ("accept", "go"):
-                self.appender.accept(pid, xyz, {v.camera: v.frame for v in views})
+                self.appender.accept(pid, xyz, {v.camera: v.stored for v in views})
                 self.spots[pid] = self._spots_of(views)
                 self.recent.append(pid)
                 seen = sum(v.uv is not None for v in views)
@@ -423,21 +434,25 @@ class FreeRecorder:
     tools ("C3: 412 sightings, bottom-left quarter empty")."""
 
     def __init__(self, dep: Deployment, grouper, appender, rate: float, say: Callable,
-                 report_every: float = 5.0, overlapping: set | None = None):
+                 report_every: float = 5.0, overlapping: set | None = None,
+                 wand: bool = False):
         self.dep, self.grouper, self.appender = dep, grouper, appender
         self.rate, self.say, self.report_every = rate, say, report_every
         self.overlapping = overlapping
+        self.wand = wand  #: a wand's two LEDs in every frame: up to two spots kept
 
     def spots(self) -> np.ndarray:
-        """Every committed set's spots so far, ``C×M×2`` (NaN: not seen)."""
+        """Every committed set's spots so far, ``C×MK×2`` (NaN: not seen; K = 2 with a wand:
+        each LED a sighting of its own, for the coverage)."""
         ids = self.appender.set_ids
-        uv = np.full((len(self.dep.cameras), len(ids), 2), np.nan)
+        k_max = 2 if self.wand else 1
+        uv = np.full((len(self.dep.cameras), len(ids), k_max, 2), np.nan)
         col = {s: i for i, s in enumerate(ids)}
         row = {c.id: k for k, c in enumerate(self.dep.cameras)}
-        for (sid, cid), p in self.appender.spots.items():
+        for (sid, cid), ps in self.appender.spots.items():
             if cid in row:
-                uv[row[cid], col[sid]] = p
-        return uv
+                uv[row[cid], col[sid], :len(ps[:k_max])] = ps[:k_max]
+        return uv.reshape(len(self.dep.cameras), -1, 2)
 
     def report(self, final: bool = False) -> None:
         from .survey.coverage import camera_words, pair_words
@@ -450,18 +465,28 @@ class FreeRecorder:
             self.say(f"  {camera_words(cam, uv[k], self.dep.room)}")
 
     def _spots_in(self, frames: dict) -> dict:
-        """camera id → (u, v) of the one clear spot in its frame (none: not in the dict)."""
+        """camera id → [(u, v)]: the one clear spot in its frame, or a wand's spots (one or
+        two; which is which is found when calibrating); none: not in the dict."""
+        from .detection import detect_several
+
         out = {}
         for cam in self.dep.cameras:
             frame = frames.get(cam.id)
             if frame is None:
+                continue
+            if self.wand:
+                found, why = detect_several([frame], 2, "blob", self.dep.detector_settings,
+                                            shape=(cam.height, cam.width), reasons=True)
+                ok = np.isfinite(found[0]).all(axis=1)
+                if ok.any() and why[0] is None:
+                    out[cam.id] = [(float(u), float(v)) for u, v in found[0][ok]]
                 continue
             found = detect_spots([frame], self.dep.detector, self.dep.detector_settings,
                                  shape=(cam.height, cam.width))
             uv = found.uv[0]
             blobs = int(found.blobs[0]) if len(found.blobs) else 0
             if np.isfinite(uv).all() and found.reasons[0] is None and blobs <= 1:
-                out[cam.id] = (float(uv[0]), float(uv[1]))
+                out[cam.id] = [(float(uv[0]), float(uv[1]))]
         return out
 
     def run(self, duration: float, max_sets: int, stop: Callable = lambda: False) -> int:

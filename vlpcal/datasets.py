@@ -5,6 +5,7 @@ The one module that knows both layouts::
     survey bundle                         locate frames folder
     points.csv   point_id,x,y,z (m)       <frame_id>/<camera_id>.jpg
     frames/<point_id>/<camera_id>.jpg     (observations: frame_id,camera_id,u,v)
+      or <camera_id>/*.jpg (a burst)
     observations.csv  point_id,camera_id,u,v   (optional)
 
 A missing JPEG means the camera did not see the LED there. Writers build the whole folder
@@ -50,6 +51,8 @@ def _check_id(value: str, where: str) -> str:
 
 #: bytes: a frame file larger than this is not a camera's JPEG (a 4K JPEG is a few MB)
 MAX_FRAME_BYTES = 32 * 2 ** 20
+#: frames read from one burst folder (the LED resting on a point: seconds of frames)
+MAX_BURST = 100
 
 
 def read_frame(path, missing=b""):
@@ -155,14 +158,21 @@ def _staged(root: Path, overwrite: bool):
 
 
 def _write_jpegs(frames: dict, ids: list, folder_of) -> None:
-    """``frames``: camera id → JPEG bytes or None per id; written to ``folder_of(id)/cam.jpg``."""
+    """``frames``: camera id → per id JPEG bytes, None, or a burst (a list of JPEG bytes: the
+    LED resting there); written to ``folder_of(id)/cam.jpg`` or ``folder_of(id)/cam/k.jpg``."""
     for cam, jpegs in frames.items():
-        name = f"{_check_id(str(cam), 'camera id')}.jpg"
+        name = _check_id(str(cam), "camera id")
         for i, data in zip(ids, jpegs):
-            if data is not None:
-                folder = folder_of(i)
+            if data is None:
+                continue
+            folder = folder_of(i)
+            if isinstance(data, (list, tuple)):
+                (folder / name).mkdir(parents=True, exist_ok=True)
+                for k, one in enumerate(data):
+                    (folder / name / f"{k + 1:03d}.jpg").write_bytes(one)
+            else:
                 folder.mkdir(parents=True, exist_ok=True)
-                (folder / name).write_bytes(data)
+                (folder / f"{name}.jpg").write_bytes(data)
 
 
 def _fmt(x: float) -> str:
@@ -190,7 +200,9 @@ class SurveyBundle:
     root: Path
     point_ids: list[str]
     xyz: np.ndarray  # N×3 measured positions, m
-    frames: dict = field(default_factory=dict)  # (point_id, camera_id) → Path
+    #: (point_id, camera_id) → Path: a frame, or a burst's folder of frames (the LED resting
+    #: there: their spots are averaged)
+    frames: dict = field(default_factory=dict)
     observations: dict = field(default_factory=dict)  # (point_id, camera_id) → (u, v)
     #: the free survey (issue 15): moments when the LED was somewhere unknown, in order
     free_ids: list = field(default_factory=list)
@@ -208,10 +220,15 @@ class SurveyBundle:
         path = self.free_frames.get((set_id, camera_id))
         return read_frame(path) if path else None
 
-    def frame(self, point_id: str, camera_id: str) -> bytes | None:
-        """The JPEG bytes the camera took at the point (None: not seen; b"": unreadable)."""
+    def frames_at(self, point_id: str, camera_id: str) -> list:
+        """The JPEG bytes the camera took at the point: one frame, a burst's (in order), or
+        none (not seen); b"": unreadable."""
         path = self.frames.get((point_id, camera_id))
-        return read_frame(path) if path else None
+        if path is None:
+            return []
+        if path.is_dir():
+            return [read_frame(f) for f in sorted(path.glob("*.jpg"))[:MAX_BURST]]
+        return [read_frame(path)]
 
 
 def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
@@ -308,8 +325,17 @@ def read_survey_bundle(root) -> SurveyBundle:
                 continue
             if d.name not in known:
                 raise DatasetError(f"{d}: point {d.name!r} is not in points.csv")
-            for f in sorted(d.glob("*.jpg")):
-                frames[(d.name, f.stem)] = f
+            for f in sorted(d.iterdir()):
+                if f.suffix == ".jpg" and not f.is_dir():
+                    key = (d.name, f.stem)
+                elif f.is_dir() and not f.name.startswith(".") and any(f.glob("*.jpg")):
+                    key = (d.name, _check_id(f.name, f"{f}: camera id"))  # a burst
+                else:
+                    continue
+                if key in frames:
+                    raise DatasetError(f"{d}: camera {key[1]} has both a frame and a burst "
+                                       f"folder (expected one)")
+                frames[key] = f
     observations = {}
     opath = root / "observations.csv"
     if opath.is_file():
@@ -575,8 +601,8 @@ class SurveyAppender:
                 if self.journal.exists() else [])
 
     def accepted(self) -> tuple[list[str], np.ndarray]:
-        """Ids and positions committed so far, in order."""
-        return read_points(self.points, allow_empty=True)
+        """Ids and positions committed so far, in order (NaN: a mark's unmeasured cell)."""
+        return read_points(self.points, allow_empty=True, unmeasured=True)
 
     def skipped(self) -> set:
         """Ids the person chose to skip (and has not captured since)."""
@@ -591,7 +617,8 @@ class SurveyAppender:
 
     # -- changes ---------------------------------------------------------------------------
     def accept(self, point_id: str, xyz, frames: dict) -> None:
-        """Commit a point: ``frames`` camera id → JPEG bytes (cameras without one: none)."""
+        """Commit a point: ``frames`` camera id → JPEG bytes, or a burst's list of them
+        (cameras without one: none)."""
         pid = _check_id(str(point_id), "point id")
         if pid in self.accepted()[0]:
             raise DatasetError(f"{self.points}: point {pid!r} is already in the survey")
@@ -599,14 +626,21 @@ class SurveyAppender:
         shutil.rmtree(stage, ignore_errors=True)
         stage.mkdir()
         for cid, data in frames.items():
-            if data is not None:
-                with open(stage / f"{_check_id(str(cid), 'camera id')}.jpg", "wb") as f:
-                    f.write(data)
+            if data is None:
+                continue
+            name = _check_id(str(cid), "camera id")
+            files = [(stage / f"{name}.jpg", data)]
+            if isinstance(data, (list, tuple)):
+                (stage / name).mkdir()
+                files = [(stage / name / f"{k + 1:03d}.jpg", one) for k, one in enumerate(data)]
+            for path, one in files:
+                with open(path, "wb") as f:
+                    f.write(one)
                     os.fsync(f.fileno())
         self._log("commit", pid)
         os.replace(stage, self.frames / pid)
-        with open(self.points, "a", newline="") as f:
-            csv.writer(f).writerow([pid, *map(_fmt, xyz)])
+        with open(self.points, "a", newline="") as f:  # a mark's unmeasured cell: empty
+            csv.writer(f).writerow([pid, *(_fmt(x) if np.isfinite(x) else "" for x in xyz)])
             f.flush()
             os.fsync(f.fileno())
         self._log("accept", pid)
@@ -629,7 +663,8 @@ class SurveyAppender:
         from .writing import OutputSet
 
         with OutputSet(self.points) as (tmp,):
-            _write_csv(tmp, POINTS_COLUMNS, [[i, *map(_fmt, p)] for i, p in rows])
+            _write_csv(tmp, POINTS_COLUMNS, [[i, *(_fmt(x) if np.isfinite(x) else ""
+                                                   for x in p)] for i, p in rows])
 
     def _log(self, event: str, pid: str) -> None:
         with open(self.journal, "a", encoding="utf-8") as f:
@@ -681,20 +716,25 @@ class FreeAppender:
             with open(self.path, "r+b") as f:
                 f.truncate(data.rfind(b"\n") + 1)
                 os.fsync(f.fileno())
-        self.spots, self.set_ids = read_observations(self.path, "set_id")
+        found, self.set_ids = read_observations(self.path, "set_id", several=True)
+        #: (set id, camera id) → its spots [(u, v)]: one, or a wand's two
+        self.spots = {k: [(u, v) for u, v, _ in spots] for k, spots in found.items()}
         numbers = [int(s[1:]) for s in self.set_ids if re.fullmatch(r"F\d+", s)]
         self._next = max(numbers, default=0) + 1
 
     def add(self, spots: dict) -> str:
-        """Commit one moment: ``spots`` camera id → (u, v) px. Returns its set id."""
+        """Commit one moment: ``spots`` camera id → [(u, v)] px, one spot or a wand's two (a
+        bare (u, v): one). Returns its set id."""
         sid = f"F{self._next:06d}"
-        rows = [[sid, _check_id(str(cid), "camera id"), _fmt(u), _fmt(v)]
-                for cid, (u, v) in spots.items()]
+        each = {_check_id(str(cid), "camera id"):
+                [tuple(map(float, p)) for p in (uv if np.ndim(uv) == 2 else [uv])]
+                for cid, uv in spots.items()}
+        rows = [[sid, cid, _fmt(u), _fmt(v)] for cid, ps in each.items() for u, v in ps]
         with open(self.path, "a", newline="", encoding="utf-8") as f:
             csv.writer(f).writerows(rows)
             f.flush()
             os.fsync(f.fileno())
         self._next += 1
         self.set_ids.append(sid)
-        self.spots.update({(sid, r[1]): tuple(spots[r[1]]) for r in rows})
+        self.spots.update({(sid, cid): ps for cid, ps in each.items()})
         return sid

@@ -133,6 +133,11 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         raise UserError(f"{out}: cannot make its folder ({e.strerror})") from None
     if out.is_dir():
         raise UserError(f"{out}: is a folder (expected a points.csv file to write)")
+    beside = [d for d in ("frames", "free", "observations.csv") if (out.parent / d).exists()]
+    if out.exists() and beside:
+        raise UserError(f"{out}: is a survey's record (it has {', '.join(beside)} beside it); "
+                        "the plan would replace its measurements: write the plan to another "
+                        "file")
     out = _output_file(out, inputs=(deployment_path,), beside=(".png",))
     from ..writing import OutputSet
 
@@ -259,8 +264,9 @@ def _echo_free_plan(plan, route, out, wand=None) -> None:
 @click.option("--on-point", "on_point", default=None, metavar="COMMAND",
               help="Shell command run before each point, e.g. to move a rig: {id}, {x}, {y}, "
                    "{z} are replaced (quoted), and VLPCAL_POINT_ID, _X, _Y, _Z are set.")
-@click.option("--burst", default=5, show_default=True, type=click.IntRange(1, 100),
-              help="Frame sets grabbed per point.")
+@click.option("--burst", default=None, type=click.IntRange(1, 100),
+              help="Frame sets grabbed per point, all kept (the calibration averages their "
+                   "spots).  [default: 10]")
 @click.option("--check-every", default=5, show_default=True, type=click.IntRange(0),
               help="Show the per-camera calibration check every N points (0: at the end).")
 @click.option("--free", is_flag=True,
@@ -273,8 +279,12 @@ def _echo_free_plan(plan, route, out, wand=None) -> None:
 @click.option("--free-sets", default=1800, show_default=True, type=click.IntRange(10, 100000),
               help="With --free: moments to record in all (a resumed survey counts those it "
                    "has).")
+@click.option("--wand", default=None, type=Finite(1e-6, 10000.0), metavar="LENGTH",
+              help="A wand survey (implies --free): two LEDs LENGTH m apart on a rigid bar "
+                   "waved through the room, both spots kept per camera; then the LED on each "
+                   "frame mark of --points (survey plan --wand's file).")
 def survey_capture(deployment_path, points_path, survey_path, cameras, yes, delay, on_point,
-                   burst, check_every, free, rate, duration, free_sets):
+                   burst, check_every, free, rate, duration, free_sets, wand):
     """Capture a survey live: walk through the points while the cameras stream.
 
     At each point: place the LED, press Enter; a short burst is grabbed from every camera and
@@ -288,7 +298,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     With --free, first the free survey: carry the LED through the room (the route of `survey
     plan --free`) while every camera streams; every few seconds each camera says how much of
     its image the LED has crossed ("C3: bottom-left quarter empty") and which pairs have seen
-    it together. Then the --points are captured as reference points.
+    it together. Then the --points are captured as reference points. With --wand, the wand
+    is waved instead (both its spots kept), and --points are its frame marks.
 
     \b
     Example:
@@ -299,13 +310,15 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     import subprocess
     import sys
 
-    from ..capture import Burst, CaptureSession, Step
+    from ..capture import BURST, Burst, CaptureSession, Step
     from ..datasets import DatasetError, SurveyAppender, read_points
     from ..live import LiveGrouper
 
+    burst = BURST if burst is None else burst
+    free = free or wand is not None
     dep = _load_deployment(deployment_path)
-    try:
-        ids, xyz = read_points(points_path)
+    try:  # a free survey's references may be frame marks, with empty cells
+        ids, xyz = read_points(points_path, unmeasured=free)
     except DatasetError as e:
         raise UserError(str(e)) from None
     _check_survey_positions(points_path, dep, xyz, ids)
@@ -383,7 +396,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
         import re
         import shlex
 
-        values = {"id": pid, "x": f"{p[0]:.6g}", "y": f"{p[1]:.6g}", "z": f"{p[2]:.6g}"}
+        values = {"id": pid, **{a: f"{v:.6g}" if math.isfinite(v) else ""  # (a mark's: "")
+                                for a, v in zip("xyz", p)}}
         cmd = re.sub(r"\{(id|x|y|z)\}", lambda m: shlex.quote(values[m.group(1)]), on_point)
         env = {**os.environ, **{f"VLPCAL_POINT_{k.upper()}": v for k, v in values.items()}}
         res = subprocess.run(cmd, shell=True, env=env)
@@ -396,7 +410,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     if free:
         try:
             free_app = _capture_free(dep, grouper, survey_path, rate, duration, free_sets, yes,
-                                     say)
+                                     say, wand)
         except KeyboardInterrupt:
             grouper.stop()
             click.echo(f"\ninterrupted: the free sets so far are safe in {survey_path}; run the "
@@ -432,12 +446,13 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
         + (f"; {len(left)} still to do (run again to resume)" if left else ""))
     if not left:
         say(f"next: vlpcal survey calibrate -d {deployment_path} --survey {survey_path} "
-            "--out calibrated.yaml")
+            + (f"--wand {wand:g} " if wand is not None else "") + "--out calibrated.yaml")
 
 
-def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattended, say):
-    """The free part of ``survey capture --free``: record until done, Enter, or the time is
-    up; the sets are on disk as they come. Returns the appender."""
+def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattended, say,
+                  wand=None):
+    """The free part of ``survey capture --free`` (``--wand``: a wand's): record until done,
+    Enter, or the time is up; the sets are on disk as they come. Returns the appender."""
     import select
     import sys
     import time
@@ -454,7 +469,8 @@ def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattende
         overlapping = {p for stop in free_route(dep).pairs for p in stop}
     except SurveyError:
         overlapping = None
-    recorder = FreeRecorder(dep, grouper, app, rate, say, overlapping=overlapping)
+    recorder = FreeRecorder(dep, grouper, app, rate, say, overlapping=overlapping,
+                            wand=wand is not None)
     have = len(app.set_ids)
     if have >= max_sets:
         say(f"free survey: {have} sets already in {survey_path} (--free-sets {max_sets})")
@@ -463,8 +479,11 @@ def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattende
     if have:
         say(f"resuming the free survey: {have} sets already in {survey_path}")
     interactive = not unattended and sys.stdin.isatty()
-    say(f"free survey: carry the LED through the room, sweeping it up and down (the route of "
-        f"`vlpcal survey plan --free`); recording {rate:g} sets/s for up to {duration:g} s"
+    what = (f"wave the wand ({wand:g} m) through the room, turning it as you go (the route of "
+            "`vlpcal survey plan --wand`)" if wand is not None else
+            "carry the LED through the room, sweeping it up and down (the route of `vlpcal "
+            "survey plan --free`)")
+    say(f"free survey: {what}; recording {rate:g} sets/s for up to {duration:g} s"
         + (", Enter stops sooner" if interactive else ""))
 
     def enter_pressed() -> bool:
@@ -480,7 +499,7 @@ def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattende
     grouper.deadline = None
     recorder.report(final=True)
     say(f"{n} free sets recorded now, {len(app.set_ids)} in {survey_path}; next: the "
-        "reference points")
+        + ("frame marks" if wand is not None else "reference points"))
     return app
 
 
@@ -837,6 +856,13 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                        f"({r['moved_share']:.0%} of its distance to the free LED) and turned "
                        f"{r['turned_deg']:.1f}° from the deployment: is this survey from this "
                        "site, and are its camera ids right?")
+    if result.scale_doubtful:
+        top = max(c.position[2] for c in result.deployment.cameras)
+        said = (f"the wand's length ({format_length(wand)})" if wand is not None else
+                "the references' measurements (their units, a misread tape)")
+        click.echo(f"warning: the calibrated cameras stand {result.plan_scale:.2f} × as high "
+                   f"above the floor as the deployment's (the highest {format_length(top)}, "
+                   f"under a {format_length(dep.ceiling_height)} ceiling): check {said}")
     _report_test_points(result, test)
     paths = _write_or_refuse(out, result, notes + free_notes, survey_path,
                              f"Calibrated by vlpcal survey calibrate from {survey_path} (free "

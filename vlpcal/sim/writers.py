@@ -9,6 +9,7 @@ import numpy as np
 
 from ..datasets import write_frames_folder, write_survey_bundle, write_truth_csv
 from ..deployment import Deployment, provenance, save
+from ..survey.spots import REST_FRAMES
 from .scene import ROBOT_RADIUS, STREAM_PATH, STREAM_TAPE, Scene, render_scene
 
 
@@ -200,7 +201,8 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
                          carrier_radius: float | None = None, wand: float | None = None,
                          marks=None, truth=None, route=None):
     """A free survey bundle (issue 15): the ``references`` (true positions) taped to
-    ± ``profile.tape`` per axis with their frames, and ``n_free`` free sets of the LED moved
+    ± ``profile.tape`` per axis with a burst of :data:`~vlpcal.survey.spots.REST_FRAMES`
+    frames each (the LED rests there), and ``n_free`` free sets of the LED moved
     along :func:`free_path` (its positions unrecorded, as in life; a robot's body hides the
     floor under its LED, ``carrier_radius``, by default :data:`~.scene.ROBOT_RADIUS`).
     Returns (measured references ``N×3``, the free LED's true positions ``M×3``).
@@ -237,24 +239,28 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
         if wand is None else wand_path(scene, n_free, wand, seed, centre=walked)
     if carrier_radius is None:
         carrier_radius = 0.0 if height is None else ROBOT_RADIUS
-    carrier = np.r_[np.zeros(n), np.full(n_free, carrier_radius)]
     placed, record = reference_placings(scene, refs, measured, seed)
+    # each reference a burst: the LED rests there for REST_FRAMES frames
+    rest = np.repeat(placed, REST_FRAMES, axis=0)
+    r = len(rest)
+    carrier = np.r_[np.zeros(r), np.full(n_free, carrier_radius)]
     if wand is None:
-        frames, seen = render_scene(scene, np.vstack([placed, path]), seed=seed,
+        frames, seen = render_scene(scene, np.vstack([rest, path]), seed=seed,
                                     carrier_radius=carrier, only_seen=True)
     else:
         # the references are one LED: the wand's second LED off
-        both = np.concatenate([np.repeat(placed[:, None], 2, axis=1), path])
-        on = np.r_[np.tile([True, False], (n, 1)), np.ones((n_free, 2), bool)]
+        both = np.concatenate([np.repeat(rest[:, None], 2, axis=1), path])
+        on = np.r_[np.tile([True, False], (r, 1)), np.ones((n_free, 2), bool)]
         frames, seen = render_scene(scene, both, seed=seed, carrier_radius=carrier, on=on,
                                     only_seen=True)
         seen = seen.any(axis=2)
     kept = {cid: [f if s else None for f, s in zip(jpegs, seen[k])]
             for k, (cid, jpegs) in enumerate(frames.items())}
+    bursts = {c: [[f for f in v[i:i + REST_FRAMES] if f is not None] or None
+                  for i in range(0, r, REST_FRAMES)] for c, v in kept.items()}
     free_ids = [f"F{i + 1:05d}" for i in range(n_free)]
-    write_survey_bundle(root, ids, record,
-                        {c: v[:n] for c, v in kept.items()}, overwrite=overwrite,
-                        free_frames={c: v[n:] for c, v in kept.items()},
+    write_survey_bundle(root, ids, record, bursts, overwrite=overwrite,
+                        free_frames={c: v[r:] for c, v in kept.items()},
                         free_ids=free_ids)
     if truth is not None:
         write_led_truth(truth, free_ids, path)

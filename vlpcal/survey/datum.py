@@ -78,14 +78,27 @@ def unfixed_motions(points, measured=None, free_height: bool = False, wand: bool
     return [names[i] for i in np.flatnonzero(weight > 1e-6)]
 
 
+def _named(marks) -> str:
+    """"the 12 reference points", "the 5 marks", "the 3 reference points and 2 marks"."""
+    marks = np.asarray(marks, bool)
+    k, n = int(marks.sum()), len(marks) - int(marks.sum())
+    parts = ([f"{n} reference point{'s' if n != 1 else ''}"] if n else []) + (
+        [f"{k} mark{'s' if k != 1 else ''}"] if k else [])
+    return "the " + " and ".join(parts)
+
+
 def check_datum(points, measured=None, free_height: bool = False, wand: bool = False,
-                spread: float = 1.0) -> None:
+                spread: float = 1.0, marks=None) -> None:
     """Refuse references and marks that cannot fix the room's frame, naming what they leave
-    free and what would fix it."""
+    free and what would fix it. ``marks``: which points are frame marks (N bools; default:
+    those with a coordinate not measured)."""
     free = unfixed_motions(points, measured, free_height, wand, spread)
     if not free:
         return
     n = len(points)
+    if marks is None:
+        marks = np.zeros(n, bool) if measured is None else ~np.asarray(measured).all(axis=1)
+    named = _named(marks)
     if measured is None or np.all(measured):  # tape-measured points only: say it plainly
         need = 2 if free_height else 3
         if n < need:
@@ -103,15 +116,15 @@ def check_datum(points, measured=None, free_height: bool = False, wand: bool = F
                               "room's rotation about it (add a point off the line)")
     what = ", ".join(free)
     if free == ["scale"]:
-        raise SurveyError(f"the {n} reference point{'s' if n != 1 else ''} and marks fix the "
-                          "room's origin and axes but not its scale: give the wand's length, "
-                          "or measure one distance between them (the X mark's x)")
+        raise SurveyError(f"{named} fix the room's origin and axes but not its scale: give "
+                          "the wand's length, or measure one distance between them (the X "
+                          "mark's x)")
     if n == 0:
         raise SurveyError("no reference point or mark seen by a camera: nothing fixes the "
                           "room's frame (measure at least 3 points, or mark O, X and the floor)")
-    raise SurveyError(f"the {n} reference point{'s' if n != 1 else ''} and marks seen by the "
-                      f"cameras leave the room's frame free in {what}: spread them over the "
-                      "room (3 points not on one line, or marks O, X and three on the floor)")
+    raise SurveyError(f"{named} seen by the cameras leave the room's frame free in {what}: "
+                      "spread them over the room (3 points not on one line, or marks O, X "
+                      "and three on the floor)")
 
 
 def datum_floor(references, sigma: float, where, free_height: bool = False, measured=None,

@@ -54,6 +54,9 @@ WAND_PRECISION = 1e-3
 #: a stated wand length and the one the deployment's cameras show must agree within this
 #: factor (a unit slip is a thousand; a hand-hung install's scale is off by a few per cent)
 WAND_SCALE_RATIO = 3.0
+#: free sets whose two LEDs two cameras see, at least, for a wand survey (its length is held
+#: on them, and a tenth are held out to measure it)
+MIN_WAND_SETS = 20
 #: a wand's spots are told apart within this many times the fitted spots' precision
 LABEL_TOLERANCE = 5.0
 #: pixels are square: a camera's fx / fy stays the deployment's within this relative spread
@@ -146,6 +149,9 @@ class FreeCalibration:
     #: every reference is a frame mark (:func:`mark_shares`): no tape, only the marks' heights
     #: in doubt
     marks_only: bool = False
+    #: the room's floor polygon in the fit's frame (moved into the marks' frame when marks set
+    #: it; :mod:`.marks_frame`), or None
+    room: list | None = None
 
     @property
     def weakly_fixed(self) -> bool:
@@ -217,12 +223,14 @@ def _check_height(cameras, X, uv, uv_free, free_height) -> None:
     off = np.abs(z - free_height)
     if np.nanmedian(off) > 5 * yard + 1e-12:
         lo, hi = np.nanpercentile(z, [5, 95])
-        raise SurveyError(f"--free-height {free_height:g}: the {int(two.sum())} free sets that "
-                          f"two cameras saw put the LED at {lo:.2f}–{hi:.2f} m (half of them "
-                          f"more than {np.nanmedian(off):.2f} m from {free_height:g}), while the "
-                          f"reference points come out within {yard * 1000:.0f} mm of their "
-                          "measured heights: the LED was not at that height (drop --free-height"
-                          " if it moved up and down)")
+        from .datum import _named
+
+        raise SurveyError(f"a free height of {free_height:g} m: the {int(two.sum())} free sets "
+                          f"that two cameras saw put the LED at {lo:.2f}–{hi:.2f} m (half of "
+                          f"them more than {np.nanmedian(off):.2f} m from {free_height:g}), "
+                          f"while {_named(is_mark(X)[ref_two])} come out within "
+                          f"{yard * 1000:.0f} mm of their measured heights: the LED was not at "
+                          "that height (if it moved up and down, state no height)")
 
 
 def _check_inside(free_xyz, room, cameras) -> None:
@@ -362,9 +370,19 @@ def mark_shares(X) -> tuple[np.ndarray, bool]:
     share = np.ones(X.shape)
     if not (~measured).any():
         return share, False
-    is_mark = (~measured).any(axis=1) | (X == 0.0).all(axis=1)
-    share[:, :2][is_mark[:, None] & measured[:, :2] & (X[:, :2] == 0.0)] = DEFINED_SHARE
+    marks = is_mark(X)
+    share[:, :2][marks[:, None] & measured[:, :2] & (X[:, :2] == 0.0)] = DEFINED_SHARE
     return share, bool((X[measured] == 0.0).all())
+
+
+def is_mark(X) -> np.ndarray:
+    """Which references (N×3, NaN: not measured) are frame marks: a point with an empty cell,
+    or the origin's zeros in a survey that has empty cells."""
+    X = np.asarray(X, float)
+    measured = np.isfinite(X)
+    if measured.all():
+        return np.zeros(len(X), bool)
+    return (~measured).any(axis=1) | (X == 0.0).all(axis=1)
 
 
 def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
@@ -392,7 +410,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     (m), C×M×2×2, each camera's two spots in the LEDs' order if ``labelled``, else matched
     across cameras here. ``lens``: ``"auto"`` (one model for every camera, chosen by the
     free LED's held-out consistency: :func:`_joint_lens_choice`) or a model of
-    :data:`~.lens.LENS_MODELS`. ``room``: the floor polygon the datum floor is judged over.
+    :data:`~.lens.LENS_MODELS`. ``room``: the floor polygon (the plan's frame) the free
+    positions and the datum floor are judged over.
     ``progress(i, n)``."""
     from .network import EPIPOLAR_SHARE, align_to_references, label_wand, network_start
 
@@ -403,6 +422,14 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     if wand is not None and (uv_free.ndim != 4 or uv_free.shape[2] != 2):
         raise ValueError("uv_free: a wand's spots are C×M×2×2")
     seen_f = np.isfinite(spots[..., 0]).any(axis=2)
+    if wand is not None:
+        both = int((np.isfinite(spots[..., 0]).all(axis=2).sum(axis=0) >= 2).sum())
+        if both < MIN_WAND_SETS:
+            raise SurveyError(
+                f"{both} of the {spots.shape[1]} free sets show the wand's two LEDs to two "
+                f"cameras (expected {MIN_WAND_SETS} at least): this looks like a survey of one "
+                "LED — calibrate it without the wand's length, or check that both LEDs are lit "
+                "and in view; nothing was written")
     seen_r = np.isfinite(uv).all(axis=2)
     measured = np.isfinite(X)
     _linkage(ids_c, seen_f)
@@ -410,7 +437,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     X0 = _reference_start(nominal, X, uv)
     used_r = seen_r.any(axis=0)
     check_datum(X0[used_r], measured[used_r], free_height is not None, wand is not None,
-                scale)
+                scale, marks=is_mark(X)[used_r])
     if free_height is not None:
         _check_height(nominal, X0, uv, uv_free, free_height)
     estimated = isinstance(point_sigma, str)
@@ -682,6 +709,10 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     tick()
     _check_fit(cams, adj[N:], uv_all[:, N:], keep[:, N:], s_px, ids_c)
     _check_references_fit(seen_r, keep[:, :N], ids_c)
+    if room is not None and (~measured).any():  # frame marks: the room moved into their frame
+        from .marks_frame import polygons_in_marks_frame
+
+        room = polygons_in_marks_frame(nominal, cams, [room])[0]
     _check_inside(adj[N:], room, cams)
     # each reference left out: its prior removed (its spots kept), where the rest put it —
     # when the rest still fix the frame; of many, an even sample (each costs a joint fit)
@@ -744,7 +775,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
                            estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum())
                            // per_set, rejected, spread, loo, floor, dropped, notes,
-                           assumed, predicted, exact, wand, wand_error, pts_free, marks_only)
+                           assumed, predicted, exact, wand, wand_error, pts_free, marks_only,
+                           room)
 
 
 def _wrong_lengths(adj, pair_i, keep, wand, wand_sigma) -> np.ndarray:

@@ -17,6 +17,10 @@ FUSION_OF = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest p
 
 #: the calibrated file's residual limit, in held-out residuals of its worst camera
 RESIDUAL_LIMIT = 5.0
+#: calibrated cameras further apart (or nearer) than this ratio of the plan's are doubtful: an
+#: install hung by hand keeps the plan's size to a few per cent; a wand length or a tape read
+#: wrong does not
+PLAN_SCALE_RATIO = 1.25
 
 
 def residual_limit(cal) -> float:
@@ -136,12 +140,23 @@ class FreeSurveyResult:
     free_height: float | None = None
     fusion: str = "robust"
     test_points: dict | None = None  #: :func:`test_point_errors`, when test points were given
+    #: the calibrated cameras' size against the plan's: their heights over the floor over the
+    #: plan's (:func:`_heights_ratio`; a hand-hung install: within a few per cent of 1)
+    plan_scale: float = 1.0
+
+    @property
+    def scale_doubtful(self) -> bool:
+        """Whether the calibrated cameras stand a different size from the plan's — further
+        apart or nearer than :data:`PLAN_SCALE_RATIO` allows: a scale from a wrong wand
+        length or tape reading, not an install's error."""
+        return not 1 / PLAN_SCALE_RATIO < self.plan_scale < PLAN_SCALE_RATIO
 
     def report(self, notes=()) -> dict:
         cal = self.calibration
         out = {"free_survey": {"sets": self.free_sets, "used": cal.used_sets,
                                 "dropped_sets": cal.dropped_sets,
                                 "free_height_m": self.free_height},
+               "plan_scale": self.plan_scale, "scale_doubtful": self.scale_doubtful,
                 "references": [{"point_id": p, "left_out_error_m": None if not np.isfinite(e)
                                 else float(e)} for p, e in zip(self.reference_ids,
                                                                cal.leave_one_out)],
@@ -170,41 +185,12 @@ class FreeSurveyResult:
         return out
 
 
-def _marks_similarity(nominal, calibrated):
-    """The similarity (s, R, t) that puts the nominal cameras' centres, and a point along each
-    optical axis, on the calibrated ones: the plan's frame to the frame marks define (the
-    nominal room is taken as roughly placed, DESIGN.md)."""
-    from .network import similarity
-
-    reach = float(np.median([c.position[2] for c in nominal])) or 1.0
-
-    def marks(cams):
-        return np.vstack([[c.center for c in cams], [c.center + reach * c.axis for c in cams]])
-
-    return similarity(marks(nominal), marks(calibrated))
-
-
-def _in_marks_frame(nominal, calibrated) -> list:
-    """The nominal cameras moved into the frame the marks define."""
-    from dataclasses import replace
-
-    from ..geometry import rotation_vector
-
-    s, R, t = _marks_similarity(nominal, calibrated)
-    return [replace(c, position=tuple(s * R @ c.center + t),
-                    rotation=tuple(rotation_vector(c.R @ R.T))) for c in nominal]
-
-
-def _site_moved(nominal, calibrated, room, keep_out):
-    """The room and keep-out polygons moved with the cameras into the frame that frame marks
-    define."""
-    s, R, t = _marks_similarity(nominal, calibrated)
-
-    def move(poly):
-        P = np.c_[np.asarray(poly, float), np.zeros(len(poly))]
-        return [[float(x), float(y)] for x, y in (s * P @ R.T + t)[:, :2]]
-
-    return move(room), [move(p) for p in keep_out]
+def _heights_ratio(nominal, calibrated) -> float:
+    """The calibrated cameras' median height above the floor (z = 0 in the references' or the
+    marks' frame) over the plan's: a wrong scale shows in every height at once."""
+    plan = float(np.median([c.position[2] for c in nominal]))
+    got = float(np.median([c.position[2] for c in calibrated]))
+    return got / plan if plan > 0 else float("nan")
 
 
 def _finite(x: float) -> float | None:
@@ -227,6 +213,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
     from .calibration import lens_sentence
     from .coverage import camera_words, quarter_counts
     from .free import calibrate_free
+    from .marks_frame import cameras_in_marks_frame, polygons_in_marks_frame
 
     cams = dep.cameras
     cal = calibrate_free(cams, X, uv, ids, uv_free, lens=lens, point_sigma=point_sigma,
@@ -235,7 +222,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
     ok = np.isfinite(cal.free_xyz).all(axis=1)
     n_sets = int(np.shape(uv_free)[1])
     uv_free = cal.free_uv
-    rmap = learn_region_map(cal.cameras, uv_free[:, ok], cal.free_xyz[ok], dep.room,
+    rmap = learn_region_map(cal.cameras, uv_free[:, ok], cal.free_xyz[ok], cal.room,
                             pair_method=dep.pair_method)
     worst = max((v for v in cal.spread_px.values() if np.isfinite(v)), default=1.0)
     extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
@@ -250,7 +237,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
     rows, words = [], []
     marks = bool(np.isnan(np.asarray(X, float)).any())
     # in the marks' frame, each camera's move is judged against the plan moved into it
-    planned = _in_marks_frame(cams, cal.cameras) if marks else cams
+    planned = cameras_in_marks_frame(cams, cal.cameras) if marks else cams
     for nom, plan, c, choice in zip(cams, planned, cal.cameras, cal.lens):
         dR = rodrigues(c.rotation) @ rodrigues(plan.rotation).T
         angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
@@ -269,12 +256,14 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                      "moved_m": moved, "moved_share": moved / max(distance, 1e-300),
                      "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
                      "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
-    room, keep_out = dep.room, dep.keep_out
+    keep_out = dep.keep_out
     if marks:  # frame marks: the deployment in their frame
-        room, keep_out = _site_moved(cams, cal.cameras, dep.room, dep.keep_out)
-    calibrated = Deployment(dep.name, dep.ceiling_height, room, cal.cameras, keep_out, extra)
+        keep_out = polygons_in_marks_frame(cams, cal.cameras, dep.keep_out)
+    calibrated = Deployment(dep.name, dep.ceiling_height, cal.room, cal.cameras, keep_out,
+                            extra)
     return FreeSurveyResult(calibrated, cal, rows, words, list(ids), np.asarray(X, float),
-                            n_sets, free_height)
+                            n_sets, free_height,
+                            plan_scale=_heights_ratio(cams, cal.cameras))
 
 
 def test_point_errors(dep, X, uv, ids) -> dict:

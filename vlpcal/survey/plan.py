@@ -384,15 +384,21 @@ class FrameMarks(SurveyPlan):
 FLOOR_MARKS = 3
 
 
-def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, margin_px: float = 5.0,
-               tape: float = TAPE_M) -> FrameMarks:
+#: a frame mark stays this share of the image's shorter side inside every view it counts on:
+#: a spot near the border is clipped, and its centre pulled inward (~0.2 px at 5 px), which
+#: would tilt or shift the whole frame the marks define
+MARK_MARGIN = 0.1
+
+
+def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M) -> FrameMarks:
     """Where a wand survey's frame marks go (no tape: the wand's length gives the scale, the
-    marks the frame): every mark on the floor where two cameras or more see it (5 px margin);
-    ``O`` and ``X`` as far apart as such places allow along one room axis — the nominal x,
-    unless along y they could be twice as far apart (a longer baseline fixes the frame's
-    rotation better) — ``O`` at the end nearer the room's origin; then ``floor_marks`` marks
-    ``F1``… each where it widens the marks' convex hull most, so the floor plane is fixed over
-    the room, not along one line."""
+    marks the frame): every mark on the floor where two cameras or more see it well inside
+    their images (:data:`MARK_MARGIN`). ``O`` where the most cameras see it nearest their
+    images' centres — the origin is where the cameras agree best, as every fix is measured
+    from it — with half the marks' zone ahead of it along one room axis (the nominal x,
+    unless the zone is twice as long along y), and ``X`` as far ahead as the zone allows;
+    then ``floor_marks`` marks ``F1``… each where it widens the marks' convex hull most, so
+    the floor plane is fixed over the room, not along one line."""
     import shapely
     from shapely import contains_xy
 
@@ -407,24 +413,37 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, margin_px: float = 5.
     step = max(min(x1 - x0, y1 - y0) / 48, np.sqrt(room.area / 20000))
     gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
     pts = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
-    two = contains_xy(room, pts[:, 0], pts[:, 1]) & (np.stack(
-        [c.project(pts, margin=margin_px)[2] for c in cams]).sum(axis=0) >= 2)
+
+    def inside(P):  # C×N: well inside each camera's image
+        return np.stack([c.project(P, margin=MARK_MARGIN * min(c.width, c.height))[2]
+                         for c in cams])
+
+    views = inside(pts)
+    two = contains_xy(room, pts[:, 0], pts[:, 1]) & (views.sum(axis=0) >= 2)
     # a mark is put by eye: it must stay in two views wherever it lands, nearby
     w = int(round(PLACING_SHARE * size / step))
     two = _box(two.reshape(gx.shape)[None].astype(float), w)[0].ravel() > 1 - 1e-9
-    xy = pts[two, :2]
+    xy, views = pts[two, :2], views[:, two]
     if len(xy) < 2 + floor_marks:
         raise SurveyError("too few places on the floor are seen by two cameras for the frame's "
                           "marks: a wand survey needs cameras that overlap")
-    best = {}
-    for a in (0, 1):  # per axis: the row (equal other coordinate) with the longest span
-        key = np.round((xy[:, 1 - a] - xy[:, 1 - a].min()) / step).astype(int)
-        spans = [(np.ptp(xy[key == r, a]), r) for r in np.unique(key)]
-        span, r = max(spans, key=lambda t: (t[0], -t[1]))  # ties: nearer the origin
-        row = np.flatnonzero(key == r)
-        best[a] = (span, row[np.argmin(xy[row, a])], row[np.argmax(xy[row, a])])
-    a = 1 if best[1][0] >= 2 * best[0][0] else 0
-    chosen = [int(best[a][1]), int(best[a][2])]
+    # the axis O→X runs along: x, unless the marks' zone is twice as long along y
+    extent = np.ptp(xy, axis=0)
+    a = 1 if extent[1] >= 2 * extent[0] else 0
+    # O: among places with half the zone still ahead of them along that axis (room for X), the
+    # most views, then the nearest the centres of the images that see it
+    off = np.zeros(len(xy))
+    for k, c in enumerate(cams):
+        uv = c.project(np.c_[xy, np.zeros(len(xy))])[0]
+        r = np.hypot((uv[:, 0] - c.cx) / c.width, (uv[:, 1] - c.cy) / c.height)
+        off += np.where(views[k], np.nan_to_num(r), 0.0)
+    n_views = views.sum(axis=0)
+    same_row = np.abs(xy[:, None, 1 - a] - xy[None, :, 1 - a]) < step / 2
+    ahead = np.max(np.where(same_row, xy[None, :, a] - xy[:, None, a], 0.0), axis=1)
+    room_for_x = ahead >= extent[a] / 2
+    o = int(np.lexsort((off / n_views, -n_views, ~room_for_x))[0])
+    row = np.flatnonzero(same_row[o])
+    chosen = [o, int(row[np.argmax(xy[row, a])])]  # X: the farthest ahead on O's row
     for _ in range(floor_marks):  # each the one that widens the marks' hull most
         d = np.min(np.linalg.norm(xy[:, None] - xy[None, chosen], axis=2), axis=1)
         sets = np.concatenate([np.repeat(xy[None, chosen], len(xy), axis=0), xy[:, None]], 1)
@@ -436,9 +455,8 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, margin_px: float = 5.
     recorded[0] = 0.0
     recorded[1, 1:] = 0.0
     recorded[2:, 2] = 0.0
-    seen = np.stack([c.project(pts, margin=margin_px)[2] for c in cams])
-    return FrameMarks(ids, pts, seen, [c.id for c in cams], tape=float(tape), recorded=recorded,
-                      axis="xy"[a])
+    return FrameMarks(ids, pts, inside(pts), [c.id for c in cams], tape=float(tape),
+                      recorded=recorded, axis="xy"[a])
 
 
 def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:

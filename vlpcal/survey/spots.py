@@ -8,6 +8,11 @@ import numpy as np
 
 from .errors import SurveyError
 
+#: frames taken while the LED rests on a survey point (a second at 10 frames/s): their spots
+#: are averaged (:func:`burst_spot`), so a frame mark, which alone sets the frame, is sighted
+#: far more precisely than one moment of the free LED
+REST_FRAMES = 10
+
 
 def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
     """The survey's spots ``C×N×2`` in the deployment's camera order, and notes: from the
@@ -17,7 +22,7 @@ def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
     strangers = sorted(set(bundle.camera_ids()) - known)
     if strangers:
         notes.append(f"ignored camera(s) {', '.join(strangers)} that the deployment lacks")
-    uv = _spots(deployment, bundle.point_ids, bundle.frame if bundle.frames else None,
+    uv = _spots(deployment, bundle.point_ids, bundle.frames_at if bundle.frames else None,
                 bundle.observations, notes, "")
     return uv, notes
 
@@ -38,7 +43,8 @@ def free_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
                      "unknown)")
     single = {k: v[0][:2] for k, v in obs.items() if len(v) == 1}
     uv = _spots(deployment, bundle.free_ids,
-                bundle.free_frame if bundle.free_frames else None, single, notes, "free ")
+                _one_frame(bundle.free_frame) if bundle.free_frames else None, single, notes,
+                "free ")
     return uv, notes
 
 
@@ -99,21 +105,55 @@ def wand_spots(deployment, bundle) -> WandSpots:
     return WandSpots(uv, labelled, notes)
 
 
-def _spots(deployment, ids, frame_of, observations, notes, what) -> np.ndarray:
+def burst_spot(uv) -> np.ndarray:
+    """One spot from a burst's ``K×2`` (NaN: not found): the mean of those within three
+    robust deviations of their median — the LED rests, so the frames differ by the spots'
+    noise; a frame that caught a flicker or a passer-by is left out. NaN when most frames
+    show no spot (the LED was not there for this camera)."""
+    uv = np.asarray(uv, float).reshape(-1, 2)
+    ok = np.isfinite(uv).all(axis=1)
+    if not ok.any() or (len(uv) > 1 and 2 * ok.sum() <= len(uv)):
+        return np.full(2, np.nan)
+    got = uv[ok]
+    d = np.linalg.norm(got - np.median(got, axis=0), axis=1)
+    return got[d <= 3 * 1.4826 * np.median(d)].mean(axis=0)
+
+
+def _one_frame(frame_of):
+    """A reader of one frame (or None) per id as a reader of a list of frames."""
+    def frames_of(p, cid):
+        f = frame_of(p, cid)
+        return [] if f is None else [f]
+    return frames_of
+
+
+def _spots(deployment, ids, frames_of, observations, notes, what) -> np.ndarray:
+    """Each camera's spot per id ``C×N×2``: from ``frames_of(id, camera id)`` (a list of frames:
+    one, or a burst of the LED resting there, averaged by :func:`burst_spot`) or, without it,
+    ``observations``."""
     from ..detection import detect_spots
 
     uv = np.full((len(deployment.cameras), len(ids), 2), np.nan)
     for k, cam in enumerate(deployment.cameras):
-        if frame_of is not None:
-            frames = [frame_of(p, cam.id) for p in ids]
-            spots = detect_spots(frames, deployment.detector, deployment.detector_settings,
-                                 shape=(cam.height, cam.width))
-            uv[k] = spots.uv
-            bad = [f"{p} {r.replace('_', ' ')}" for p, r in zip(ids, spots.reasons)
-                   if r not in (None, "missing", "no_spot")]
+        if frames_of is not None:
+            per_id = [frames_of(p, cam.id) for p in ids]
+            owner = np.repeat(np.arange(len(ids)), [len(f) for f in per_id])
+            spots = detect_spots([f for fs in per_id for f in fs], deployment.detector,
+                                 deployment.detector_settings, shape=(cam.height, cam.width))
+            found = spots.uv
+            bad = {}
+            for i in np.unique(owner):
+                mine = owner == i
+                uv[k, i] = burst_spot(found[mine])
+                why = [r for r in np.asarray(spots.reasons, object)[mine]
+                       if r not in (None, "missing", "no_spot")]
+                if why and not np.isfinite(uv[k, i]).all():
+                    bad[ids[i]] = why[0]
             if bad:
                 notes.append(f"camera {cam.id}: {len(bad)} {what}frames not used: "
-                             + ", ".join(bad[:8]) + (" …" if len(bad) > 8 else ""))
+                             + ", ".join(f"{p} {r.replace('_', ' ')}"
+                                         for p, r in list(bad.items())[:8])
+                             + (" …" if len(bad) > 8 else ""))
         else:
             for i, p in enumerate(ids):
                 if (p, cam.id) in observations:
