@@ -113,6 +113,7 @@ seen when it projects 2 px inside the image; its error is `sqrt(trace(F⁻¹))`,
 ```
 points.csv                         point_id,x,y,z — measured LED positions, m
 frames/<point_id>/<camera_id>.jpg  what each camera saw with the LED there (missing = not seen)
+frames/<point_id>/<camera_id>/*.jpg  or a burst: frames of the LED resting there (spots averaged)
 observations.csv                   optional: point_id,camera_id,u,v — spots cameras reported
 free/frames/<set_id>/<camera_id>.jpg  optional, a free survey: the LED somewhere unknown, one folder per moment
 free/observations.csv              or instead: set_id,camera_id,u,v[,led]
@@ -133,6 +134,11 @@ far apart on a rigid bar) has both LEDs in each free frame, or two rows per came
 spots are matched across cameras); its report's `wand` block gives the length error on
 held-out sets. `vlpcal simulate --wand` also writes `free-survey.truth.csv`
 (`set_id,led,x,y,z`: where each LED, `A` and `B`, really was).
+A burst folder holds the frames a camera took while the LED rested on the point (`survey
+capture` keeps its whole burst, `vlpcal simulate` writes 10 per reference): their spots are
+averaged, a frame whose spot lies far from the others' (a flicker, a passer-by) left out, and
+the point counts as not seen by that camera when most of its frames show no spot. A camera
+has a frame or a burst at a point, not both; at most 100 frames of a burst are read.
 `vlpcal survey calibrate --test-points DIR` reads a second bundle (`points.csv` with `frames/`
 or `observations.csv`) of measured points the calibration never sees.
 Example: `surveys/paper-2024/survey/`.

@@ -811,7 +811,9 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                   "reference points")
                + (f" and the wand's length (±{WAND_PRECISION:.1%})" if wand else "")
                + f" fix the room to about {cal.datum_floor * 1000:.1f} mm (the datum floor: no "
-               "calibration does better on average); "
+               "calibration does better on average"
+               + (f", predicted at the ±{cal.point_sigma * 1000:g} mm assumed"
+                  if cal.point_sigma_assumed else "") + "); "
                + ("place the LED on the marks more carefully (--point-sigma says how well), or "
                   "add floor marks, to do better" if marks else
                   "measure more points, or more precisely, to do better"))
