@@ -310,3 +310,8 @@ def test_a_plan_never_replaces_a_surveys_measured_points(tmp_path):
                                     "0.5", "--out", str(bundle / "points.csv")])
     assert res.exit_code == 2 and "is a survey's record (it has frames beside it)" in res.output
     assert (bundle / "points.csv").read_text() == record
+    (tmp_path / "link.csv").symlink_to(bundle / "points.csv")  # through a link, too
+    res = CliRunner().invoke(main, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--wand",
+                                    "0.5", "--out", str(tmp_path / "link.csv")])
+    assert res.exit_code == 2 and "is a survey's record" in res.output, res.output
+    assert (bundle / "points.csv").read_text() == record

@@ -223,6 +223,11 @@ def test_simulate_and_calibrate_a_wand_survey_from_the_command_line(tmp_path):
     assert run.exit_code == 0, run.output
     assert "warning: the calibrated cameras stand 2.00 × as high above the floor as the " \
            "deployment's" in run.output and "check the wand's length (1.00 m)" in run.output
+    # 1.1 × the bar: within the plan's size, but the cameras stand above the ceiling
+    run = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(sim / "nominal.yaml"),
+                                    "--survey", str(sim / "free-survey"), "--wand", "0.55",
+                                    "--out", str(tmp_path / "long.yaml"), "-q"])
+    assert run.exit_code == 0 and "stand 1.10 × as high" in run.output, run.output
 
 
 def test_only_a_marks_own_zeros_define_the_frame():
@@ -343,3 +348,21 @@ def test_a_survey_of_one_led_is_refused_as_a_wands():
     with pytest.raises(SurveyError, match=r"0 of the 300 free sets show the wand's two LEDs "
                                           r"to two cameras .* a survey of one LED"):
         calibrate_free(nominal, MARKS, uv_marks, ["O", "X", "F1", "F2", "F3"], one, wand=0.5)
+
+
+def test_a_wand_whose_led_names_are_swapped_for_a_camera_is_refused():
+    """From a hostile probe: the ``led`` column swapped for one camera exited 0 with "0
+    held-out sets … ±nan mm" and cameras about 1 m off."""
+    rng = np.random.default_rng(7)
+    scene = make_scene(get_profile("paper-2024"), 0)
+    marks = _marks_of(scene)
+    true = _moved(scene.true, marks[0])
+    ends = wand_path(scene, 600, 0.5, 0) - marks[0]
+    uv = np.stack([_spots(true, ends[:, e], rng) for e in range(2)], axis=2)  # A, B named
+    uv[0] = uv[0][:, ::-1]  # … but the first camera's names swapped
+    nominal = _off(_moved(scene.nominal, marks[0]), 0.03, 3.0, rng)
+    uv_marks = _spots(true, marks - marks[0], rng)
+    with pytest.raises(SurveyError, match=r"the wand does not fit the cameras: \d+ held-out "
+                                          r"sets put its ends .* from its 50.00 cm"):
+        calibrate_free(nominal, MARKS, uv_marks, ["O", "X", "F1", "F2", "F3"], uv, wand=0.5,
+                       labelled=True)

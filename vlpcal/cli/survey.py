@@ -133,7 +133,8 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         raise UserError(f"{out}: cannot make its folder ({e.strerror})") from None
     if out.is_dir():
         raise UserError(f"{out}: is a folder (expected a points.csv file to write)")
-    beside = [d for d in ("frames", "free", "observations.csv") if (out.parent / d).exists()]
+    real = out.resolve()  # (through a link: the file it would replace)
+    beside = [d for d in ("frames", "free", "observations.csv") if (real.parent / d).exists()]
     if out.exists() and beside:
         raise UserError(f"{out}: is a survey's record (it has {', '.join(beside)} beside it); "
                         "the plan would replace its measurements: write the plan to another "

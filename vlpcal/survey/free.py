@@ -54,6 +54,9 @@ WAND_PRECISION = 1e-3
 #: a stated wand length and the one the deployment's cameras show must agree within this
 #: factor (a unit slip is a thousand; a hand-hung install's scale is off by a few per cent)
 WAND_SCALE_RATIO = 3.0
+#: a wand whose held-out sets miss its length by more than this share of it, on average, does
+#: not fit (a good survey misses by a few thousandths)
+WAND_MISFIT = 0.1
 #: free sets whose two LEDs two cameras see, at least, for a wand survey (its length is held
 #: on them, and a tenth are held out to measure it)
 MIN_WAND_SETS = 20
@@ -772,6 +775,16 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
             choices.append(choice)
     wand_error = None if wand is None else wand_errors(cams, pts_free[:, held_out], wand, ids_c,
                                                         s_px)
+    if wand_error is not None and not wand_error.mean <= WAND_MISFIT * wand:
+        said = (f"{wand_error.sets} held-out sets put its ends {format_length(wand_error.mean)} "
+                f"from its {format_length(wand)} on average" if wand_error.sets else
+                "no held-out set shows its two ends meeting")
+        raise SurveyError(f"the wand does not fit the cameras: {said} (of "
+                          f"{int(held_out.sum()) // 2} held out, {wand_error.discarded} whose "
+                          f"spots do not meet; the spots fit to ±{s_px:.2g} px): the second "
+                          "spot is not the wand's other LED "
+                          "(a reflection, another light, a survey of one LED), or the LEDs' "
+                          "names are swapped for a camera; nothing was written")
     return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
                            estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum())
                            // per_set, rejected, spread, loo, floor, dropped, notes,

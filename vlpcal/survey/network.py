@@ -70,12 +70,15 @@ def _pair_pose(ni, nj, S: int, labelled: bool, threshold: float):
     if len(np.unique(sets)) < MIN_PAIR_SETS:
         return None
     A, B = np.concatenate(A), np.concatenate(B)
-    E, mask = cv2.findEssentialMat(A, B, np.eye(3), method=cv2.RANSAC, prob=0.9999,
-                                   threshold=threshold, maxIters=2000)
-    if E is None or E.shape != (3, 3):
+    try:  # views with no depth to them (a wand that never moved) have no essential matrix
+        E, mask = cv2.findEssentialMat(A, B, np.eye(3), method=cv2.RANSAC, prob=0.9999,
+                                       threshold=threshold, maxIters=2000)
+        if E is None or E.shape != (3, 3):
+            return None
+        inl = mask.ravel().astype(bool)
+        n, R, t, mask2 = cv2.recoverPose(E, A[inl], B[inl], np.eye(3))
+    except cv2.error:
         return None
-    inl = mask.ravel().astype(bool)
-    n, R, t, mask2 = cv2.recoverPose(E, A[inl], B[inl], np.eye(3))
     good = np.zeros(len(A), bool)
     good[np.flatnonzero(inl)[mask2.ravel() > 0]] = True
     if len(np.unique(sets[good])) < MIN_PAIR_SETS:

@@ -21,6 +21,8 @@ RESIDUAL_LIMIT = 5.0
 #: install hung by hand keeps the plan's size to a few per cent; a wand length or a tape read
 #: wrong does not
 PLAN_SCALE_RATIO = 1.25
+#: … or any camera above the ceiling by more than this share of its height
+CEILING_SHARE = 0.03
 
 
 def residual_limit(cal) -> float:
@@ -149,7 +151,16 @@ class FreeSurveyResult:
         """Whether the calibrated cameras stand a different size from the plan's — further
         apart or nearer than :data:`PLAN_SCALE_RATIO` allows: a scale from a wrong wand
         length or tape reading, not an install's error."""
-        return not 1 / PLAN_SCALE_RATIO < self.plan_scale < PLAN_SCALE_RATIO
+        return not 1 / PLAN_SCALE_RATIO < self.plan_scale < PLAN_SCALE_RATIO \
+            or self.above_ceiling
+
+    @property
+    def above_ceiling(self) -> bool:
+        """Whether a calibrated camera stands higher above the floor than the ceiling by more
+        than :data:`CEILING_SHARE` of its height: no install puts it there; a scale does."""
+        dep = self.deployment
+        top = max(c.position[2] for c in dep.cameras)
+        return bool(top > (1 + CEILING_SHARE) * dep.ceiling_height)
 
     def report(self, notes=()) -> dict:
         cal = self.calibration
