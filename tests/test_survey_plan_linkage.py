@@ -315,3 +315,13 @@ def test_a_plan_never_replaces_a_surveys_measured_points(tmp_path):
                                     "0.5", "--out", str(tmp_path / "link.csv")])
     assert res.exit_code == 2 and "is a survey's record" in res.output, res.output
     assert (bundle / "points.csv").read_text() == record
+
+
+def test_a_wand_longer_than_the_room_is_refused_before_planning(tmp_path):
+    """From a hostile probe: `survey plan --wand 50` planned a survey that `survey calibrate`
+    then refuses (a length in the wrong unit)."""
+    save(issue_office(), tmp_path / "d.yaml")
+    res = CliRunner().invoke(main, ["survey", "plan", "-d", str(tmp_path / "d.yaml"), "--wand",
+                                    "50", "--out", str(tmp_path / "marks.csv")])
+    assert res.exit_code == 2 and "--wand 50: longer than the room" in res.output, res.output
+    assert not (tmp_path / "marks.csv").exists()

@@ -102,6 +102,7 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         raise click.BadParameter(f"expected a height from 0 to below {top:g} m (nine tenths of "
                                  f"the lowest camera's), got {free_height:g}",
                                  param_hint="--free-height")
+    _check_wand_fits(wand, dep)
     sweep = hs if heights else None
     if wand is not None and not heights:  # the wand's LEDs: from the floor to 40 % + half of it
         from ..survey.plan import free_sweep
@@ -727,9 +728,7 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     if free_height is not None and not (0 <= free_height < dep.ceiling_height):
         raise UserError(f"--free-height {free_height:g}: expected a height from the floor to "
                         f"below the ceiling ({dep.ceiling_height:g} m)")
-    if wand is not None and wand > 2 * dep.size:
-        raise UserError(f"--wand {wand:g}: longer than the room ({dep.size:.3g} m across): "
-                        "expected the wand's length in metres")
+    _check_wand_fits(wand, dep)
     labelled = False
     try:
         if wand is None:
@@ -940,6 +939,13 @@ def _print_calibration(result, folds: int) -> None:
                    "from its record the calibrated cameras put the LED):")
         for pid, off in result.mismeasured:
             click.echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
+
+
+def _check_wand_fits(wand, dep) -> None:
+    """Refuse a wand far longer than the room (a length in millimetres, not metres)."""
+    if wand is not None and wand > 2 * dep.size:
+        raise UserError(f"--wand {wand:g}: longer than the room ({dep.size:.3g} m across): "
+                        "expected the wand's length in metres")
 
 
 def _check_survey_positions(survey_path, dep, X, ids, frame_marks: bool = False) -> None:
