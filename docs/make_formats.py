@@ -138,7 +138,7 @@ A burst folder holds the frames a camera took while the LED rested on the point 
 capture` keeps its whole burst, `vlpcal simulate` writes 10 per reference): their spots are
 averaged, a frame whose spot lies far from the others' (a flicker, a passer-by) left out, and
 the point counts as not seen by that camera when most of its frames show no spot. A camera
-has a frame or a burst at a point, not both; at most 100 frames of a burst are read.
+has a frame or a burst at a point, not both; at most 100 frames (128 MB) of a burst are read.
 `vlpcal survey calibrate --test-points DIR` reads a second bundle (`points.csv` with `frames/`
 or `observations.csv`) of measured points the calibration never sees.
 Example: `surveys/paper-2024/survey/`.

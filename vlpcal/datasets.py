@@ -53,6 +53,8 @@ def _check_id(value: str, where: str) -> str:
 MAX_FRAME_BYTES = 32 * 2 ** 20
 #: frames read from one burst folder (the LED resting on a point: seconds of frames)
 MAX_BURST = 100
+#: … and at most this many bytes of them
+MAX_BURST_BYTES = 4 * MAX_FRAME_BYTES
 
 
 def read_frame(path, missing=b""):
@@ -226,9 +228,15 @@ class SurveyBundle:
         path = self.frames.get((point_id, camera_id))
         if path is None:
             return []
-        if path.is_dir():
-            return [read_frame(f) for f in sorted(path.glob("*.jpg"))[:MAX_BURST]]
-        return [read_frame(path)]
+        if not path.is_dir():
+            return [read_frame(path)]
+        burst, size = [], 0
+        for f in sorted(path.glob("*.jpg"))[:MAX_BURST]:
+            if size >= MAX_BURST_BYTES:  # (a camera's burst is seconds of small frames)
+                break
+            burst.append(read_frame(f))
+            size += len(burst[-1])
+        return burst
 
 
 def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,

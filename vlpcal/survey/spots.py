@@ -12,6 +12,8 @@ from .errors import SurveyError
 #: are averaged (:func:`burst_spot`), so a frame mark, which alone sets the frame, is sighted
 #: far more precisely than one moment of the free LED
 REST_FRAMES = 10
+#: bytes of frames detected at once: a survey's frames are read a block at a time
+BLOCK_BYTES = 64 << 20
 
 
 def survey_spots(deployment, bundle) -> tuple[np.ndarray, list[str]]:
@@ -127,6 +129,22 @@ def _one_frame(frame_of):
     return frames_of
 
 
+def _blocks(ids, frames_of):
+    """``(indices, per-id frame lists)`` of ``ids`` a block at a time: a block ends once its
+    frames pass :data:`BLOCK_BYTES`, so that a survey of any size is read in bounded memory."""
+    idx, block, size = [], [], 0
+    for i, p in enumerate(ids):
+        frames = frames_of(p)
+        idx.append(i)
+        block.append(frames)
+        size += sum(len(f) for f in frames if f)
+        if size >= BLOCK_BYTES:
+            yield np.array(idx), block
+            idx, block, size = [], [], 0
+    if idx:
+        yield np.array(idx), block
+
+
 def _spots(deployment, ids, frames_of, observations, notes, what) -> np.ndarray:
     """Each camera's spot per id ``C×N×2``: from ``frames_of(id, camera id)`` (a list of frames:
     one, or a burst of the LED resting there, averaged by :func:`burst_spot`) or, without it,
@@ -135,29 +153,34 @@ def _spots(deployment, ids, frames_of, observations, notes, what) -> np.ndarray:
 
     uv = np.full((len(deployment.cameras), len(ids), 2), np.nan)
     for k, cam in enumerate(deployment.cameras):
-        if frames_of is not None:
-            per_id = [frames_of(p, cam.id) for p in ids]
-            owner = np.repeat(np.arange(len(ids)), [len(f) for f in per_id])
-            spots = detect_spots([f for fs in per_id for f in fs], deployment.detector,
-                                 deployment.detector_settings, shape=(cam.height, cam.width))
-            found = spots.uv
-            bad = {}
-            for i in np.unique(owner):
-                mine = owner == i
-                uv[k, i] = burst_spot(found[mine])
-                why = [r for r in np.asarray(spots.reasons, object)[mine]
-                       if r not in (None, "missing", "no_spot")]
-                if why and not np.isfinite(uv[k, i]).all():
-                    bad[ids[i]] = why[0]
-            if bad:
-                notes.append(f"camera {cam.id}: {len(bad)} {what}frames not used: "
-                             + ", ".join(f"{p} {r.replace('_', ' ')}"
-                                         for p, r in list(bad.items())[:8])
-                             + (" …" if len(bad) > 8 else ""))
-        else:
+        if frames_of is None:
             for i, p in enumerate(ids):
                 if (p, cam.id) in observations:
                     uv[k, i] = observations[(p, cam.id)]
+            continue
+        bad = {}
+        for idx, per_id in _blocks(ids, lambda p: frames_of(p, cam.id)):
+            counts = np.array([len(f) for f in per_id])
+            start = np.r_[0, np.cumsum(counts)[:-1]]
+            spots = detect_spots([f for fs in per_id for f in fs], deployment.detector,
+                                 deployment.detector_settings, shape=(cam.height, cam.width))
+            one = counts == 1  # a frame each: its spot as found
+            uv[k, idx[one]] = spots.uv[start[one]]
+            for j in np.flatnonzero(counts > 1):  # a burst: its frames averaged
+                uv[k, idx[j]] = burst_spot(spots.uv[start[j]:start[j] + counts[j]])
+            reasons = spots.reasons
+            for j in np.flatnonzero(counts):
+                if np.isfinite(uv[k, idx[j]]).all():
+                    continue
+                why = [r for r in reasons[start[j]:start[j] + counts[j]]
+                       if r not in (None, "missing", "no_spot")]
+                if why:
+                    bad[ids[idx[j]]] = why[0]
+        if bad:
+            notes.append(f"camera {cam.id}: {len(bad)} {what}frames not used: "
+                         + ", ".join(f"{p} {r.replace('_', ' ')}"
+                                     for p, r in list(bad.items())[:8])
+                         + (" …" if len(bad) > 8 else ""))
     # the deployment's per-camera pixel corrections apply here exactly as in the locator, so
     # that the cameras are fitted to the spots the locator will see
     offsets = deployment.pixel_offsets
