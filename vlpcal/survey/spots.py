@@ -129,12 +129,12 @@ def _one_frame(frame_of):
     return frames_of
 
 
-def _blocks(ids, frames_of):
-    """``(indices, per-id frame lists)`` of ``ids`` a block at a time: a block ends once its
+def _blocks(ids, frames_of, camera_id):
+    """``(indices, per-id frame lists)`` of ``ids`` from one camera a block at a time: a block ends once its
     frames pass :data:`BLOCK_BYTES`, so that a survey of any size is read in bounded memory."""
     idx, block, size = [], [], 0
     for i, p in enumerate(ids):
-        frames = frames_of(p)
+        frames = frames_of(p, camera_id)
         idx.append(i)
         block.append(frames)
         size += sum(len(f) for f in frames if f)
@@ -159,7 +159,7 @@ def _spots(deployment, ids, frames_of, observations, notes, what) -> np.ndarray:
                     uv[k, i] = observations[(p, cam.id)]
             continue
         bad = {}
-        for idx, per_id in _blocks(ids, lambda p: frames_of(p, cam.id)):
+        for idx, per_id in _blocks(ids, frames_of, cam.id):
             counts = np.array([len(f) for f in per_id])
             start = np.r_[0, np.cumsum(counts)[:-1]]
             spots = detect_spots([f for fs in per_id for f in fs], deployment.detector,
