@@ -130,8 +130,9 @@ def _one_frame(frame_of):
 
 
 def _blocks(ids, frames_of, camera_id):
-    """``(indices, per-id frame lists)`` of ``ids`` from one camera a block at a time: a block ends once its
-    frames pass :data:`BLOCK_BYTES`, so that a survey of any size is read in bounded memory."""
+    """``(indices, per-id frame lists)`` of ``ids`` from one camera, a block at a time: a block
+    ends once its frames pass :data:`BLOCK_BYTES`, so that a survey of any size is read in
+    bounded memory."""
     idx, block, size = [], [], 0
     for i, p in enumerate(ids):
         frames = frames_of(p, camera_id)
