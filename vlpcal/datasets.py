@@ -159,26 +159,34 @@ def _staged(root: Path, overwrite: bool):
         yield tmp
 
 
+def _frame_files(folder: Path, camera_id, data) -> list[tuple[Path, bytes]]:
+    """Where a camera's sighting at a point goes: one JPEG as ``folder/cam.jpg``, a burst (a
+    list of JPEGs: the LED resting there) as ``folder/cam/001.jpg``…; its folders made."""
+    name = _check_id(str(camera_id), "camera id")
+    if isinstance(data, (list, tuple)):
+        (folder / name).mkdir(parents=True, exist_ok=True)
+        return [(folder / name / f"{k + 1:03d}.jpg", one) for k, one in enumerate(data)]
+    folder.mkdir(parents=True, exist_ok=True)
+    return [(folder / f"{name}.jpg", data)]
+
+
 def _write_jpegs(frames: dict, ids: list, folder_of) -> None:
-    """``frames``: camera id → per id JPEG bytes, None, or a burst (a list of JPEG bytes: the
-    LED resting there); written to ``folder_of(id)/cam.jpg`` or ``folder_of(id)/cam/k.jpg``."""
+    """``frames``: camera id → per id JPEG bytes, None, or a burst (:func:`_frame_files`)."""
     for cam, jpegs in frames.items():
-        name = _check_id(str(cam), "camera id")
+        _check_id(str(cam), "camera id")
         for i, data in zip(ids, jpegs):
-            if data is None:
-                continue
-            folder = folder_of(i)
-            if isinstance(data, (list, tuple)):
-                (folder / name).mkdir(parents=True, exist_ok=True)
-                for k, one in enumerate(data):
-                    (folder / name / f"{k + 1:03d}.jpg").write_bytes(one)
-            else:
-                folder.mkdir(parents=True, exist_ok=True)
-                (folder / f"{name}.jpg").write_bytes(data)
+            if data is not None:
+                for path, one in _frame_files(folder_of(i), cam, data):
+                    path.write_bytes(one)
 
 
 def _fmt(x: float) -> str:
     return repr(round(float(x), 9))
+
+
+def _point_row(point_id: str, xyz) -> list[str]:
+    """A ``points.csv`` row; a coordinate not measured (NaN, a frame mark's) an empty cell."""
+    return [point_id, *(_fmt(x) if np.isfinite(x) else "" for x in xyz)]
 
 
 def _check_lengths(per_camera: dict | None, n: int, what: str) -> None:
@@ -262,8 +270,7 @@ def write_survey_bundle(root, point_ids, xyz, frames: dict | None = None,
     _check_lengths(observations, len(ids), "observations")
     with _staged(root, overwrite) as tmp:
         _write_csv(tmp / "points.csv", POINTS_COLUMNS,
-                   [[p, *(_fmt(x) if np.isfinite(x) else "" for x in xyz[i])]
-                    for i, p in enumerate(ids)])
+                   [_point_row(p, xyz[i]) for i, p in enumerate(ids)])
         _write_jpegs(frames or {}, ids, lambda p: tmp / "frames" / p)
         if observations:
             rows = [[p, cam, _fmt(uv[i, 0]), _fmt(uv[i, 1])]
@@ -636,19 +643,14 @@ class SurveyAppender:
         for cid, data in frames.items():
             if data is None:
                 continue
-            name = _check_id(str(cid), "camera id")
-            files = [(stage / f"{name}.jpg", data)]
-            if isinstance(data, (list, tuple)):
-                (stage / name).mkdir()
-                files = [(stage / name / f"{k + 1:03d}.jpg", one) for k, one in enumerate(data)]
-            for path, one in files:
+            for path, one in _frame_files(stage, cid, data):
                 with open(path, "wb") as f:
                     f.write(one)
                     os.fsync(f.fileno())
         self._log("commit", pid)
         os.replace(stage, self.frames / pid)
-        with open(self.points, "a", newline="") as f:  # a mark's unmeasured cell: empty
-            csv.writer(f).writerow([pid, *(_fmt(x) if np.isfinite(x) else "" for x in xyz)])
+        with open(self.points, "a", newline="") as f:
+            csv.writer(f).writerow(_point_row(pid, xyz))
             f.flush()
             os.fsync(f.fileno())
         self._log("accept", pid)
@@ -671,8 +673,7 @@ class SurveyAppender:
         from .writing import OutputSet
 
         with OutputSet(self.points) as (tmp,):
-            _write_csv(tmp, POINTS_COLUMNS, [[i, *(_fmt(x) if np.isfinite(x) else ""
-                                                   for x in p)] for i, p in rows])
+            _write_csv(tmp, POINTS_COLUMNS, [_point_row(i, p) for i, p in rows])
 
     def _log(self, event: str, pid: str) -> None:
         with open(self.journal, "a", encoding="utf-8") as f:
