@@ -770,7 +770,7 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                         "far from any consistent camera; check free/ and the deployment)") \
             from None
     cal = result.calibration
-    marks = bool(np.isnan(bundle.xyz).any())  # frame marks among the references
+    marks = cal.in_marks_frame  # frame marks among the references
     marks_only = cal.marks_only
     refs = "marks" if marks_only else "references"
     click.echo(f"free survey: {result.free_sets} sets (moments a camera saw the LED), "

@@ -78,7 +78,17 @@ def unfixed_motions(points, measured=None, free_height: bool = False, wand: bool
     return [names[i] for i in np.flatnonzero(weight > 1e-6)]
 
 
-def _named(marks) -> str:
+def is_mark(X) -> np.ndarray:
+    """Which references (N×3, NaN: not measured) are frame marks: a point with an empty cell,
+    or the origin's zeros in a survey that has empty cells."""
+    X = np.asarray(X, float)
+    measured = np.isfinite(X)
+    if measured.all():
+        return np.zeros(len(X), bool)
+    return (~measured).any(axis=1) | (X == 0.0).all(axis=1)
+
+
+def references_named(marks) -> str:
     """"the 12 reference points", "the 5 marks", "the 3 reference points and 2 marks"."""
     marks = np.asarray(marks, bool)
     k, n = int(marks.sum()), len(marks) - int(marks.sum())
@@ -98,7 +108,7 @@ def check_datum(points, measured=None, free_height: bool = False, wand: bool = F
     n = len(points)
     if marks is None:
         marks = np.zeros(n, bool) if measured is None else ~np.asarray(measured).all(axis=1)
-    named = _named(marks)
+    named = references_named(marks)
     if measured is None or np.all(measured):  # tape-measured points only: say it plainly
         need = 2 if free_height else 3
         if n < need:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..geometry import Camera
 from .calibration import estimate_precision, format_length, refine_jointly
-from .datum import check_datum, datum_floor, unfixed_motions
+from .datum import check_datum, datum_floor, is_mark, references_named, unfixed_motions
 from .errors import SurveyError
 from .lens import LENS_MODELS
 
@@ -155,6 +155,8 @@ class FreeCalibration:
     #: the room's floor polygon in the fit's frame (moved into the marks' frame when marks set
     #: it; :mod:`.marks_frame`), or None
     room: list | None = None
+    #: the frame is the marks' (a reference has an empty cell), not the plan's
+    in_marks_frame: bool = False
 
     @property
     def weakly_fixed(self) -> bool:
@@ -226,12 +228,10 @@ def _check_height(cameras, X, uv, uv_free, free_height) -> None:
     off = np.abs(z - free_height)
     if np.nanmedian(off) > 5 * yard + 1e-12:
         lo, hi = np.nanpercentile(z, [5, 95])
-        from .datum import _named
-
         raise SurveyError(f"a free height of {free_height:g} m: the {int(two.sum())} free sets "
                           f"that two cameras saw put the LED at {lo:.2f}–{hi:.2f} m (half of "
                           f"them more than {np.nanmedian(off):.2f} m from {free_height:g}), "
-                          f"while {_named(is_mark(X)[ref_two])} come out within "
+                          f"while {references_named(is_mark(X)[ref_two])} come out within "
                           f"{yard * 1000:.0f} mm of their measured heights: the LED was not at "
                           "that height (if it moved up and down, state no height)")
 
@@ -376,16 +376,6 @@ def mark_shares(X) -> tuple[np.ndarray, bool]:
     marks = is_mark(X)
     share[:, :2][marks[:, None] & measured[:, :2] & (X[:, :2] == 0.0)] = DEFINED_SHARE
     return share, bool((X[measured] == 0.0).all())
-
-
-def is_mark(X) -> np.ndarray:
-    """Which references (N×3, NaN: not measured) are frame marks: a point with an empty cell,
-    or the origin's zeros in a survey that has empty cells."""
-    X = np.asarray(X, float)
-    measured = np.isfinite(X)
-    if measured.all():
-        return np.zeros(len(X), bool)
-    return (~measured).any(axis=1) | (X == 0.0).all(axis=1)
 
 
 def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
@@ -712,11 +702,26 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     tick()
     _check_fit(cams, adj[N:], uv_all[:, N:], keep[:, N:], s_px, ids_c)
     _check_references_fit(seen_r, keep[:, :N], ids_c)
-    if room is not None and (~measured).any():  # frame marks: the room moved into their frame
+    in_marks_frame = bool((~measured).any())  # frame marks define a frame of their own
+    if room is not None and in_marks_frame:  # the room moved into it
         from .marks_frame import polygons_in_marks_frame
 
         room = polygons_in_marks_frame(nominal, cams, [room])[0]
     _check_inside(adj[N:], room, cams)
+    # the wand's length on held-out sets: a wand that does not fit is refused before the
+    # references are left out in turn (each a joint fit)
+    wand_error = None if wand is None else wand_errors(cams, pts_free[:, held_out], wand, ids_c,
+                                                        s_px)
+    if wand_error is not None and not wand_error.mean <= WAND_MISFIT * wand:
+        said = (f"{wand_error.sets} held-out sets put its ends {format_length(wand_error.mean)} "
+                f"from its {format_length(wand)} on average" if wand_error.sets else
+                "no held-out set shows its two ends meeting")
+        raise SurveyError(f"the wand does not fit the cameras: {said} (of "
+                          f"{int(held_out.sum()) // 2} held out, {wand_error.discarded} whose "
+                          f"spots do not meet; the spots fit to ±{s_px:.2g} px): the second "
+                          "spot is not the wand's other LED "
+                          "(a reflection, another light, a survey of one LED), or the LEDs' "
+                          "names are swapped for a camera; nothing was written")
     # each reference left out: its prior removed (its spots kept), where the rest put it —
     # when the rest still fix the frame; of many, an even sample (each costs a joint fit)
     loo = np.full(N, np.nan)
@@ -773,23 +778,11 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
             if kept:
                 choice.reason = f"kept as in the deployment, as {kept}"
             choices.append(choice)
-    wand_error = None if wand is None else wand_errors(cams, pts_free[:, held_out], wand, ids_c,
-                                                        s_px)
-    if wand_error is not None and not wand_error.mean <= WAND_MISFIT * wand:
-        said = (f"{wand_error.sets} held-out sets put its ends {format_length(wand_error.mean)} "
-                f"from its {format_length(wand)} on average" if wand_error.sets else
-                "no held-out set shows its two ends meeting")
-        raise SurveyError(f"the wand does not fit the cameras: {said} (of "
-                          f"{int(held_out.sum()) // 2} held out, {wand_error.discarded} whose "
-                          f"spots do not meet; the spots fit to ±{s_px:.2g} px): the second "
-                          "spot is not the wand's other LED "
-                          "(a reflection, another light, a survey of one LED), or the LEDs' "
-                          "names are swapped for a camera; nothing was written")
     return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
                            estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum())
                            // per_set, rejected, spread, loo, floor, dropped, notes,
                            assumed, predicted, exact, wand, wand_error, pts_free, marks_only,
-                           room)
+                           room, in_marks_frame)
 
 
 def _wrong_lengths(adj, pair_i, keep, wand, wand_sigma) -> np.ndarray:

@@ -246,9 +246,8 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
         point_sigma_estimated=cal.point_sigma_estimated, datum_floor_m=cal.datum_floor,
         free_height_m=free_height, wand_m=wand)
     rows, words = [], []
-    marks = bool(np.isnan(np.asarray(X, float)).any())
     # in the marks' frame, each camera's move is judged against the plan moved into it
-    planned = cameras_in_marks_frame(cams, cal.cameras) if marks else cams
+    planned = cameras_in_marks_frame(cams, cal.cameras) if cal.in_marks_frame else cams
     for nom, plan, c, choice in zip(cams, planned, cal.cameras, cal.lens):
         dR = rodrigues(c.rotation) @ rodrigues(plan.rotation).T
         angle = float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
@@ -268,7 +267,7 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                      "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
                      "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
     keep_out = dep.keep_out
-    if marks:  # frame marks: the deployment in their frame
+    if cal.in_marks_frame:  # the deployment in the marks' frame
         keep_out = polygons_in_marks_frame(cams, cal.cameras, dep.keep_out)
     calibrated = Deployment(dep.name, dep.ceiling_height, cal.room, cal.cameras, keep_out,
                             extra)
