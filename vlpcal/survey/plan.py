@@ -414,16 +414,16 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
     pts = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
 
-    def inside(P):  # C×N: well inside each camera's image
-        return np.stack([c.project(P, margin=MARK_MARGIN * min(c.width, c.height))[2]
-                         for c in cams])
+    def inside(P):  # C×N pixels and whether well inside each camera's image
+        got = [c.project(P, margin=MARK_MARGIN * min(c.width, c.height)) for c in cams]
+        return np.stack([g[0] for g in got]), np.stack([g[2] for g in got])
 
-    views = inside(pts)
+    uv, views = inside(pts)
     two = contains_xy(room, pts[:, 0], pts[:, 1]) & (views.sum(axis=0) >= 2)
     # a mark is put by eye: it must stay in two views wherever it lands, nearby
     w = int(round(PLACING_SHARE * size / step))
     two = _box(two.reshape(gx.shape)[None].astype(float), w)[0].ravel() > 1 - 1e-9
-    xy, views = pts[two, :2], views[:, two]
+    xy, uv, views = pts[two, :2], uv[:, two], views[:, two]
     if len(xy) < 2 + floor_marks:
         raise SurveyError("too few places on the floor are seen by two cameras for the frame's "
                           "marks: a wand survey needs cameras that overlap")
@@ -432,11 +432,10 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     a = 1 if extent[1] >= 2 * extent[0] else 0
     # O: among places with half the zone still ahead of them along that axis (room for X), the
     # most views, then the nearest the centres of the images that see it
-    off = np.zeros(len(xy))
-    for k, c in enumerate(cams):
-        uv = c.project(np.c_[xy, np.zeros(len(xy))])[0]
-        r = np.hypot((uv[:, 0] - c.cx) / c.width, (uv[:, 1] - c.cy) / c.height)
-        off += np.where(views[k], np.nan_to_num(r), 0.0)
+    size_px = np.array([[c.width, c.height] for c in cams], float)[:, None]
+    centre = np.array([[c.cx, c.cy] for c in cams])[:, None]
+    r = np.nan_to_num(np.linalg.norm((uv - centre) / size_px, axis=2))
+    off = np.where(views, r, 0.0).sum(axis=0)
     n_views = views.sum(axis=0)
     same_row = np.abs(xy[:, None, 1 - a] - xy[None, :, 1 - a]) < step / 2
     ahead = np.max(np.where(same_row, xy[None, :, a] - xy[:, None, a], 0.0), axis=1)
@@ -455,7 +454,7 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     recorded[0] = 0.0
     recorded[1, 1:] = 0.0
     recorded[2:, 2] = 0.0
-    return FrameMarks(ids, pts, inside(pts), [c.id for c in cams], tape=float(tape),
+    return FrameMarks(ids, pts, inside(pts)[1], [c.id for c in cams], tape=float(tape),
                       recorded=recorded, axis="xy"[a])
 
 
