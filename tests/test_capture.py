@@ -428,6 +428,17 @@ class MovingRig(Rig):
         return self.moving[cid][i]
 
 
+def _capture_free(root, rig, survey, points, *extra):
+    """`survey capture --yes` of a free survey (25 s at 8 sets/s) and then ``points``, against
+    ``rig``, which is closed after."""
+    try:
+        cmd = capture_cmd(root, rig, survey, "--yes", *extra, "--duration", "25", "--rate", "8")
+        cmd[cmd.index("--points") + 1] = str(points)
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    finally:
+        rig.close()
+
+
 def test_free_capture_then_references_calibrates_end_to_end(site, tmp_path):
     """`survey capture --free` against simulated MJPEG cameras: the free part records sets
     while the LED moves and reports each camera's coverage and the pairs; then the reference
@@ -441,13 +452,7 @@ def test_free_capture_then_references_calibrates_end_to_end(site, tmp_path):
     write_truth_csv(tmp_path / "refs.csv", refs.ids, refs.xyz, id_column="point_id")
     rig = MovingRig(scene, tmp_path, free_path(scene, 400), fps=30.0)
     survey = tmp_path / "survey"
-    try:
-        cmd = capture_cmd(root, rig, survey, "--yes", "--delay", "0.1", "--free",
-                          "--duration", "25", "--rate", "8")
-        cmd[cmd.index("--points") + 1] = str(tmp_path / "refs.csv")
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    finally:
-        rig.close()
+    res = _capture_free(root, rig, survey, tmp_path / "refs.csv", "--delay", "0.1", "--free")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert "free survey:" in res.stdout and "sightings" in res.stdout
     assert "pairs:" in res.stdout and "linked" in res.stdout
@@ -516,13 +521,8 @@ def test_a_wand_survey_captured_live_calibrates_with_no_tape(site, tmp_path):
     rig = WandRig(scene, tmp_path, wand_path(scene, 400, 0.5, 3),
                   dict(zip(marks.ids, marks.xyz.tolist())), fps=30.0)
     survey = tmp_path / "survey"
-    try:
-        cmd = capture_cmd(root, rig, survey, "--yes", "--delay", "0.2", "--wand", "0.5",
-                          "--duration", "25", "--rate", "8")
-        cmd[cmd.index("--points") + 1] = str(tmp_path / "marks.csv")
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    finally:
-        rig.close()
+    res = _capture_free(root, rig, survey, tmp_path / "marks.csv", "--delay", "0.2", "--wand",
+                        "0.5")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert "wave the wand (0.5 m)" in res.stdout and "place the LED on mark X" in res.stdout
     assert "--wand 0.5 --out calibrated.yaml" in res.stdout
