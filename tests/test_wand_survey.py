@@ -366,3 +366,24 @@ def test_a_wand_whose_led_names_are_swapped_for_a_camera_is_refused():
                                           r"sets put its ends .* from its 50.00 cm"):
         calibrate_free(nominal, MARKS, uv_marks, ["O", "X", "F1", "F2", "F3"], uv, wand=0.5,
                        labelled=True)
+
+
+def test_the_x_mark_lands_on_plus_x_when_the_start_faces_the_other_way():
+    """The marks' zeros fit a half turn about z as well as the frame itself: the X mark names
+    the +x side (``X,,0,0``, DESIGN.md), so a start drawn facing the other way (the plan's
+    axes reversed) is turned round, not left with X at negative x."""
+    from vlpcal.survey.network import align_to_references
+
+    rng = np.random.default_rng(3)
+    scene = make_scene(get_profile("paper-2024"), 0)
+    marks = _marks_of(scene)
+    true = _moved(scene.true, marks[0])
+    uv = _spots(true, marks - marks[0], rng, noise=0.01)
+    turn = rodrigues([0.0, 0.0, np.pi + 0.05])
+    start = [replace(c, position=tuple(turn @ c.center),
+                     rotation=tuple(rotation_vector(c.R @ turn.T))) for c in true]
+    aligned = align_to_references(start, uv, MARKS, scale_fixed=True)
+    x = triangulate(aligned, uv[:, 1:2]).X[0]
+    assert x[0] > 0.5 * np.linalg.norm(marks[1] - marks[0]), x
+    moved_by = [np.linalg.norm(np.subtract(a.center, t.center)) for a, t in zip(aligned, true)]
+    assert max(moved_by) < 0.01, moved_by
