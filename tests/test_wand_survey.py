@@ -285,6 +285,11 @@ def test_a_burst_of_frames_is_one_sighting_averaged_without_its_stray_frame(tmp_
     bundle = read_survey_bundle(root)
     assert len(bundle.frames_at("P1", "C1")) == 4 and len(bundle.frames_at("P2", "C1")) == 1
     assert bundle.frames_at("P1", "C2") == []
+    # a Mac's hidden ._ files beside the frames are not frames, nor cameras
+    (root / "frames" / "P1" / "C1" / "._002.jpg").write_bytes(b"\0\5\26\7 mac")
+    (root / "frames" / "P2" / "._C1.jpg").write_bytes(b"\0\5\26\7 mac")
+    bundle = read_survey_bundle(root)
+    assert len(bundle.frames_at("P1", "C1")) == 4 and set(bundle.camera_ids()) == {"C1"}
     dep = Deployment("lab", 2.3, [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]], paper_rig())
     uv, _ = survey_spots(dep, bundle)
     each = detect_spots(rest, dep.detector, dep.detector_settings, shape=(120, 160)).uv

@@ -239,7 +239,8 @@ class SurveyBundle:
         if not path.is_dir():
             return [read_frame(path)]
         burst, size = [], 0
-        for f in sorted(path.glob("*.jpg"))[:MAX_BURST]:
+        # hidden files (._001.jpg of a Mac) are not frames
+        for f in sorted(f for f in path.glob("*.jpg") if not f.name.startswith("."))[:MAX_BURST]:
             if size >= MAX_BURST_BYTES:  # (a camera's burst is seconds of small frames)
                 break
             burst.append(read_frame(f))
@@ -341,9 +342,11 @@ def read_survey_bundle(root) -> SurveyBundle:
             if d.name not in known:
                 raise DatasetError(f"{d}: point {d.name!r} is not in points.csv")
             for f in sorted(d.iterdir()):
+                if f.name.startswith("."):  # hidden (._C1.jpg of a Mac): not a frame
+                    continue
                 if f.suffix == ".jpg" and not f.is_dir():
                     key = (d.name, f.stem)
-                elif f.is_dir() and not f.name.startswith(".") and any(f.glob("*.jpg")):
+                elif f.is_dir() and any(f.glob("*.jpg")):
                     key = (d.name, _check_id(f.name, f"{f}: camera id"))  # a burst
                 else:
                     continue
@@ -378,6 +381,8 @@ def _read_free(free: Path, bundle: SurveyBundle) -> None:
             if d.is_dir() and not d.name.startswith("."):
                 sid = _check_id(d.name, f"{d}: set id")
                 for f in d.glob("*.jpg"):
+                    if f.name.startswith("."):  # hidden (._C1.jpg of a Mac): not a frame
+                        continue
                     bundle.free_frames[(sid, _check_id(f.stem, f"{f}: camera id"))] = f
                 ids.add(sid)
     opath = free / "observations.csv"
