@@ -215,6 +215,13 @@ def test_simulate_and_calibrate_a_wand_survey_from_the_command_line(tmp_path):
     assert report["wand"]["held_out_sets"] >= 20
     assert report["wand"]["length_error_mean_m"] < 0.003
     assert abs(report["plan_scale"] - 1) < 0.02 and not report["scale_doubtful"]
+    # what `show` tells the next person: the wand's held-out miss
+    run = CliRunner().invoke(main, ["show", str(out)])
+    assert run.exit_code == 0, run.output
+    mean_mm = report["wand"]["length_error_mean_m"] * 1000
+    assert f"wand: 500 mm long, missed by {mean_mm:.2f} mm on average" in run.output, \
+        run.output
+    assert "position error: 2.0 mm (assumed)" in run.output, run.output
     # a wand length twice the bar's (within the 3× a unit slip is refused at): every camera
     # twice as high, said, not refused (a plain bundle adjustment would take it)
     run = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(sim / "nominal.yaml"),

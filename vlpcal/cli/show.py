@@ -81,9 +81,20 @@ def show(deployment_path, deployment_option):
         if isinstance(prov.get("lens"), dict):
             click.echo("  lens models: " + ", ".join(f"{k} {v}" for k, v in prov["lens"].items()))
         if prov.get("point_sigma_m") is not None:
-            how = "estimated" if prov.get("point_sigma_estimated") else "as stated"
+            how = "estimated" if prov.get("point_sigma_estimated") else \
+                "assumed" if prov.get("point_sigma_assumed") else "as stated"
             click.echo(f"  survey points' position error: {float(prov['point_sigma_m']) * 1000:.1f}"
                        f" mm ({how})")
+        wand = prov.get("wand_error_m")
+        if isinstance(wand, dict) and wand.get("mean") is not None and prov.get("wand_m"):
+            click.echo(f"  wand: {float(prov['wand_m']) * 1000:.0f} mm long, missed by "
+                       f"{float(wand['mean']) * 1000:.2f} mm on average (p95 "
+                       f"{float(wand.get('p95') or math.nan) * 1000:.2f} mm) over "
+                       f"{wand.get('held_out_sets', '?')} held-out sets")
+        if prov.get("predicted_error_m") is not None and not prov.get("held_out_mean_m"):
+            click.echo(f"  predicted mean 3D error of fixes: "
+                       f"{float(prov['predicted_error_m']) * 1000:.1f} mm (from the fit's "
+                       "own uncertainty; no test points held out)")
         held = prov.get("held_out_mean_m")
         if isinstance(held, dict) and held:
             best = min(held, key=lambda k: held[k] if held[k] is not None else math.inf)

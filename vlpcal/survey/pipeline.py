@@ -244,7 +244,11 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                                                 "free_sets": n_sets}},
         lens={c.camera_id: c.chosen for c in cal.lens}, point_sigma_m=cal.point_sigma,
         point_sigma_estimated=cal.point_sigma_estimated, datum_floor_m=cal.datum_floor,
-        free_height_m=free_height, wand_m=wand)
+        free_height_m=free_height, wand_m=wand, point_sigma_assumed=cal.point_sigma_assumed,
+        predicted_error_m=_finite(cal.predicted_error),
+        wand_error_m=None if cal.wand_error is None else {
+            "mean": _finite(cal.wand_error.mean), "p95": _finite(cal.wand_error.p95),
+            "held_out_sets": cal.wand_error.sets})
     rows, words = [], []
     # in the marks' frame, each camera's move is judged against the plan moved into it
     planned = cameras_in_marks_frame(cams, cal.cameras) if cal.in_marks_frame else cams
