@@ -396,10 +396,8 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     their images (:data:`MARK_MARGIN`). ``O`` where the most cameras see it nearest their
     images' centres — the origin is where the cameras agree best, as every fix is measured
     from it — with half the marks' zone ahead of it along one room axis (the nominal x,
-    unless the zone is twice as long along y), and ``X`` as far ahead as the zone allows;
-    then ``floor_marks`` marks ``F1``… each where it widens the marks' convex hull most, so
-    the floor plane is fixed over the room, not along one line."""
-    import shapely
+    unless the zone is twice as long along y); then ``X`` ahead of it and ``floor_marks``
+    marks ``F1``… where they fix the frame best for the fixes (:func:`_frame_marks`)."""
     from shapely import contains_xy
 
     from .linkage import PLACING_SHARE, _box, footprint
@@ -441,13 +439,8 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     ahead = np.max(np.where(same_row, xy[None, :, a] - xy[:, None, a], 0.0), axis=1)
     room_for_x = ahead >= extent[a] / 2
     o = int(np.lexsort((off / n_views, -n_views, ~room_for_x))[0])
-    row = np.flatnonzero(same_row[o])
-    chosen = [o, int(row[np.argmax(xy[row, a])])]  # X: the farthest ahead on O's row
-    for _ in range(floor_marks):  # each the one that widens the marks' hull most
-        d = np.min(np.linalg.norm(xy[:, None] - xy[None, chosen], axis=2), axis=1)
-        sets = np.concatenate([np.repeat(xy[None, chosen], len(xy), axis=0), xy[:, None]], 1)
-        area = shapely.area(shapely.convex_hull(shapely.multipoints(sets)))
-        chosen.append(int(np.argmax(area + 1e-6 * step * d)))  # ties: the farthest
+    chosen = _frame_marks(cams, xy, views, o, same_row[o] & (xy[:, a] > xy[o, a]),
+                          floor_marks, 2 * PLACING_SHARE * size)
     pts = to_marks(np.c_[xy[chosen], np.zeros(len(chosen))], tape)
     ids = ["O", "X"] + [f"F{i + 1}" for i in range(floor_marks)]
     recorded = np.full((len(ids), 3), np.nan)
@@ -456,6 +449,55 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     recorded[2:, 2] = 0.0
     return FrameMarks(ids, pts, inside(pts)[1], [c.id for c in cams], tape=float(tape),
                       recorded=recorded, axis="xy"[a])
+
+
+#: ``X`` candidates tried along O's row (evenly spaced): each costs one greedy choice of the
+#: floor marks
+X_CANDIDATES = 24
+
+
+def _frame_marks(cams, xy, views, o: int, row, floor_marks: int, apart: float) -> list[int]:
+    """Indices into ``xy`` (N×2 floor places, ``views`` C×N) of O, X and the floor marks: X on
+    ``row`` (N booleans, ahead of O) and each floor mark, greedily, where the predicted error
+    the frame gives the fixes over the marks' zone is least (:mod:`.frame_error`) — a mark
+    far out fixes the floor's tilt with a long lever, one seen by more cameras or at a wider
+    angle is triangulated better; the best trade is measured, not guessed. Marks stay
+    ``apart`` m from each other (a mark's spot bias is the same wherever it stands, so two
+    marks at one place are one)."""
+    from .frame_error import frame_errors, mark_covariances, mark_information, zone_weight
+
+    P = np.c_[xy, np.zeros(len(xy))]
+    cov = mark_covariances(cams, P, views)
+    lift = 0.25 * float(np.median([c.position[2] for c in cams]))
+    weight = zone_weight(np.vstack([P, P + [0.0, 0.0, lift]]))
+    on_floor = mark_information(P, cov, (2,))
+    base = mark_information(P[[o]], cov[[o]], (0, 1, 2))[0]
+    along = mark_information(P, cov, (1, 2))
+    ahead = np.flatnonzero(row)
+    if not len(ahead):
+        raise SurveyError("no place ahead of the origin mark is seen by two cameras: a wand "
+                          "survey needs cameras that overlap along the room")
+    tried = ahead[np.unique(np.linspace(0, len(ahead) - 1, min(X_CANDIDATES, len(ahead)))
+                            .round().astype(int))]
+    best, best_err = None, np.inf
+    for x in tried:
+        chosen, info = [o, int(x)], base + along[x]
+        err = np.inf
+        for _ in range(floor_marks):
+            near = np.min(np.linalg.norm(xy[:, None] - xy[None, chosen], axis=2), axis=1) < apart
+            errs = frame_errors(info[None] + on_floor, weight)
+            errs[near] = np.inf
+            f = int(np.argmin(errs))
+            if not np.isfinite(errs[f]):
+                break
+            chosen.append(f)
+            info, err = info + on_floor[f], errs[f]
+        if len(chosen) == 2 + floor_marks and err < best_err:
+            best, best_err = chosen, err
+    if best is None:
+        raise SurveyError("the floor places two cameras see lie on one line: no floor marks "
+                          "can fix the floor's tilt across it")
+    return best
 
 
 def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
