@@ -326,6 +326,11 @@ def test_hostile_free_inputs_are_one_line(tmp_path):
                                    "--out", str(tmp_path / "r.csv")])
     assert res.exit_code == 2 and "leave no floor" in res.output
     assert len(res.output.strip().splitlines()) == 1
+    # a tape grid's spacing asked of a free or wand plan is refused, not silently dropped
+    for kind in (["--free"], ["--wand", "0.5"]):
+        res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "k.yaml"), *kind,
+                                       "--step", "0.2", "--out", str(tmp_path / "r.csv")])
+        assert res.exit_code == 2 and "drop --step" in res.output, res.output
 
 
 def test_test_points_in_millimetres_or_of_other_cameras_are_refused(tmp_path):

@@ -88,6 +88,9 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         raise click.BadParameter("a wand survey plans frame marks, not references, and is "
                                  "waved by hand (drop --references and --free-height)",
                                  param_hint="--wand")
+    if free and step is not None:
+        raise click.BadParameter("is for a tape survey's grid; a free or wand survey plans "
+                                 "a few points and a route (drop --step)", param_hint="--step")
     if references is not None and references < 3 and free_height is None:
         raise click.BadParameter(f"expected 3 or more (2 or more with --free-height), got "
                                  f"{references}", param_hint="--references")
