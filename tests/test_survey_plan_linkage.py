@@ -341,3 +341,25 @@ def test_a_wand_longer_than_the_room_is_refused_before_planning(tmp_path):
                                     "50", "--out", str(tmp_path / "marks.csv")])
     assert res.exit_code == 2 and "--wand 50: longer than the room" in res.output, res.output
     assert not (tmp_path / "marks.csv").exists()
+
+
+def test_frame_marks_are_the_same_along_y_and_far_from_the_plans_origin():
+    """From a hostile probe: a room long along y was refused ("the floor places … lie on one
+    line": X was scored by its y, which is its distance along y there), and so was the same
+    room 1000 m from the plan's origin (the error model in absolute coordinates). The marks
+    now follow the room: turned with it, moved with it."""
+    ys = (1.2, 1.8, 2.4, 3.0, 3.6)
+
+    def room(w, h, dx=0.0):
+        return [[dx, 0], [dx + w, 0], [dx + w, h], [dx, h]]
+
+    along_x = Deployment("x", 2.3, room(4.8, 1.8),
+                         [cam(f"C{k + 1}", y, 0.9, 2.3) for k, y in enumerate(ys)])
+    along_y = Deployment("y", 2.3, [[y, x] for x, y in room(4.8, 1.8)],
+                         [cam(f"C{k + 1}", 0.9, y, 2.3, 90.0) for k, y in enumerate(ys)])
+    far = Deployment("far", 2.3, room(4.8, 1.8, 1000.0),
+                     [cam(f"C{k + 1}", 1000.0 + y, 0.9, 2.3) for k, y in enumerate(ys)])
+    mx, my, mf = plan_marks(along_x), plan_marks(along_y), plan_marks(far)
+    assert mx.axis == "x" and my.axis == "y"
+    assert np.allclose(my.xyz[:, [1, 0]], mx.xyz[:, :2], atol=0.05), (mx.xyz, my.xyz)
+    assert np.allclose(mf.xyz[:, 0] - 1000.0, mx.xyz[:, 0], atol=0.05), (mx.xyz, mf.xyz)

@@ -83,7 +83,10 @@ def marks_frame_error(cameras, marks, views, zone) -> float:
     at ``marks`` (K×3, in that order; ``views`` C×K) gives points of ``zone`` (M×3)."""
     P = np.asarray(marks, float)
     cov = mark_covariances(cameras, P, views)
-    info = mark_information(P[:1], cov[:1], (0, 1, 2))[0] \
-        + mark_information(P[1:2], cov[1:2], (1, 2))[0] \
-        + mark_information(P[2:], cov[2:], (2,)).sum(axis=0)
-    return float(np.sqrt(frame_errors(info[None], zone_weight(zone))[0]))
+    Q, Z = P - P[0], np.asarray(zone, float) - P[0]  # from O: far from the origin alike
+    d = (Q[1] - Q[0])[:2]
+    across = (1,) if abs(d[0]) >= abs(d[1]) else (0,)  # X's recorded zero: across O→X
+    info = mark_information(Q[:1], cov[:1], (0, 1, 2))[0] \
+        + mark_information(Q[1:2], cov[1:2], (*across, 2))[0] \
+        + mark_information(Q[2:], cov[2:], (2,)).sum(axis=0)
+    return float(np.sqrt(frame_errors(info[None], zone_weight(Z))[0]))

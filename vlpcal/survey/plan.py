@@ -439,7 +439,7 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     ahead = np.max(np.where(same_row, xy[None, :, a] - xy[:, None, a], 0.0), axis=1)
     room_for_x = ahead >= extent[a] / 2
     o = int(np.lexsort((off / n_views, -n_views, ~room_for_x))[0])
-    chosen = _frame_marks(cams, xy, views, o, same_row[o] & (xy[:, a] > xy[o, a]),
+    chosen = _frame_marks(cams, xy, views, o, same_row[o] & (xy[:, a] > xy[o, a]), a,
                           floor_marks, 2 * PLACING_SHARE * size)
     pts = to_marks(np.c_[xy[chosen], np.zeros(len(chosen))], tape)
     ids = ["O", "X"] + [f"F{i + 1}" for i in range(floor_marks)]
@@ -456,23 +456,30 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
 X_CANDIDATES = 24
 
 
-def _frame_marks(cams, xy, views, o: int, row, floor_marks: int, apart: float) -> list[int]:
+def _frame_marks(cams, xy, views, o: int, row, axis: int, floor_marks: int,
+                 apart: float) -> list[int]:
     """Indices into ``xy`` (N×2 floor places, ``views`` C×N) of O, X and the floor marks: X on
-    ``row`` (N booleans, ahead of O) and each floor mark, greedily, where the predicted error
-    the frame gives the fixes over the marks' zone is least (:mod:`.frame_error`) — a mark
-    far out fixes the floor's tilt with a long lever, one seen by more cameras or at a wider
-    angle is triangulated better; the best trade is measured, not guessed. Marks stay
+    ``row`` (N booleans, ahead of O along the plan's ``axis``, 0: x, 1: y; X's recorded zeros
+    are the other horizontal coordinate and z) and each floor mark, greedily, where the
+    predicted error the frame gives the fixes over the marks' zone is least
+    (:mod:`.frame_error`) — a mark far out fixes the floor's tilt with a long lever, one seen
+    by more cameras or at a wider angle is placed better; the best trade is measured, not
+    guessed. Marks stay
     ``apart`` m from each other (a mark's spot bias is the same wherever it stands, so two
     marks at one place are one)."""
     from .frame_error import frame_errors, mark_covariances, mark_information, zone_weight
 
     P = np.c_[xy, np.zeros(len(xy))]
     cov = mark_covariances(cams, P, views)
-    lift = 0.25 * float(np.median([c.position[2] for c in cams]))
-    weight = zone_weight(np.vstack([P, P + [0.0, 0.0, lift]]))
-    on_floor = mark_information(P, cov, (2,))
-    base = mark_information(P[[o]], cov[[o]], (0, 1, 2))[0]
-    along = mark_information(P, cov, (1, 2))
+    # the model in the room's own measure: from O, in camera heights (a site far from the
+    # plan's origin, or at any scale, is judged alike)
+    lift = float(np.median([c.position[2] for c in cams])) or 1.0
+    Q = (P - P[o]) / lift
+    cov = cov / lift ** 2
+    weight = zone_weight(np.vstack([Q, Q + [0.0, 0.0, 0.25]]))
+    on_floor = mark_information(Q, cov, (2,))
+    base = mark_information(Q[[o]], cov[[o]], (0, 1, 2))[0]
+    along = mark_information(Q, cov, (1 - axis, 2))
     ahead = np.flatnonzero(row)
     if not len(ahead):
         raise SurveyError("no place ahead of the origin mark is seen by two cameras: a wand "
