@@ -331,6 +331,19 @@ def test_hostile_free_inputs_are_one_line(tmp_path):
         res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "k.yaml"), *kind,
                                        "--step", "0.2", "--out", str(tmp_path / "r.csv")])
         assert res.exit_code == 2 and "drop --step" in res.output, res.output
+    # a tenth-scale room (cameras 0.23 m up): the wand plan sweeps below them by itself; the
+    # tape grid's default heights do not fit, and the refusal says so (it said "got None")
+    small = [[0, 0], [0.36, 0], [0.36, 0.18], [0, 0.18]]
+    save(Deployment("small", 0.23, small, [paper_camera(f"C{k + 1}", (x, 0.09, 0.23))
+                                           for k, x in enumerate((0.12, 0.18, 0.24))]),
+         tmp_path / "s.yaml")
+    res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "s.yaml"), "--wand",
+                                   "0.05", "--out", str(tmp_path / "w.csv")])
+    assert res.exit_code == 0 and "links all 3 cameras" in res.output, res.output
+    res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "s.yaml"), "--out",
+                                   str(tmp_path / "t.csv")])
+    assert res.exit_code == 2 and "the default heights" in res.output, res.output
+    assert "None" not in res.output
 
 
 def test_test_points_in_millimetres_or_of_other_cameras_are_refused(tmp_path):

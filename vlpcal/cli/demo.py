@@ -99,10 +99,14 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise click.UsageError(f"{out} exists and is not empty (use --overwrite to replace)")
     heights = _floats(survey_heights, "--survey-heights")
-    top = profile.ceiling_height - 0.5
+    # under the cameras, in their view: a site of any size (0.5 m under a 2.3 m ceiling)
+    top = min(profile.ceiling_height - 0.5,
+              0.9 * min(c.position[2] for c in profile.nominal))
+    if top <= 0:
+        top = 0.78 * min(profile.ceiling_height, *(c.position[2] for c in profile.nominal))
     if not heights or any(not 0 <= h <= top for h in heights):
-        raise click.BadParameter(f"expected LED heights from 0 to {top:g} m (0.5 m under the "
-                                 f"ceiling), got {survey_heights!r}",
+        raise click.BadParameter(f"expected LED heights from 0 to {top:.3g} m (under the "
+                                 f"cameras), got {survey_heights!r}",
                                  param_hint="--survey-heights")
     scene = make_scene(profile, seed)
     pts = grid_points(scene, survey_step, heights)

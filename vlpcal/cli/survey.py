@@ -97,10 +97,16 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
     hs = _floats(heights or "0,0.35,0.7", "--heights")
     top = 0.9 * min(c.position[2] for c in dep.cameras)  # below the cameras, in their view
     if len(set(hs)) < 2 or any(not 0 <= h < top for h in hs):
-        raise click.BadParameter(f"expected two or more heights, all different, from 0 to below "
-                                 f"{top:g} m (nine tenths of the lowest camera's), got "
-                                 f"{heights!r}",
-                                 param_hint="--heights")
+        if heights is None and free:  # a free or wand plan sweeps below its cameras' reach
+            hs = (0.0, top / 3, 2 * top / 3)
+        elif heights is None:
+            raise click.BadParameter(f"the default heights (0, 0.35 and 0.7 m) do not fit "
+                                     f"below {top:.3g} m (nine tenths of the lowest camera's): "
+                                     "give the LED heights to survey", param_hint="--heights")
+        else:
+            raise click.BadParameter(f"expected two or more heights, all different, from 0 to "
+                                     f"below {top:.3g} m (nine tenths of the lowest camera's), "
+                                     f"got {heights!r}", param_hint="--heights")
     if free_height is not None and not 0 <= free_height < top:
         raise click.BadParameter(f"expected a height from 0 to below {top:g} m (nine tenths of "
                                  f"the lowest camera's), got {free_height:g}",
