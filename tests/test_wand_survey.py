@@ -222,6 +222,11 @@ def test_simulate_and_calibrate_a_wand_survey_from_the_command_line(tmp_path):
     assert f"wand: 500 mm long, missed by {mean_mm:.2f} mm on average" in run.output, \
         run.output
     assert "position error: 2.0 mm (assumed)" in run.output, run.output
+    assert f"frame fixed to about {report['datum_floor_m'] * 1000:.1f} mm" in run.output
+    import re
+
+    span = re.search(r"room (\S+) × (\S+) m", run.output).groups()
+    assert all(len(v.replace(".", "")) <= 4 for v in span), span  # a room in mm, not µm
     # a wand length twice the bar's (within the 3× a unit slip is refused at): every camera
     # twice as high, said, not refused (a plain bundle adjustment would take it)
     run = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(sim / "nominal.yaml"),

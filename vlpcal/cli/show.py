@@ -32,7 +32,7 @@ def show(deployment_path, deployment_option):
     area = 0.5 * abs(np.dot(room[:, 0], np.roll(room[:, 1], 1))
                      - np.dot(room[:, 1], np.roll(room[:, 0], 1)))
     click.echo(f"{dep.name}: {len(dep.cameras)} camera{'s' if len(dep.cameras) != 1 else ''};"
-               f" room {span[0]:g} × {span[1]:g} m ({area:.2f} m², {len(room)} corners), "
+               f" room {span[0]:.4g} × {span[1]:.4g} m ({area:.2f} m², {len(room)} corners), "
                f"ceiling {dep.ceiling_height:g} m"
                + (f", {len(dep.keep_out)} keep-out area(s)" if dep.keep_out else ""))
     click.echo(f"\n{'camera':8s} {'image':>9s} {'fx':>7s} {'fy':>7s} {'cx':>6s} {'cy':>6s} "
@@ -91,6 +91,10 @@ def show(deployment_path, deployment_option):
                        f"{float(wand['mean']) * 1000:.2f} mm on average (p95 "
                        f"{float(wand.get('p95') or math.nan) * 1000:.2f} mm) over "
                        f"{wand.get('held_out_sets', '?')} held-out sets")
+        if prov.get("datum_floor_m") is not None:
+            click.echo(f"  frame fixed to about {float(prov['datum_floor_m']) * 1000:.1f} mm by "
+                       "its references or marks (the datum floor: no calibration in that frame "
+                       "does better on average)")
         if prov.get("predicted_error_m") is not None and not prov.get("held_out_mean_m"):
             click.echo(f"  predicted mean 3D error of fixes: "
                        f"{float(prov['predicted_error_m']) * 1000:.1f} mm (from the fit's "
