@@ -331,6 +331,12 @@ def test_hostile_free_inputs_are_one_line(tmp_path):
         res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "k.yaml"), *kind,
                                        "--step", "0.2", "--out", str(tmp_path / "r.csv")])
         assert res.exit_code == 2 and "drop --step" in res.output, res.output
+    # a wand longer than the room's diagonal cannot be waved there (simulate said so, the
+    # plan planned a sweep for it)
+    res = CliRunner().invoke(cli, ["survey", "plan", "-d", str(tmp_path / "k.yaml"), "--wand",
+                                   "5", "--out", str(tmp_path / "r.csv")])
+    assert res.exit_code == 2 and "longer than the room's diagonal (4.02 m)" in res.output, \
+        res.output
     # a tenth-scale room (cameras 0.23 m up): the wand plan sweeps below them by itself; the
     # tape grid's default heights do not fit, and the refusal says so (it said "got None")
     small = [[0, 0], [0.36, 0], [0.36, 0.18], [0, 0.18]]

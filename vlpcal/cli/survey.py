@@ -111,7 +111,7 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         raise click.BadParameter(f"expected a height from 0 to below {top:g} m (nine tenths of "
                                  f"the lowest camera's), got {free_height:g}",
                                  param_hint="--free-height")
-    _check_wand_fits(wand, dep)
+    _check_wand_fits(wand, dep, to_wave=True)
     sweep = hs if heights else None
     if wand is not None and not heights:  # the wand's LEDs: from the floor to 40 % + half of it
         from ..survey.plan import free_sweep
@@ -950,11 +950,20 @@ def _print_calibration(result, folds: int) -> None:
             click.echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
 
 
-def _check_wand_fits(wand, dep) -> None:
-    """Refuse a wand far longer than the room (a length in millimetres, not metres)."""
+def _check_wand_fits(wand, dep, to_wave: bool = False) -> None:
+    """Refuse a wand far longer than the room (a length in millimetres, not metres); one
+    ``to_wave`` (a plan) at most the floor's diagonal, as ``simulate`` takes it."""
+    import math
+
     if wand is not None and wand > 2 * dep.size:
         raise UserError(f"--wand {wand:g}: longer than the room ({dep.size:.3g} m across): "
                         "expected the wand's length in metres")
+    if wand is not None and to_wave:
+        xs, ys = zip(*dep.room)
+        diagonal = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
+        if wand > diagonal:
+            raise UserError(f"--wand {wand:g}: longer than the room's diagonal "
+                            f"({diagonal:.2f} m): it cannot be waved there")
 
 
 def _check_survey_positions(survey_path, dep, X, ids, frame_marks: bool = False) -> None:
