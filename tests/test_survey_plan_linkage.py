@@ -343,7 +343,7 @@ def test_a_wand_longer_than_the_room_is_refused_before_planning(tmp_path):
     assert not (tmp_path / "marks.csv").exists()
 
 
-def test_frame_marks_are_the_same_along_y_and_far_from_the_plans_origin():
+def test_frame_marks_are_the_same_along_y_far_from_the_origin_and_in_a_hall():
     """From a hostile probe: a room long along y was refused ("the floor places … lie on one
     line": X was scored by its y, which is its distance along y there), and so was the same
     room 1000 m from the plan's origin (the error model in absolute coordinates). The marks
@@ -363,3 +363,7 @@ def test_frame_marks_are_the_same_along_y_and_far_from_the_plans_origin():
     assert mx.axis == "x" and my.axis == "y"
     assert np.allclose(my.xyz[:, [1, 0]], mx.xyz[:, :2], atol=0.05), (mx.xyz, my.xyz)
     assert np.allclose(mf.xyz[:, 0] - 1000.0, mx.xyz[:, 0], atol=0.05), (mx.xyz, mf.xyz)
+    # the same cameras in a 100 × 50 m hall: they were lost between the points of a grid
+    # over the whole hall ("too few places … seen by two cameras")
+    hall = Deployment("hall", 2.3, room(100.0, 50.0), along_x.cameras)
+    assert np.allclose(plan_marks(hall).xyz, mx.xyz, atol=0.05), (mx.xyz, plan_marks(hall).xyz)

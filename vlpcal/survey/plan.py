@@ -406,9 +406,12 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     room = _floor(deployment)
     if room.is_empty:
         raise SurveyError("the keep-out areas leave no floor to survey")
-    x0, y0, x1, y1 = room.bounds
+    # the grid over the floor the cameras see (a few cameras in a large hall are not lost
+    # between the points of a grid over the whole hall)
+    x0, y0, x1, y1 = _seen_bounds(cams, room.bounds)
     size = footprint(cams, 0.0)
-    step = max(min(x1 - x0, y1 - y0) / 48, np.sqrt(room.area / 20000))
+    area = (x1 - x0) * (y1 - y0)
+    step = max(min(x1 - x0, y1 - y0) / 48, np.sqrt(area / 20000))
     gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
     pts = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
 
@@ -449,6 +452,20 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     recorded[2:, 2] = 0.0
     return FrameMarks(ids, pts, inside(pts)[1], [c.id for c in cams], tape=float(tape),
                       recorded=recorded, axis="xy"[a])
+
+
+def _seen_bounds(cams, bounds) -> tuple[float, float, float, float]:
+    """``bounds`` (x0, y0, x1, y1, the room's) cut to the box of the cameras' floor
+    footprints (their image corners on the floor; the room's where no corner reaches it)."""
+    corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
+    feet = np.vstack([c.ground(corners * [c.width - 1, c.height - 1], 0.0) for c in cams])
+    feet = feet[np.isfinite(feet).all(axis=1)]
+    if len(feet) < len(cams) * len(corners):  # a view that reaches past the floor's horizon
+        return bounds
+    lo, hi = feet.min(axis=0), feet.max(axis=0)
+    x0, y0, x1, y1 = max(bounds[0], lo[0]), max(bounds[1], lo[1]), min(bounds[2], hi[0]), \
+        min(bounds[3], hi[1])
+    return (x0, y0, x1, y1) if x1 > x0 and y1 > y0 else bounds
 
 
 #: ``X`` candidates tried along O's row (evenly spaced): each costs one greedy choice of the
