@@ -239,9 +239,9 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
     extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
     extra["fusion"] = {**extra.get("fusion", {}), "method": "robust",
                        "max_residual": RESIDUAL_LIMIT * worst, "region_map": rmap.to_dict()}
+    counted = {"marks" if cal.marks_only else "references": len(ids), "free_sets": n_sets}
     extra["provenance"] = provenance(
-        "vlpcal survey calibrate", **{"from": {**(sources or {}), "references": len(ids),
-                                                "free_sets": n_sets}},
+        "vlpcal survey calibrate", **{"from": {**(sources or {}), **counted}},
         lens={c.camera_id: c.chosen for c in cal.lens}, point_sigma_m=cal.point_sigma,
         point_sigma_estimated=cal.point_sigma_estimated, datum_floor_m=cal.datum_floor,
         free_height_m=free_height, wand_m=wand, point_sigma_assumed=cal.point_sigma_assumed,
