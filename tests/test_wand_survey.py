@@ -202,9 +202,14 @@ def test_simulate_and_calibrate_a_wand_survey_from_the_command_line(tmp_path):
     out = tmp_path / "cal.yaml"
     run = CliRunner().invoke(main, ["survey", "calibrate", "-d", str(sim / "nominal.yaml"),
                                     "--survey", str(sim / "free-survey"), "--wand", "0.5",
-                                    "--out", str(out), "-q"])
+                                    "--out", str(out), "-q", "--test-points",
+                                    str(sim / "survey")])
     assert run.exit_code == 0, run.output
     assert "wand: " in run.output and "held-out sets" in run.output
+    # the marks' precision says nothing of the taped test points' own error (a newcomer read
+    # "at the references' ±2 mm" as the test points' tape)
+    assert "whose own measurement error is in these figures too" in run.output, run.output
+    assert "references' ±" not in run.output and "their heights only" in run.output
     assert "in the marks' frame" in run.output and "warning" not in run.output, run.output
     cal, truth = deployment.load(out), deployment.load(sim / "truth.yaml")
     off = [np.linalg.norm(np.subtract(a.position, b.position))

@@ -714,12 +714,16 @@ def _report_test_points(result, test) -> None:
         return
     cal = getattr(result, "calibration", None)
     sigma = cal.point_sigma if cal is not None else result.precision["point_sigma_m"]
+    if cal is not None and cal.marks_only:  # marks say nothing of how a tape was read
+        own = "whose own measurement error is in these figures too"
+    else:
+        own = (f"whose own measurement error is in these figures: at the references' "
+               f"±{format_length(sigma)} per axis, about {format_length(sigma * 1.596)} of the "
+               "mean")
     click.echo(f"\ntest points (never used by the calibration): {fixed} of {tp['points']} "
                f"fixed{unfixed}, mean {format_length(tp['mean'])}, p95 "
                f"{format_length(tp['p95'])}, max {format_length(tp['max'])} from their measured "
-               f"positions (whose own measurement error is in these figures: at the "
-               f"references' ±{format_length(sigma)} per axis, about "
-               f"{format_length(sigma * 1.596)} of the mean)")
+               f"positions ({own})")
 
 
 def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes, quiet,
@@ -808,7 +812,9 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     loo = cal.leave_one_out[np.isfinite(cal.leave_one_out)]
     if len(loo):
         tape = cal.point_sigma * 1000 * math.sqrt(3)
-        own = (f"the floor's unevenness under them, ±{cal.point_sigma * 1000:.1f} mm, included"
+        own = (f"their heights only, O and X setting the frame; the floor's unevenness under "
+               f"them, ±{cal.point_sigma * 1000:.1f} mm "
+               f"{'assumed' if cal.point_sigma_assumed else 'as stated'}, is in these figures"
                if marks_only else f"their own tape, ±{tape:.1f} mm in 3D, included")
         click.echo(f"\n{refs}, each left out in turn where the rest still fix the room (its "
                    f"spots place it): mean {loo.mean() * 1000:.1f} mm, max "
