@@ -17,6 +17,10 @@ from .common import (
     main,
 )
 
+#: a free or wand survey's capture: at most this long, this many sets (10 a second)
+CAPTURE_SECONDS = 180.0
+CAPTURE_SETS = 1800
+
 
 @main.group()
 def survey():
@@ -242,7 +246,8 @@ def _echo_free_plan(plan, route, out, wand=None) -> None:
                    f"{route.high:g} m and back at each"
                    + (f" ({len(low)} stop{'s' if len(low) != 1 else ''} only as high as said: "
                       "there two cameras share a thin overlap near the floor)" if len(low) else "")
-                   + " (the map shows the route):")
+                   + " (the map shows the route; walk it again until `survey capture` has "
+                   f"its {CAPTURE_SETS} sets, {CAPTURE_SECONDS / 60:g} min at 10 a second):")
     for n, ((x, y), pairs, quarters, t) in enumerate(
             zip(route.stops, route.pairs, route.quarters, route.tops), start=1):
         what = [f"pairs {', '.join(f'{a}+{b}' for a, b in pairs)}"] if pairs else []
@@ -285,9 +290,11 @@ def _echo_free_plan(plan, route, out, wand=None) -> None:
                    "cameras stream (free/observations.csv), then the --points as references.")
 @click.option("--rate", default=10.0, show_default=True, type=Finite(0.1, 100.0),
               help="With --free: moments recorded per second.")
-@click.option("--duration", default=180.0, show_default=True, type=Finite(1.0, 86400.0),
+@click.option("--duration", default=CAPTURE_SECONDS, show_default=True,
+              type=Finite(1.0, 86400.0),
               help="With --free: seconds to record at most (Enter stops sooner).")
-@click.option("--free-sets", default=1800, show_default=True, type=click.IntRange(10, 100000),
+@click.option("--free-sets", default=CAPTURE_SETS, show_default=True,
+              type=click.IntRange(10, 100000),
               help="With --free: moments to record in all (a resumed survey counts those it "
                    "has).")
 @click.option("--wand", default=None, type=Finite(1e-6, 10000.0), metavar="LENGTH",
