@@ -98,3 +98,22 @@ def test_a_folder_given_to_the_wrong_command_is_named_for_the_right_one(tmp_path
     res = run(main, ["simulate", "--out", str(tmp_path / "s2"), "--seconds", "5"])
     assert res.exit_code == 2 and "--robot-speed" in res.output
     assert not (tmp_path / "s2").exists()
+
+
+def test_show_gives_a_turned_rooms_size_not_its_box(tmp_path):
+    """A room carried into a frame that marks define is turned: `show` gives its length and
+    width (a newcomer read 5.014 × 3.02 m for a 5 × 3 m room)."""
+    import math
+
+    import numpy as np
+
+    from vlpcal.deployment import Deployment, save
+    from vlpcal.geometry import paper_camera
+
+    a = math.radians(30)
+    turn = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    room = (np.array([[0, 0], [5, 0], [5, 3], [0, 3]], float) @ turn.T).tolist()
+    save(Deployment("turned", 2.6, room, [paper_camera("C1", (1.0, 2.0, 2.6))]),
+         tmp_path / "t.yaml")
+    res = CliRunner().invoke(main, ["show", str(tmp_path / "t.yaml")])
+    assert res.exit_code == 0 and "room 5 × 3 m (15.00 m²" in res.output, res.output

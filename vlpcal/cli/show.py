@@ -28,7 +28,7 @@ def show(deployment_path, deployment_option):
         raise click.UsageError("give one deployment: vlpcal show D (or -d D)")
     dep = _load_deployment(deployment_path or deployment_option)
     room = np.asarray(dep.room, float)
-    span = np.ptp(room, axis=0)
+    span = _extent(room)
     area = 0.5 * abs(np.dot(room[:, 0], np.roll(room[:, 1], 1))
                      - np.dot(room[:, 1], np.roll(room[:, 0], 1)))
     click.echo(f"{dep.name}: {len(dep.cameras)} camera{'s' if len(dep.cameras) != 1 else ''};"
@@ -105,3 +105,15 @@ def show(deployment_path, deployment_option):
             if held[best] is not None:
                 click.echo(f"  held-out mean 3D error: {float(held[best]) * 100:.2f} cm "
                            f"({best}; the report has every pipeline)")
+
+
+def _extent(room):
+    """The room's length and width: the sides of the smallest rectangle around it at any
+    angle (a room carried into a frame that marks define is turned, and its box would not
+    be its size)."""
+    import numpy as np
+    from shapely.geometry import Polygon
+
+    box = np.asarray(Polygon(room).minimum_rotated_rectangle.exterior.coords)[:3]
+    sides = np.linalg.norm(np.diff(box, axis=0), axis=1)
+    return np.sort(sides)[::-1] if np.all(np.isfinite(sides)) else np.ptp(room, axis=0)
