@@ -350,6 +350,12 @@ def test_hostile_free_inputs_are_one_line(tmp_path):
                                    str(tmp_path / "t.csv")])
     assert res.exit_code == 2 and "the default heights" in res.output, res.output
     assert "None" not in res.output
+    # and it can be rehearsed: simulate's top height and grid follow the site (they were
+    # 0.5 m under the ceiling, negative here, and a 0.3 m grid that missed the room)
+    res = CliRunner().invoke(cli, ["simulate", "-d", str(tmp_path / "s.yaml"),
+                                   "--survey-heights", "0,0.01", "--test-points", "5",
+                                   "--out", str(tmp_path / "sim")])
+    assert res.exit_code == 0 and "survey: " in res.output, res.output
 
 
 def test_test_points_in_millimetres_or_of_other_cameras_are_refused(tmp_path):

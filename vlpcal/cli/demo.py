@@ -19,8 +19,9 @@ from .common import Finite, UserError, _floats, _load_deployment, main
               help="Seed of the install and frames.")
 @click.option("--out", type=click.Path(file_okay=False), required=False,
               help="Folder to write (created; must not exist unless --overwrite).")
-@click.option("--survey-step", default=0.3, show_default=True, type=Finite(0.05, 2.0),
-              help="Spacing of the survey grid, m.")
+@click.option("--survey-step", default=None, type=Finite(0.001, 2.0),
+              help="Spacing of the survey grid, m.  [default: 0.3, or a sixth of the room's "
+                   "shorter side in a smaller room]")
 @click.option("--survey-heights", default="0,0.35,0.7", show_default=True,
               help="LED heights of the survey, m, comma-separated.")
 @click.option("--test-points", default=100, show_default=True, type=click.IntRange(0, 100_000),
@@ -109,6 +110,9 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
                                  f"cameras), got {survey_heights!r}",
                                  param_hint="--survey-heights")
     scene = make_scene(profile, seed)
+    if survey_step is None:
+        xs, ys = zip(*profile.room)
+        survey_step = min(0.3, min(max(xs) - min(xs), max(ys) - min(ys)) / 6)
     pts = grid_points(scene, survey_step, heights)
     if not len(pts):
         step_given = click.get_current_context().get_parameter_source("survey_step") \
