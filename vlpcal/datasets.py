@@ -159,6 +159,16 @@ def _staged(root: Path, overwrite: bool):
         yield tmp
 
 
+def _is_frame(name: str) -> bool:
+    """Whether a file name is a frame's: a JPEG, not a hidden file (a Mac's ``._C1.jpg``)."""
+    return name.endswith(".jpg") and not name.startswith(".")
+
+
+def _frames_in(folder: Path) -> list[Path]:
+    """A folder's frames, by name."""
+    return sorted(f for f in folder.glob("*.jpg") if _is_frame(f.name) and not f.is_dir())
+
+
 def _frame_files(folder: Path, camera_id, data) -> list[tuple[Path, bytes]]:
     """Where a camera's sighting at a point goes: one JPEG as ``folder/cam.jpg``, a burst (a
     list of JPEGs: the LED resting there) as ``folder/cam/001.jpg``…; its folders made."""
@@ -239,8 +249,7 @@ class SurveyBundle:
         if not path.is_dir():
             return [read_frame(path)]
         burst, size = [], 0
-        # hidden files (._001.jpg of a Mac) are not frames
-        for f in sorted(f for f in path.glob("*.jpg") if not f.name.startswith("."))[:MAX_BURST]:
+        for f in _frames_in(path)[:MAX_BURST]:
             if size >= MAX_BURST_BYTES:  # (a camera's burst is seconds of small frames)
                 break
             burst.append(read_frame(f))
@@ -342,11 +351,9 @@ def read_survey_bundle(root) -> SurveyBundle:
             if d.name not in known:
                 raise DatasetError(f"{d}: point {d.name!r} is not in points.csv")
             for f in sorted(d.iterdir()):
-                if f.name.startswith("."):  # hidden (._C1.jpg of a Mac): not a frame
-                    continue
-                if f.suffix == ".jpg" and not f.is_dir():
+                if _is_frame(f.name) and not f.is_dir():
                     key = (d.name, f.stem)
-                elif f.is_dir() and any(f.glob("*.jpg")):
+                elif f.is_dir() and not f.name.startswith(".") and _frames_in(f):
                     key = (d.name, _check_id(f.name, f"{f}: camera id"))  # a burst
                 else:
                     continue
@@ -380,9 +387,7 @@ def _read_free(free: Path, bundle: SurveyBundle) -> None:
         for d in fdir.iterdir():
             if d.is_dir() and not d.name.startswith("."):
                 sid = _check_id(d.name, f"{d}: set id")
-                for f in d.glob("*.jpg"):
-                    if f.name.startswith("."):  # hidden (._C1.jpg of a Mac): not a frame
-                        continue
+                for f in _frames_in(d):
                     bundle.free_frames[(sid, _check_id(f.stem, f"{f}: camera id"))] = f
                 ids.add(sid)
     opath = free / "observations.csv"
@@ -485,8 +490,8 @@ def read_frames_folder(root) -> FramesFolder:
                         _check_id(d.name, f"{where}: frame id")
                     ids.append(d.name)
                     with os.scandir(d.path) as inside:
-                        for f in inside:  # hidden files (._C1.jpg of a Mac) are not frames
-                            if f.name.endswith(".jpg") and not f.name.startswith("."):
+                        for f in inside:
+                            if _is_frame(f.name):
                                 cid = f.name[:-4]
                                 if cid not in cams:
                                     cams.add(_check_id(cid, f"{f.path}: camera id"))
