@@ -211,11 +211,12 @@ def _linkage(camera_ids, seen) -> None:
                           "where they overlap")
 
 
-def _check_height(cameras, X, uv, uv_free, free_height) -> None:
+def _check_height(cameras, X, uv, uv_free, free_height, marks) -> None:
     """Refuse a stated free height the free sets contradict: where two cameras or more saw
     the LED, the nominal cameras place it; their heights must sit about ``free_height`` as
     closely as the references' triangulated heights sit about their measured ones (five times
-    that, and the references as the yardstick: the nominal cameras' own error)."""
+    that, and the references as the yardstick: the nominal cameras' own error). ``marks``:
+    which references are frame marks (N bools), for the words."""
     from ..triangulation import triangulate
 
     two = np.isfinite(uv_free).all(axis=2).sum(axis=0) >= 2
@@ -231,7 +232,7 @@ def _check_height(cameras, X, uv, uv_free, free_height) -> None:
         raise SurveyError(f"a free height of {free_height:g} m: the {int(two.sum())} free sets "
                           f"that two cameras saw put the LED at {lo:.2f}–{hi:.2f} m (half of "
                           f"them more than {np.nanmedian(off):.2f} m from {free_height:g}), "
-                          f"while {references_named(is_mark(X)[ref_two])} come out within "
+                          f"while {references_named(marks[ref_two])} come out within "
                           f"{yard * 1000:.0f} mm of their measured heights: the LED was not at "
                           "that height (if it moved up and down, state no height)")
 
@@ -432,7 +433,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     check_datum(X0[used_r], measured[used_r], free_height is not None, wand is not None,
                 scale, marks=is_mark(X)[used_r])
     if free_height is not None:
-        _check_height(nominal, X0, uv, uv_free, free_height)
+        _check_height(nominal, X0, uv, uv_free, free_height, is_mark(X))
     estimated = isinstance(point_sigma, str)
     stated = None if estimated else float(point_sigma)
     notes: list = []
