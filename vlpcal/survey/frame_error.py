@@ -22,10 +22,10 @@ import numpy as np
 NETWORK_SHARE = 3.0
 
 
-def mark_covariances(cameras, P, views, network: float = NETWORK_SHARE) -> np.ndarray:
+def mark_covariances(cameras, P, views) -> np.ndarray:
     """``N×3×3`` covariance of each point triangulated from the views that see it (``views``
-    C×N), per px² of spot error, plus ``network`` px of isotropic error at the nearest view's
-    pixel footprint (:data:`NETWORK_SHARE`); a point seen once has an unbounded depth (the
+    C×N), per px² of spot error, plus :data:`NETWORK_SHARE` px of isotropic error at the
+    nearest view's pixel footprint; a point seen once has an unbounded depth (the
     pseudo-inverse of its information)."""
     info = np.zeros((len(P), 3, 3))
     foot = np.full(len(P), np.inf)
@@ -35,7 +35,8 @@ def mark_covariances(cameras, P, views, network: float = NETWORK_SHARE) -> np.nd
         far = np.linalg.norm(P - cam.center, axis=1) / cam.fx
         foot = np.where(seen, np.minimum(foot, far), foot)
     foot = np.where(np.isfinite(foot), foot, 0.0)
-    return np.linalg.pinv(info, hermitian=True) + (network * foot)[:, None, None] ** 2 * np.eye(3)
+    return np.linalg.pinv(info, hermitian=True) \
+        + (NETWORK_SHARE * foot)[:, None, None] ** 2 * np.eye(3)
 
 
 def _rows(P, axes) -> np.ndarray:
@@ -60,6 +61,14 @@ def mark_information(P, cov, axes) -> np.ndarray:
     return np.einsum("nki,nkl,nlj->nij", A, np.linalg.pinv(S, hermitian=True), A)
 
 
+def roles_information(Q, cov, across: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What each place (``Q`` N×3 from the origin, ``cov`` N×3×3) would add to the frame's
+    information as ``O`` (all three coordinates recorded), as ``X`` (``across``, the
+    horizontal coordinate across O→X, and z) and as a floor mark (z): three N×6×6."""
+    return (mark_information(Q, cov, (0, 1, 2)), mark_information(Q, cov, (across, 2)),
+            mark_information(Q, cov, (2,)))
+
+
 def zone_weight(zone) -> np.ndarray:
     """``6×6`` mean of ``BᵀB`` over the zone's points (M×3): ``trace(Σ · this)`` is the mean
     squared displacement the frame's error ``Σ`` gives a fix there."""
@@ -70,11 +79,12 @@ def zone_weight(zone) -> np.ndarray:
 def frame_errors(info, weight) -> np.ndarray:
     """Mean squared displacement over the zone (``weight``, :func:`zone_weight`) for each
     candidate frame information ``…×6×6``; infinite where the marks leave a motion free."""
-    cond = np.linalg.cond(info)
-    ok = np.isfinite(cond) & (cond < 1e12)
+    w, V = np.linalg.eigh(info)  # symmetric: its spectrum gives both the test and the inverse
+    ok = np.isfinite(w).all(axis=-1) & (w[..., 0] > 1e-12 * w[..., -1])
     out = np.full(info.shape[:-2], np.inf)
     if ok.any():
-        out[ok] = np.einsum("nij,ji->n", np.linalg.inv(info[ok]), weight)
+        inv = np.einsum("nik,nk,njk->nij", V[ok], 1.0 / w[ok], V[ok])
+        out[ok] = np.einsum("nij,ji->n", inv, weight)
     return out
 
 
@@ -84,9 +94,7 @@ def marks_frame_error(cameras, marks, views, zone) -> float:
     P = np.asarray(marks, float)
     cov = mark_covariances(cameras, P, views)
     Q, Z = P - P[0], np.asarray(zone, float) - P[0]  # from O: far from the origin alike
-    d = (Q[1] - Q[0])[:2]
-    across = (1,) if abs(d[0]) >= abs(d[1]) else (0,)  # X's recorded zero: across O→X
-    info = mark_information(Q[:1], cov[:1], (0, 1, 2))[0] \
-        + mark_information(Q[1:2], cov[1:2], (*across, 2))[0] \
-        + mark_information(Q[2:], cov[2:], (2,)).sum(axis=0)
+    across = 1 if abs(Q[1, 0]) >= abs(Q[1, 1]) else 0  # X's recorded zero: across O→X
+    as_o, as_x, on_floor = roles_information(Q, cov, across)
+    info = as_o[0] + as_x[1] + on_floor[2:].sum(axis=0)
     return float(np.sqrt(frame_errors(info[None], zone_weight(Z))[0]))

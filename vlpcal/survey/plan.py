@@ -438,11 +438,13 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     r = np.nan_to_num(np.linalg.norm((uv - centre) / size_px, axis=2))
     off = np.where(views, r, 0.0).sum(axis=0)
     n_views = views.sum(axis=0)
-    same_row = np.abs(xy[:, None, 1 - a] - xy[None, :, 1 - a]) < step / 2
-    ahead = np.max(np.where(same_row, xy[None, :, a] - xy[:, None, a], 0.0), axis=1)
-    room_for_x = ahead >= extent[a] / 2
+    # the grid's rows along that axis: how far each place's row runs on ahead of it
+    row = np.round((xy[:, 1 - a] - xy[:, 1 - a].min()) / step).astype(int)
+    row_end = np.full(row.max() + 1, -np.inf)
+    np.maximum.at(row_end, row, xy[:, a])
+    room_for_x = row_end[row] - xy[:, a] >= extent[a] / 2
     o = int(np.lexsort((off / n_views, -n_views, ~room_for_x))[0])
-    chosen = _frame_marks(cams, xy, views, o, same_row[o] & (xy[:, a] > xy[o, a]), a,
+    chosen = _frame_marks(cams, xy, views, o, (row == row[o]) & (xy[:, a] > xy[o, a]), a,
                           floor_marks, 2 * PLACING_SHARE * size)
     pts = to_marks(np.c_[xy[chosen], np.zeros(len(chosen))], tape)
     ids = ["O", "X"] + [f"F{i + 1}" for i in range(floor_marks)]
@@ -481,10 +483,9 @@ def _frame_marks(cams, xy, views, o: int, row, axis: int, floor_marks: int,
     predicted error the frame gives the fixes over the marks' zone is least
     (:mod:`.frame_error`) — a mark far out fixes the floor's tilt with a long lever, one seen
     by more cameras or at a wider angle is placed better; the best trade is measured, not
-    guessed. Marks stay
-    ``apart`` m from each other (a mark's spot bias is the same wherever it stands, so two
-    marks at one place are one)."""
-    from .frame_error import frame_errors, mark_covariances, mark_information, zone_weight
+    guessed. Marks stay ``apart`` m from each other (a mark's spot bias is the same wherever
+    it stands, so two marks at one place are one)."""
+    from .frame_error import frame_errors, mark_covariances, roles_information, zone_weight
 
     P = np.c_[xy, np.zeros(len(xy))]
     cov = mark_covariances(cams, P, views)
@@ -494,9 +495,8 @@ def _frame_marks(cams, xy, views, o: int, row, axis: int, floor_marks: int,
     Q = (P - P[o]) / lift
     cov = cov / lift ** 2
     weight = zone_weight(np.vstack([Q, Q + [0.0, 0.0, 0.25]]))
-    on_floor = mark_information(Q, cov, (2,))
-    base = mark_information(Q[[o]], cov[[o]], (0, 1, 2))[0]
-    along = mark_information(Q, cov, (1 - axis, 2))
+    as_o, as_x, on_floor = roles_information(Q, cov, 1 - axis)
+    base = as_o[o]
     ahead = np.flatnonzero(row)
     if not len(ahead):
         raise SurveyError("no place ahead of the origin mark is seen by two cameras: a wand "
@@ -505,12 +505,12 @@ def _frame_marks(cams, xy, views, o: int, row, axis: int, floor_marks: int,
                             .round().astype(int))]
     best, best_err = None, np.inf
     for x in tried:
-        chosen, info = [o, int(x)], base + along[x]
+        chosen, info = [o, int(x)], base + as_x[x]
         err = np.inf
         for _ in range(floor_marks):
-            near = np.min(np.linalg.norm(xy[:, None] - xy[None, chosen], axis=2), axis=1) < apart
-            errs = frame_errors(info[None] + on_floor, weight)
-            errs[near] = np.inf
+            far = np.min(np.linalg.norm(xy[:, None] - xy[None, chosen], axis=2), axis=1) >= apart
+            errs = np.full(len(xy), np.inf)
+            errs[far] = frame_errors(info[None] + on_floor[far], weight)
             f = int(np.argmin(errs))
             if not np.isfinite(errs[f]):
                 break
