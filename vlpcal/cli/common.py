@@ -194,6 +194,14 @@ def _floats(text: str, option: str) -> list[float]:
 MAX_LIST = 12
 
 
+def _floor_diagonal(room) -> float:
+    """m: the diagonal of the room's box, the longest wand that can be waved in it."""
+    import math
+
+    xs, ys = zip(*room)
+    return math.hypot(max(xs) - min(xs), max(ys) - min(ys))
+
+
 def _camera_sources(cameras, dep, stamps: bool = False) -> dict:
     """``--camera ID=SOURCE`` values → camera id → frame source, checked against ``dep``
     (``stamps``: :func:`~vlpcal.live.open_source`'s)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .common import Finite, UserError, _floats, _load_deployment, main
+from .common import Finite, UserError, _floats, _floor_diagonal, _load_deployment, main
 
 
 @main.command()
@@ -197,15 +197,12 @@ SIMULATED = {"nominal.yaml", "truth.yaml", "survey", "frames", "frames.truth.csv
 
 def _check_wand(profile, length: float, free_height) -> None:
     """``--wand``: a bar a hand can wave in this room, before any work."""
-    import math
-
     from ..sim.writers import longest_wand, wand_fits
 
     if free_height is not None:
         raise click.BadParameter("is waved by hand: give --free-height (a robot's LED) or "
                                  "--wand, not both", param_hint="--wand")
-    xs, ys = zip(*profile.room)
-    diagonal = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
+    diagonal = _floor_diagonal(profile.room)
     if not 0 < length <= diagonal:
         raise click.BadParameter(f"expected a length above 0 m and at most the room's "
                                  f"diagonal ({diagonal:.2f} m), got {length:g}",

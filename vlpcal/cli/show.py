@@ -115,5 +115,4 @@ def _extent(room):
     from shapely.geometry import Polygon
 
     box = np.asarray(Polygon(room).minimum_rotated_rectangle.exterior.coords)[:3]
-    sides = np.linalg.norm(np.diff(box, axis=0), axis=1)
-    return np.sort(sides)[::-1] if np.all(np.isfinite(sides)) else np.ptp(room, axis=0)
+    return np.sort(np.linalg.norm(np.diff(box, axis=0), axis=1))[::-1]

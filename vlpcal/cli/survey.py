@@ -12,6 +12,7 @@ from .common import (
     UserError,
     _camera_sources,
     _floats,
+    _floor_diagonal,
     _load_deployment,
     _output_file,
     main,
@@ -966,14 +967,11 @@ def _print_calibration(result, folds: int) -> None:
 def _check_wand_fits(wand, dep, to_wave: bool = False) -> None:
     """Refuse a wand far longer than the room (a length in millimetres, not metres); one
     ``to_wave`` (a plan) at most the floor's diagonal, as ``simulate`` takes it."""
-    import math
-
     if wand is not None and wand > 2 * dep.size:
         raise UserError(f"--wand {wand:g}: longer than the room ({dep.size:.3g} m across): "
                         "expected the wand's length in metres")
     if wand is not None and to_wave:
-        xs, ys = zip(*dep.room)
-        diagonal = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
+        diagonal = _floor_diagonal(dep.room)
         if wand > diagonal:
             raise UserError(f"--wand {wand:g}: longer than the room's diagonal "
                             f"({diagonal:.2f} m): it cannot be waved there")
