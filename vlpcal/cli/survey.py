@@ -101,10 +101,10 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
                                  f"{references}", param_hint="--references")
     hs = _floats(heights or "0,0.35,0.7", "--heights")
     top = 0.9 * min(c.position[2] for c in dep.cameras)  # below the cameras, in their view
-    if len(set(hs)) < 2 or any(not 0 <= h < top for h in hs):
-        if heights is None and free:  # a free or wand plan sweeps below its cameras' reach
-            hs = (0.0, top / 3, 2 * top / 3)
-        elif heights is None:
+    # (a free or wand plan given no heights sweeps below its cameras by itself)
+    if (heights is not None or not free) and (len(set(hs)) < 2
+                                              or any(not 0 <= h < top for h in hs)):
+        if heights is None:
             raise click.BadParameter(f"the default heights (0, 0.35 and 0.7 m) do not fit "
                                      f"below {top:.3g} m (nine tenths of the lowest camera's): "
                                      "give the LED heights to survey", param_hint="--heights")
