@@ -202,7 +202,7 @@ def _run(root: Path, seed: int, say) -> DemoResult:
     site = site_from_dict(DEMO_SITE, "site.yaml")
     step(1, f"planning cameras for {site.name} ({_room_size(site.room)}, "
             f"{site.ceiling_height:g} m ceiling)…")
-    plan = plan_site(site)
+    plan = plan_site(site, tilt_hint=False)
     if not plan.candidates:  # the built-in site is known to be feasible
         raise RuntimeError("the demo site has no feasible plan")
     cand = plan.candidates[0]

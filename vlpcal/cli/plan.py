@@ -78,11 +78,14 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         sp = "×".join(f"{v:.2f}" for v in c.spacing) if c.spacing else "–"
         yaw = "/".join(str(a) for a in sorted({round(math.degrees(cam.yaw)) % 180
                                                for cam in c.cameras}))
+        if c.family == "tilted":
+            grid, yaw = "–", "any"
         click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>5s} "
                    f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
                    f"{c.evaluation.p95 * 100:7.2f}")
     for family, why in result.missing.items():
         click.echo(f"   {family:10s} {why}")
+    _echo_tilted(site, result)
     click.echo(f"x×y: distinct camera positions along x and y (cameras on a {_mount(site)} "
                "grid from the room's lower-left corner); yaw: "
                f"degrees from the room's x axis to each image's {site.camera.width} px side "
@@ -99,6 +102,34 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                                         f"{candidate}."), encoding="utf-8")
     click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
     _echo_linkage(dep)
+
+
+def _echo_tilted(site, result) -> None:
+    """What the CasADi optimiser found below the level layout: its candidate and its cost when
+    the site allows tilt, else what tilting would save."""
+    t = result.tilted
+    if t is None:
+        return
+    level = min(c.count for c in result.candidates if c.family != "tilted")
+    deg = f"{math.degrees(result.tilt):.0f}°"
+    solves = (f"CasADi optimiser: {len(t.solves)} solve{'s' * (len(t.solves) != 1)}, "
+              f"{sum(s.iterations for s in t.solves)} iterations, {t.seconds:.1f} s")
+    if site.mounting is None:
+        if t.best is not None:
+            click.echo(f"with tilt up to {deg}: {t.best.count} cameras instead of {level} — "
+                       "needs tilting brackets (the site's mounting: block allows it; "
+                       f"{solves})")
+        else:
+            click.echo(f"tilting up to {deg} would not save a camera ({solves})")
+        return
+    if t.best is not None:
+        from ..planning.poses import pose_of, tilts
+
+        most = math.degrees(max(tilts([pose_of(c) for c in t.best.cameras])))
+        click.echo(f"   tilted     {t.best.count} cameras, tilted up to {most:.0f}° (of {deg} "
+                   f"allowed), from the best {t.best.seed} layout ({solves})")
+    else:
+        click.echo(f"   tilted     none below {level} cameras with tilts up to {deg} ({solves})")
 
 
 def _echo_linkage(dep) -> None:

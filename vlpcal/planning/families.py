@@ -66,6 +66,8 @@ class Candidate:
     yaw: float  #: rad
     cameras: list
     evaluation: Evaluation
+    #: for a layout the optimiser found ("tilted"): the family of the layout it started from
+    seed: str = ""
 
     @property
     def count(self) -> int:
@@ -82,6 +84,15 @@ def footprint(site: Site) -> tuple[float, float]:
     """Width and depth (m) of a nadir camera's view at the highest LED height."""
     z = site.ceiling_height - max(site.requirements.heights)
     return site.camera.width / site.camera.fx * z, site.camera.height / site.camera.fy * z
+
+
+def ceiling_area(site: Site):
+    """Where cameras may hang: the room less the site's wall clearance (a shapely polygon)."""
+    from shapely.geometry import Polygon
+
+    room = Polygon(site.room)
+    clearance = site.mounting.wall_clearance if site.mounting else 0.0
+    return room.buffer(-clearance, join_style="mitre") if clearance else room
 
 
 #: m, the mounting grid: camera positions are multiples of it from the room's lower-left

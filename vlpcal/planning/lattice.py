@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .families import Candidate, ceiling_cameras, footprint
+from .families import Candidate, ceiling_area, ceiling_cameras, footprint
 from .nadir import YAWS, NadirModel
 from .reference import evaluate
 from .site import Site
@@ -94,20 +94,21 @@ def lattices(site: Site, family: str, step: float, yaws=YAWS):
 
 
 class Mounting:
-    """Whether floor positions can carry a camera: inside the room polygon, its walls
-    included (a camera body a few centimetres across hangs against the wall; the model's
-    sample grid does not resolve the difference). A raster lookup for positions on the
-    ``step`` grid from the room's lower-left corner, the polygon itself for the others."""
+    """Whether floor positions can carry a camera: inside the room polygon less the site's
+    wall clearance, its edges included (a camera body a few centimetres across hangs against
+    the wall; the model's sample grid does not resolve the difference). A raster lookup for
+    positions on the ``step`` grid from the room's lower-left corner, the polygon itself for
+    the others."""
 
     def __init__(self, site: Site, step: float):
         from shapely import contains_xy
         from shapely.geometry import Polygon
 
-        room = Polygon(site.room)
-        self.x0, self.y0, self.x1, self.y1 = room.bounds
+        room = ceiling_area(site)
+        self.x0, self.y0, self.x1, self.y1 = Polygon(site.room).bounds
         self.room = room.buffer(1e-9 * max(1.0, self.x1 - self.x0, self.y1 - self.y0))
         self.step = step
-        self.rectangle = len(site.room) == 4 and room.envelope.equals(room)
+        self.rectangle = room.envelope.equals(room) and room.bounds == Polygon(site.room).bounds
         gx, gy = np.meshgrid(np.arange(math.floor((self.x1 - self.x0) / step + 1e-9) + 1),
                              np.arange(math.floor((self.y1 - self.y0) / step + 1e-9) + 1),
                              indexing="ij")

@@ -16,10 +16,13 @@ from .lattice import lattice_search
 from .nadir import YAWS, NadirModel
 from .reference import evaluate
 from .site import Site
+from .tilted import TiltedPlan, tilted_plan
 
 #: the searches' coarse models keep every n-th sample point along each axis (the exact model
 #: judges after): the lattice screen, the local search
 SCREEN_EVERY, SEARCH_EVERY = 2, 3
+#: rad: for a site without ``mounting:``, the tilt the plan says what would save
+HINT_TILT = math.radians(30.0)
 #: sample-grid cells per LED height a plan takes on (a 200 × 100 m hall at 10 cm has 2·10⁶:
 #: gigabytes and hours)
 MAX_SAMPLE_CELLS = 500_000
@@ -35,9 +38,14 @@ class Plan:
     seconds: float
     closest: Candidate | None = None  # when nothing meets: the densest lattice tried
     missing: dict = field(default_factory=dict)  # family → why it has no candidate
+    #: the CasADi optimiser's search below the best level layout (when it ran)
+    tilted: TiltedPlan | None = None
+    #: rad: the tilt ``tilted`` allowed; for a site without ``mounting:`` it is
+    #: :data:`HINT_TILT`, a what-if whose layout is not a candidate
+    tilt: float = 0.0
 
 
-def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
+def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool = True) -> Plan:
     """The fewest cameras that meet the requirements.
 
     1. Each grid family of the site (square: a × b, a ≠ b; triangular; linear) by the
@@ -48,6 +56,11 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
        removes cameras and repairs the layout by moves on the mounting grid.
     3. Every candidate on the mounting grid (a triangular lattice's cameras snapped to it and
        repaired if snapping broke it) and judged by :func:`evaluate`, the reference model.
+    4. ``tilted`` (when the site's ``mounting`` allows tilt): from the best level layout, the
+       CasADi optimiser over every camera's pose (:func:`.tilted.tilted_plan`) takes cameras
+       away while the exact model still meets. A site without ``mounting`` runs it as a
+       what-if at :data:`HINT_TILT` (:attr:`Plan.tilted`), not as a candidate, unless
+       ``tilt_hint`` is false.
     """
     import time
 
@@ -87,7 +100,7 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
             missing[family] = ("its best lattice fails the reference model once snapped to "
                                "the mounting grid" if cand is None else
                                "its best lattice fails the reference model (the lens "
-                               "distortion the search leaves out)")
+                               "distortion and obstacles' shadows the search leaves out)")
             continue
         found[family] = cand
         best_n = min(best_n, cand.count)
@@ -110,8 +123,16 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None) -> Plan:
     closest = None
     if not candidates:
         closest = _densest(site, step)
+    tilt = site.mounting.max_tilt if site.mounting else HINT_TILT * tilt_hint
+    tilted = None
+    if candidates and tilt > 0:
+        say(f"  tilted: the CasADi optimiser, tilts up to {math.degrees(tilt):.0f}°"
+            + ("" if site.mounting else " (a what-if: the site has no mounting: block)"))
+        tilted = tilted_plan(site, candidates[0], step, tilt, progress=say)
+        if site.mounting and tilted.best is not None:
+            candidates = sorted(candidates + [tilted.best], key=rank_key)
     return Plan(candidates, tried, time.perf_counter() - t0, closest,
-                {f: m for f, m in missing.items() if f in site.families})
+                {f: m for f, m in missing.items() if f in site.families}, tilted, tilt)
 
 
 def fewest_possible(site: Site) -> int:
@@ -179,7 +200,13 @@ def planned_deployment(site: Site, cand: Candidate, rank: int = 1, source: str =
     ev, r = cand.evaluation, site.requirements
     layout = {"family": cand.family, "cameras": cand.count, "rank": rank,
               "mounting_grid_m": float(mount_step(site))}
-    if cand.family != "free":
+    if cand.family == "tilted":
+        from .poses import pose_of, tilts
+
+        layout.update({"started_from": cand.seed, "optimiser": "CasADi (IPOPT)",
+                       "max_tilt_deg": round(math.degrees(float(max(tilts(
+                           [pose_of(c) for c in cand.cameras])))), 3)})
+    elif cand.family != "free":
         layout.update({"grid": [cand.nx, cand.ny],
                        "spacing_m": [round(float(v), 6) for v in cand.spacing],
                        "origin_m": [round(float(v), 6) for v in cand.origin],

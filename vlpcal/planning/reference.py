@@ -1,7 +1,9 @@
 """The reference model (DESIGN.md, the contract) that judges every layout: sample points of the
 room minus keep-out at the lowest, middle and highest LED height; a point is seen by a camera
 when it projects inside the image (2 px margin) in front of it; the predicted error of a point
-seen by ≥ 2 cameras is ``sqrt(trace(F⁻¹))``, ``F = Σ JᵢᵀJᵢ / σ²``; a layout meets the
+seen by ≥ 2 cameras is ``sqrt(trace(F⁻¹))``, ``F = Σ JᵢᵀJᵢ / σ²``; an obstacle (a keep-out with
+a height) hides a point from a camera when it stands across the segment between them; a
+layout meets the
 requirements when at least ``coverage`` of the points are seen by ``min_cameras`` cameras and
 the 95th percentile of their predicted error is within ``max_error_p95``."""
 
@@ -86,11 +88,56 @@ class Evaluation:
     error: np.ndarray  #: N, predicted RMS error (m; NaN where < 2 cameras)
 
 
+def unobstructed(center, points, obstacles) -> np.ndarray:
+    """Whether the segment from each of ``points`` (N×3) to a camera at ``center`` clears every
+    obstacle (N): its stretch below an obstacle's top, seen from above, must not meet the
+    obstacle's polygon."""
+    import shapely
+    from shapely.geometry import Polygon
+
+    points = np.asarray(points, float)
+    C = np.asarray(center, float)
+    clear = np.ones(len(points), bool)
+    for ob in obstacles:
+        low = clear & (points[:, 2] < ob.height)
+        if not low.any():
+            continue
+        P = points[low]
+        rise = C[2] - P[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(rise > ob.height - P[:, 2], (ob.height - P[:, 2]) / rise, 1.0)
+        Q = P[:, :2] + t[:, None] * (C[:2] - P[:, :2])
+        poly = Polygon(ob.polygon)
+        x0, y0, x1, y1 = poly.bounds
+        near = (np.maximum(P[:, 0], Q[:, 0]) >= x0) & (np.minimum(P[:, 0], Q[:, 0]) <= x1) \
+            & (np.maximum(P[:, 1], Q[:, 1]) >= y0) & (np.minimum(P[:, 1], Q[:, 1]) <= y1)
+        if not near.any():
+            continue
+        shapely.prepare(poly)
+        lines = shapely.linestrings(np.stack([P[near, :2], Q[near]], axis=1))
+        hit = np.zeros(len(P), bool)
+        hit[near] = shapely.intersects(poly, lines)
+        idx = np.flatnonzero(low)
+        clear[idx[hit]] = False
+    return clear
+
+
+def seen_by(site: Site, cameras: list[Camera], points) -> np.ndarray:
+    """C×N: which cameras see which points by the reference model — inside the image by
+    :data:`MARGIN_PX`, in front, and not hidden by an obstacle."""
+    if not cameras:
+        return np.zeros((0, len(points)), bool)
+    seen = np.stack([c.project(points, margin=MARGIN_PX)[2] for c in cameras])
+    for k, c in enumerate(cameras):
+        if site.obstacles and seen[k].any():
+            seen[k, seen[k]] = unobstructed(c.center, points[seen[k]], site.obstacles)
+    return seen
+
+
 def evaluate(site: Site, cameras: list[Camera], step: float | None = None) -> Evaluation:
     """Judge a layout with the reference model (DESIGN.md), independently of any optimiser."""
     pts = sample_points(site, step)
-    seen = np.stack([c.project(pts, margin=MARGIN_PX)[2] for c in cameras]) if cameras \
-        else np.zeros((0, len(pts)), bool)
+    seen = seen_by(site, cameras, pts)
     views = seen.sum(axis=0)
     err = predicted_rms_error(cameras, pts, seen, site.requirements.pixel_noise) if cameras \
         else np.full(len(pts), np.nan)

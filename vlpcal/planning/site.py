@@ -3,6 +3,7 @@ requirements, read as strictly as a deployment."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +23,10 @@ FAMILIES = ("linear", "triangular", "square", "free")
 REQUIREMENT_KEYS = ("heights", "min_cameras", "coverage", "max_error_p95", "pixel_noise")
 CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
 SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
+MOUNTING_KEYS = ("max_tilt", "wall_clearance")
+OBSTACLE_KEYS = ("polygon", "height")
+#: degrees: the steepest tilt a site may allow (past it a ceiling camera looks at the walls)
+TILT_LIMIT = 75.0
 
 
 class SiteError(DeploymentError):
@@ -37,6 +42,24 @@ class Requirements:
     pixel_noise: float = 0.3  #: px
 
 
+@dataclass(frozen=True)
+class CameraMounting:
+    """How cameras may hang (DESIGN.md ``mounting:``): tilted up to ``max_tilt`` from straight
+    down, at least ``wall_clearance`` inside the walls."""
+
+    max_tilt: float = 0.0  #: rad
+    wall_clearance: float = 0.0  #: m
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A keep-out area that stands ``height`` m tall (a pillar, a shelf): it also hides what
+    is behind it from a camera."""
+
+    polygon: list
+    height: float  #: m
+
+
 @dataclass
 class Site:
     """A room to plan for, the camera model to hang, and what the plan must achieve."""
@@ -46,8 +69,11 @@ class Site:
     room: list
     camera: Camera  #: the model; id, position and rotation are placeholders
     requirements: Requirements
-    keep_out: list = field(default_factory=list)
+    keep_out: list = field(default_factory=list)  #: floor polygons left out, obstacles too
     families: tuple = FAMILIES
+    #: None: level cameras only (the plan then says what tilting would save)
+    mounting: CameraMounting | None = None
+    obstacles: list = field(default_factory=list)  #: Obstacle, the keep-outs with a height
 
 
 def site_from_dict(doc, source: str = "<site>") -> Site:
@@ -60,10 +86,10 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         if type(doc.get("version")) is not int or doc.get("version") != VERSION:
             raise SiteError(f"version: expected {VERSION}, got {shown(doc.get('version'))}")
         unknown = sorted(set(doc) - {"format", "version", "site", "camera", "requirements",
-                                     "families"})
+                                     "families", "mounting"})
         if unknown:
             raise SiteError(f"{unknown[0]}: unknown key (expected format, version, site, "
-                            "camera, requirements, families)")
+                            "camera, requirements, families, mounting)")
         for key in ("site", "camera", "requirements"):
             if key not in doc:
                 raise SiteError(f"{key}: missing")
@@ -75,9 +101,16 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         ceiling = _number(site["ceiling_height"], "site.ceiling_height", positive=True,
                           within=(0, MAX_LENGTH), unit=" m")
         room = _polygon(site["room"], "site.room")
-        keep_out = [_polygon(p, f"site.keep_out[{i}]")
-                    for i, p in enumerate(site.get("keep_out") or [])]
+        items = site.get("keep_out") or []
+        if not isinstance(items, list):
+            raise SiteError("site.keep_out: expected a list of polygons or {polygon, height} "
+                            "obstacles")
+        obstacles = [_obstacle(p, f"site.keep_out[{i}]", ceiling)
+                     for i, p in enumerate(items)]
+        keep_out = [o.polygon for o in obstacles]
+        obstacles = [o for o in obstacles if o.height > 0]
         _check_floor(room, keep_out)
+        mounting = _mounting(doc["mounting"], room) if "mounting" in doc else None
         cam = _mapping(doc["camera"], "camera")
         _only(cam, CAMERA_KEYS, "camera")
         for key in CAMERA_KEYS:
@@ -125,7 +158,36 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
                     cam["cy"], cam["dist"], (0.0, 0.0, ceiling), NADIR)
     requirements = Requirements(tuple(heights), min_cams, float(coverage), p95, noise)
     return Site(str(site["name"]), float(ceiling), room, camera, requirements, keep_out,
-                tuple(families))
+                tuple(families), mounting, obstacles)
+
+
+def _obstacle(item, where: str, ceiling: float) -> Obstacle:
+    """A keep-out item: a polygon (a floor area, height 0) or ``{polygon, height}``."""
+    if not isinstance(item, dict):
+        return Obstacle(_polygon(item, where), 0.0)
+    _only(item, OBSTACLE_KEYS, where)
+    if "polygon" not in item:
+        raise SiteError(f"{where}.polygon: missing")
+    height = _number(item.get("height", 0.0), f"{where}.height", within=(0, ceiling),
+                     unit=f" m (from the floor to the ceiling, {ceiling:g} m)")
+    return Obstacle(_polygon(item["polygon"], f"{where}.polygon"), float(height))
+
+
+def _mounting(block, room) -> CameraMounting:
+    """The ``mounting:`` block: a tilt in degrees up to :data:`TILT_LIMIT`, a clearance that
+    leaves some ceiling to hang cameras from."""
+    from shapely.geometry import Polygon
+
+    block = _mapping(block, "mounting")
+    _only(block, MOUNTING_KEYS, "mounting")
+    tilt = _number(block.get("max_tilt", 0.0), "mounting.max_tilt", within=(0, TILT_LIMIT),
+                   unit="° (from straight down)")
+    clearance = _number(block.get("wall_clearance", 0.0), "mounting.wall_clearance",
+                        within=(0, MAX_LENGTH), unit=" m")
+    if clearance and Polygon(room).buffer(-clearance).is_empty:
+        raise SiteError(f"mounting.wall_clearance: {clearance:g} m from every wall leaves no "
+                        "ceiling to hang a camera from")
+    return CameraMounting(math.radians(float(tilt)), float(clearance))
 
 
 def _only(block: dict, keys, where: str) -> None:

@@ -1,0 +1,214 @@
+"""Fewer cameras by tilting them: from a layout that meets the requirements, take one camera
+away and let the CasADi optimiser (:mod:`.optimiser`) move, turn and tilt the others until the
+smooth model meets again; snap the answer to what an installer can set and judge it by the
+exact reference model; repeat while it meets.
+
+Each count is tried from several starts: the last layout that met less its least useful
+camera (by the exact model), and grids of that many cameras over the ceiling whose outer
+cameras lean inward (the grid families as seeds). The first start whose snapped answer meets
+wins the count.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .families import Candidate, ceiling_area
+from .nadir import PAIRS
+from .optimiser import PoseProblem, Solve, optimiser_points
+from .poses import pose_of, posed_cameras, snapped, tilts
+from .reference import evaluate
+from .site import Site
+
+#: the grid seeds tried per count, best aspect first
+GRID_SEEDS = 2
+#: share of max_tilt the grid seeds' outer cameras start with
+SEED_LEAN = 0.7
+
+
+@dataclass
+class TiltedPlan:
+    """What the tilted search found: the fewest cameras that met (None if no count below the
+    start did), every solve, and the time."""
+
+    best: Candidate | None
+    solves: list = field(default_factory=list)  # Solve
+    seconds: float = 0.0
+
+
+def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
+                progress=None, seconds: float = math.inf) -> TiltedPlan:
+    """The fewest cameras below ``start.count`` that meet the requirements with tilts up to
+    ``max_tilt`` (rad), positions on the ``step`` mounting grid; stops after ``seconds``.
+
+    The counts tried gallop down from the start (1, 2, 4, … fewer while each meets), then
+    bisect between the fewest that met and the most that did not."""
+    t0 = time.perf_counter()
+    say = progress or (lambda m: None)
+    points = optimiser_points(site)
+    area = ceiling_area(site)
+    bounds = area.bounds
+    out = TiltedPlan(None)
+    problems = {}  # n → PoseProblem
+
+    def judge(poses):
+        poses = _mounted(area, snapped(poses, step, max_tilt, *bounds[:2]), step)
+        cams = posed_cameras(site, poses)
+        if not _meets_coarse(site, cams, points):
+            return None
+        ev = evaluate(site, cams)
+        return (poses, cams, ev) if ev.meets else None
+
+    def attempt(n, base):
+        for name, seed in [(f"the {len(base)}-camera layout less {len(base) - n}",
+                            _less(site, base, len(base) - n, points))] + \
+                [(f"a {nx}×{ny} grid", _grid_seed(area, nx, ny, n, SEED_LEAN * max_tilt))
+                 for nx, ny in _grid_shapes(area, n)]:
+            if n not in problems:
+                problems[n] = PoseProblem(site, n, points)
+            s = problems[n].solve(seed, bounds, max_tilt, judge)
+            out.solves.append(s)
+            got = s.judged or judge(s.poses)
+            say(f"  tilted {n}: from {name}, {s.iterations} iterations, {s.seconds:.1f} s"
+                + (" — meets" if got else " — does not meet"))
+            if got:
+                return got, ("grid" if "grid" in name else "less")
+            if time.perf_counter() - t0 >= seconds:
+                break
+        return None
+
+    best = np.array([pose_of(c) for c in start.cameras])
+    family, fewest_bad, stride = start.family, site.requirements.min_cameras - 1, 1
+    while len(best) - fewest_bad > 1 and time.perf_counter() - t0 < seconds:
+        galloping = fewest_bad == site.requirements.min_cameras - 1
+        n = max(len(best) - stride, fewest_bad + 1) if galloping \
+            else (len(best) + fewest_bad + 1) // 2
+        got = attempt(n, best)
+        if got is None:
+            fewest_bad = n
+            continue
+        (best, cams, ev), how = got
+        family = family if how == "less" else "square"
+        out.best = Candidate("tilted", 0, 0, (), tuple(cams[0].position[:2]), 0.0, cams, ev,
+                             seed=family)
+        stride *= 2
+    out.seconds = time.perf_counter() - t0
+    return out
+
+
+def _information(site: Site, cams, points):
+    """Each camera's share of the reference model at ``points``: which it sees (C×N) and its
+    Fisher entries ``JᵀJ / σ²`` there (C×N×6, zero where unseen)."""
+    from .reference import seen_by
+
+    seen = seen_by(site, cams, points)
+    info = np.zeros(seen.shape + (6,))
+    for k, cam in enumerate(cams):
+        if seen[k].any():
+            J = cam.jacobian(points[seen[k]])
+            info[k, seen[k]] = np.stack([(J[:, :, i] * J[:, :, j]).sum(axis=1)
+                                         for i, j in PAIRS], axis=-1)
+    return seen, info / site.requirements.pixel_noise ** 2
+
+
+def _met(site: Site, views, info) -> np.ndarray:
+    """Per point (…×N): seen by enough cameras within the error bound, from the summed views
+    (…×N) and Fisher entries (…×N×6)."""
+    from ..triangulation import trace_adjugate_det
+
+    r = site.requirements
+    tr, det = trace_adjugate_det(*np.moveaxis(info, -1, 0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ok = tr / det <= r.max_error_p95 ** 2
+    return (views >= r.min_cameras) & ok
+
+
+def _meets_coarse(site: Site, cams, points) -> bool:
+    """The reference model's verdict on the optimiser's coarser grid (a quick look before the
+    exact one)."""
+    r = site.requirements
+    seen, info = _information(site, cams, points)
+    views = seen.sum(axis=0)
+    covered = views >= r.min_cameras
+    good = _met(site, views, info.sum(axis=0))
+    return covered.mean() >= r.coverage and good.sum() >= 0.95 * covered.sum()
+
+
+def _less(site: Site, poses, k: int, points) -> np.ndarray:
+    """The layout without the ``k`` cameras whose loss, one at a time, hurts it least (the
+    share of ``points`` it still serves within the requirements)."""
+    if k <= 0:
+        return poses
+    seen, info = _information(site, posed_cameras(site, poses), points)
+    views, total = seen.sum(axis=0), info.sum(axis=0)
+    scores = _met(site, views[None] - seen, total[None] - info).mean(axis=1)
+    return np.delete(poses, np.argsort(-scores, kind="stable")[:k], axis=0)
+
+
+def _grid_shapes(area, n: int):
+    """Columns × rows for ``n`` cameras whose cells are closest to square over the ceiling's
+    bounding box (a last row may be short by less than a row)."""
+    x0, y0, x1, y1 = area.bounds
+    w, h = max(x1 - x0, 1e-9), max(y1 - y0, 1e-9)
+    shapes = []
+    for nx in range(1, n + 1):
+        ny = math.ceil(n / nx)
+        if nx * ny - n >= nx or (ny > 1 and nx * ny - n >= ny and nx > 1):
+            continue
+        cell = (w / nx) / (h / ny)
+        shapes.append((abs(math.log(cell)), nx, ny))
+    return [(nx, ny) for _, nx, ny in sorted(shapes)[:GRID_SEEDS]]
+
+
+def _grid_seed(area, nx: int, ny: int, n: int, lean: float) -> np.ndarray:
+    """``n`` cameras on an nx × ny grid of cell centres over the ceiling's bounding box, each
+    leaning toward the room's middle by up to ``lean`` (rad) in proportion to how far out it
+    hangs; a short last row is centred."""
+    x0, y0, x1, y1 = area.bounds
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    out = []
+    for j in range(ny):
+        k = min(nx, n - j * nx)
+        for i in range(k):
+            x = x0 + (i + 0.5 + (nx - k) / 2) * (x1 - x0) / nx
+            y = y0 + (j + 0.5) * (y1 - y0) / ny
+            dx, dy = cx - x, cy - y
+            reach = math.hypot((x1 - x0) / 2, (y1 - y0) / 2)
+            d = math.hypot(dx, dy)
+            theta = lean * d / reach if d > 1e-9 else 0.0
+            # the axis leans along (dx, dy): w = θ·(dy, −dx)/d (see .poses)
+            w = (theta * dy / d, -theta * dx / d) if d > 1e-9 else (0.0, 0.0)
+            out.append((x, y, 0.0, *w))
+    return np.array(out)
+
+
+def _mounted(area, poses, step: float) -> np.ndarray:
+    """Poses moved onto the ceiling where they may hang: a position outside ``area`` goes to
+    the nearest mounting-grid point inside it."""
+    from shapely import contains_xy
+    from shapely.geometry import Point
+    from shapely.ops import nearest_points
+
+    poses = poses.copy()
+    x0, y0 = area.bounds[:2]
+    inside = contains_xy(area.buffer(1e-9), poses[:, 0], poses[:, 1])
+    for k in np.flatnonzero(~inside):
+        near = nearest_points(area, Point(poses[k, 0], poses[k, 1]))[0]
+        cand = np.array([(x0 + step * (round((near.x - x0) / step) + i),
+                          y0 + step * (round((near.y - y0) / step) + j))
+                         for i in (-1, 0, 1) for j in (-1, 0, 1)])
+        ok = contains_xy(area.buffer(1e-9), cand[:, 0], cand[:, 1])
+        if ok.any():
+            cand = cand[ok]
+            best = np.argmin(np.hypot(cand[:, 0] - near.x, cand[:, 1] - near.y))
+            poses[k, :2] = cand[best]
+        else:
+            poses[k, :2] = near.x, near.y
+    return poses
+
+
+__all__ = ["Solve", "TiltedPlan", "tilted_plan", "tilts"]
