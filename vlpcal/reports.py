@@ -257,6 +257,15 @@ def _lens_panel(ax, rows) -> None:
     ax.grid(alpha=0.3, axis="y")
 
 
+def _footprint(camera, height: float):
+    """Where a camera's image falls on the level plane z = ``height``: its four corners'
+    rays (4+1 × 2, closed), or None when a corner's ray does not reach the plane."""
+    w, h = camera.width - 0.5, camera.height - 0.5
+    quad = camera.ground(np.array([[-0.5, -0.5], [w, -0.5], [w, h], [-0.5, h], [-0.5, -0.5]]),
+                         height)
+    return quad if np.isfinite(quad).all() else None
+
+
 def plan_maps(path, site, cand) -> None:
     """Per LED height: how many cameras see each point (discrete colours, one scale for every
     height) and the predicted RMS error (one scale that includes the requirement, its cut
@@ -318,16 +327,33 @@ def plan_maps(path, site, cand) -> None:
             ax.plot(room[:, 0], room[:, 1], "k-", lw=1)
             for poly in site.keep_out:
                 ax.fill(*np.array(poly).T, color="0.85", ec="0.5")
+            for ob in site.obstacles:  # an obstacle: darker, its height written on it
+                ax.fill(*np.array(ob.polygon).T, color="0.55", ec="0.2", hatch="///")
+                ax.annotate(f"{ob.height:g} m", np.mean(ob.polygon, axis=0), fontsize=6,
+                            ha="center", va="center", path_effects=halo)
             for c in cand.cameras:
                 px, py = c.position[:2]
+                if row == 0:  # where the camera's image falls at this height
+                    quad = _footprint(c, h)
+                    if quad is not None:
+                        ax.plot(quad[:, 0], quad[:, 1], "-", color="0.15", lw=0.5,
+                                alpha=0.6)
                 d = np.asarray(c.R[0][:2], float)  # the image's x axis (its long side)
                 d = d / (np.hypot(*d) or 1.0) * 0.04 * size
                 ax.plot([px - d[0], px + d[0]], [py - d[1], py + d[1]], "k-", lw=1.2)
                 ax.plot(px, py, "c^", ms=6, mec="k")
-                ax.annotate(c.id, (px, py), fontsize=7, xytext=(3, 3),
-                            textcoords="offset points", path_effects=halo)
+                tilt = np.degrees(np.arctan2(np.hypot(*c.axis[:2]), -c.axis[2]))
+                ax.annotate(c.id + (f" {tilt:.0f}°" if tilt >= 0.5 else ""), (px, py),
+                            fontsize=7, xytext=(3, 3), textcoords="offset points",
+                            path_effects=halo)
+                if tilt >= 0.5:  # an arrow along the optical axis' lean
+                    a = c.axis[:2] / np.hypot(*c.axis[:2]) * 0.06 * size
+                    ax.annotate("", (px + a[0], py + a[1]), (px, py),
+                                arrowprops={"arrowstyle": "->", "lw": 0.9, "color": "k"})
             ax.set_aspect("equal")
-            ax.margins(0.04)
+            pad = 0.04 * size  # the room, not the footprints, sets the frame
+            ax.set_xlim(room[:, 0].min() - pad, room[:, 0].max() + pad)
+            ax.set_ylim(room[:, 1].min() - pad, room[:, 1].max() + pad)
             ax.set_xlabel("x (m)")
             ax.set_ylabel("y (m)")
             ax.set_title(title, fontsize=8)
@@ -335,8 +361,12 @@ def plan_maps(path, site, cand) -> None:
     fig.suptitle(f"{site.name}: {cand.count} cameras, {cand.family} — coverage "
                  f"{ev.coverage:.1%} (need {r.coverage:.0%}), predicted p95 {p95} over the "
                  "covered points\nred outline: a point that fails the requirement (too few "
-                 "cameras, or too large an error); black bar: each image's long side",
-                 fontsize=10)
+                 "cameras, or too large an error); black bar: each image's long side\n"
+                 "top row: each image's footprint at that height"
+                 + ("; arrow and °: a camera's tilt" if any(
+                     c.axis[2] > -np.cos(np.radians(0.5)) for c in cand.cameras) else "")
+                 + ("; hatched: an obstacle that hides what is behind it (its height)"
+                    if site.obstacles else ""), fontsize=10)
     save_figure(fig, path, dpi=110)
 
 

@@ -85,11 +85,11 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                    f"{c.evaluation.p95 * 100:7.2f}")
     for family, why in result.missing.items():
         click.echo(f"   {family:10s} {why}")
-    _echo_tilted(site, result)
     click.echo(f"x×y: distinct camera positions along x and y (cameras on a {_mount(site)} "
                "grid from the room's lower-left corner); yaw: "
                f"degrees from the room's x axis to each image's {site.camera.width} px side "
                "(the maps draw it)")
+    _echo_tilted(site, result)
     if candidate > len(result.candidates):
         raise UserError(f"--candidate {candidate}: the plan has {k} candidate"
                         f"{'s' if k > 1 else ''}, numbered from 1")
@@ -105,31 +105,37 @@ def plan(site_path, out, candidate, max_cameras, quiet):
 
 
 def _echo_tilted(site, result) -> None:
-    """What the CasADi optimiser found below the level layout: its candidate and its cost when
-    the site allows tilt, else what tilting would save."""
+    """What the CasADi optimiser did beyond the lattices: the layout it mended when no
+    lattice met, its tilted candidate and its cost when the site allows tilt, else what
+    tilting would save."""
     t = result.tilted
     if t is None:
         return
-    level = min(c.count for c in result.candidates if c.family != "tilted")
     deg = f"{math.degrees(result.tilt):.0f}°"
     solves = (f"CasADi optimiser: {len(t.solves)} solve{'s' * (len(t.solves) != 1)}, "
               f"{sum(s.iterations for s in t.solves)} iterations, {t.seconds:.1f} s")
-    if site.mounting is None:
-        if t.best is not None:
-            click.echo(f"with tilt up to {deg}: {t.best.count} cameras instead of {level} — "
-                       "needs tilting brackets (the site's mounting: block allows it; "
-                       f"{solves})")
-        else:
-            click.echo(f"tilting up to {deg} would not save a camera ({solves})")
-        return
-    if t.best is not None:
+    if t.repaired:
+        click.echo(f"{t.best.family}: no lattice meets once obstacles' shadows and the lens "
+                   f"count; the optimiser mended the best ({t.start} cameras) into "
+                   f"{t.best.count}" + (f", tilted up to {deg}" if result.tilt else "")
+                   + f" ({solves})" if t.best is not None else
+                   f"the optimiser could not mend the best lattice ({t.start} cameras, which "
+                   f"fails once obstacles' shadows and the lens count; {solves})")
+    elif site.mounting is None and t.best is not None:
+        fewer = "" if t.complete else " or fewer (the what-if ran out of its time)"
+        click.echo(f"with tilt up to {deg}: {t.best.count} cameras{fewer} instead of "
+                   f"{t.start} — needs tilting brackets (the site's mounting: block allows "
+                   f"it; {solves})")
+    elif site.mounting is None:
+        click.echo(f"tilting up to {deg} would not save a camera ({solves})")
+    elif t.best is not None:
         from ..planning.poses import pose_of, tilts
 
         most = math.degrees(max(tilts([pose_of(c) for c in t.best.cameras])))
-        click.echo(f"   tilted     {t.best.count} cameras, tilted up to {most:.0f}° (of {deg} "
+        click.echo(f"tilted: {t.best.count} cameras, tilted up to {most:.0f}° (of {deg} "
                    f"allowed), from the best {t.best.seed} layout ({solves})")
     else:
-        click.echo(f"   tilted     none below {level} cameras with tilts up to {deg} ({solves})")
+        click.echo(f"tilted: none below {t.start} cameras with tilts up to {deg} ({solves})")
 
 
 def _echo_linkage(dep) -> None:

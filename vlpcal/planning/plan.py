@@ -23,6 +23,8 @@ from .tilted import TiltedPlan, tilted_plan
 SCREEN_EVERY, SEARCH_EVERY = 2, 3
 #: rad: for a site without ``mounting:``, the tilt the plan says what would save
 HINT_TILT = math.radians(30.0)
+#: the what-if's time, as a multiple of the level plan's own (a hint, not the plan)
+HINT_TIME = 2.0
 #: sample-grid cells per LED height a plan takes on (a 200 × 100 m hall at 10 cm has 2·10⁶:
 #: gigabytes and hours)
 MAX_SAMPLE_CELLS = 500_000
@@ -86,7 +88,7 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
     grids = [f for f in ("square", "triangular", "linear") if f in site.families]
     if "free" in site.families and "square" not in grids:
         grids.insert(0, "square")  # the local search starts from a lattice
-    found, missing, tried, best_n = {}, {}, 0, max_cameras
+    found, missing, tried, best_n, failing = {}, {}, 0, max_cameras, []
     for family in grids:
         r = lattice_search(site, (family,), step, model, fewest=best_n, screen=screen)
         tried += r.judged
@@ -95,6 +97,8 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
             say(f"  {family}: none of ≤ {best_n} cameras meets ({r.seconds:.1f} s)")
             continue
         cand = _on_grid(site, model, step, r.best)
+        if cand is not None and not cand.evaluation.meets:
+            failing.append(cand)  # the optimiser may repair it
         if cand is None or not cand.evaluation.meets:
             # the search's closed form ignores lens distortion: the reference model decides
             missing[family] = ("its best lattice fails the reference model once snapped to "
@@ -120,15 +124,27 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
             missing["free"] = f"no layout beyond lattices with fewer than {seed.count} cameras"
             say(f"  free: none below {seed.count} cameras ({time.perf_counter() - t1:.1f} s)")
     candidates = sorted((c for f, c in found.items() if f in site.families), key=rank_key)
+    tilt = site.mounting.max_tilt if site.mounting else HINT_TILT * tilt_hint
+    tilted = None
+    if not candidates and failing:
+        # no lattice meets once shadows (or distortion) count: the optimiser repairs the
+        # best one — tilted if the site allows it, else level cameras moved and turned
+        repair = site.mounting.max_tilt if site.mounting else 0.0
+        say(f"  repair: the CasADi optimiser from the best lattice ({failing[0].count} "
+            "cameras), which fails the reference model")
+        tilted = tilted_plan(site, min(failing, key=rank_key), step, repair, progress=say,
+                             most=max_cameras)
+        if tilted.best is not None:
+            candidates, tilt = [tilted.best], repair
+            missing = {f: m for f, m in missing.items() if f != tilted.best.family}
     closest = None
     if not candidates:
         closest = _densest(site, step)
-    tilt = site.mounting.max_tilt if site.mounting else HINT_TILT * tilt_hint
-    tilted = None
-    if candidates and tilt > 0:
+    if candidates and tilt > 0 and tilted is None:
         say(f"  tilted: the CasADi optimiser, tilts up to {math.degrees(tilt):.0f}°"
             + ("" if site.mounting else " (a what-if: the site has no mounting: block)"))
-        tilted = tilted_plan(site, candidates[0], step, tilt, progress=say)
+        budget = math.inf if site.mounting else HINT_TIME * (time.perf_counter() - t0)
+        tilted = tilted_plan(site, candidates[0], step, tilt, progress=say, seconds=budget)
         if site.mounting and tilted.best is not None:
             candidates = sorted(candidates + [tilted.best], key=rank_key)
     return Plan(candidates, tried, time.perf_counter() - t0, closest,

@@ -40,8 +40,8 @@ def pose_of(camera: Camera) -> np.ndarray:
     """The pose (5) of a ceiling camera: the tilt from its optical axis, the yaw from what is
     left once the tilt is undone."""
     d = camera.axis
-    theta = math.acos(max(-1.0, min(1.0, -d[2])))
     h = math.hypot(d[0], d[1])
+    theta = math.atan2(h, -d[2])  # not acos: exact near straight down
     w = (theta * d[1] / h, -theta * d[0] / h) if h > 1e-12 else (0.0, 0.0)
     # R = N·Rz(yaw)ᵀ·Q(w)ᵀ  ⇒  Rz(yaw)ᵀ = Nᵀ·R·Q(w)
     Rz = (rodrigues(NADIR).T @ camera.R @ rodrigues((w[0], w[1], 0.0))).T

@@ -38,21 +38,28 @@ class TiltedPlan:
     best: Candidate | None
     solves: list = field(default_factory=list)  # Solve
     seconds: float = 0.0
+    complete: bool = True  #: False when the time allowed ran out before the search ended
+    start: int = 0  #: cameras of the layout it started from
+    repaired: bool = False  #: the start did not meet the requirements; the search mended it
 
 
 def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
-                progress=None, seconds: float = math.inf) -> TiltedPlan:
+                progress=None, seconds: float = math.inf, most: int = 0) -> TiltedPlan:
     """The fewest cameras below ``start.count`` that meet the requirements with tilts up to
-    ``max_tilt`` (rad), positions on the ``step`` mounting grid; stops after ``seconds``.
+    ``max_tilt`` (rad; 0: level cameras moved and turned freely), positions on the ``step``
+    mounting grid; stops after ``seconds``.
 
-    The counts tried gallop down from the start (1, 2, 4, … fewer while each meets), then
-    bisect between the fewest that met and the most that did not."""
+    A start that does not meet (a lattice whose obstacles' shadows or lens distortion the
+    lattice search left out) is repaired first: the same count, then one camera more at a
+    time up to ``most``, until a layout meets. Then the counts tried gallop down (1, 2, 4, …
+    fewer while each meets) and bisect between the fewest that met and the most that did
+    not."""
     t0 = time.perf_counter()
     say = progress or (lambda m: None)
     points = optimiser_points(site)
     area = ceiling_area(site)
     bounds = area.bounds
-    out = TiltedPlan(None)
+    out = TiltedPlan(None, start=start.count, repaired=not start.evaluation.meets)
     problems = {}  # n → PoseProblem
 
     def judge(poses):
@@ -64,8 +71,10 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
         return (poses, cams, ev) if ev.meets else None
 
     def attempt(n, base):
-        for name, seed in [(f"the {len(base)}-camera layout less {len(base) - n}",
-                            _less(site, base, len(base) - n, points))] + \
+        first = [] if n > len(base) else [
+            (f"the {len(base)}-camera layout less {len(base) - n}" if n < len(base) else
+             f"the {len(base)}-camera layout", _less(site, base, len(base) - n, points))]
+        for name, seed in first + \
                 [(f"a {nx}×{ny} grid", _grid_seed(area, nx, ny, n, SEED_LEAN * max_tilt))
                  for nx, ny in _grid_shapes(area, n)]:
             if n not in problems:
@@ -81,8 +90,20 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
                 break
         return None
 
+    kind = "tilted" if max_tilt > 0 else "free"
     best = np.array([pose_of(c) for c in start.cameras])
     family, fewest_bad, stride = start.family, site.requirements.min_cameras - 1, 1
+    if not start.evaluation.meets:
+        best = _repaired(attempt, best, most, lambda: time.perf_counter() - t0 < seconds)
+        if best is None:
+            out.seconds, out.complete = time.perf_counter() - t0, False
+            return out
+        (best, cams, ev), how = best
+        family = family if how == "less" else "square"
+        out.best = Candidate(kind, 0, 0, (), tuple(cams[0].position[:2]), 0.0, cams, ev,
+                             seed=family)
+        fewest_bad = max(fewest_bad, len(best) - 1) if len(best) > len(start.cameras) \
+            else fewest_bad
     while len(best) - fewest_bad > 1 and time.perf_counter() - t0 < seconds:
         galloping = fewest_bad == site.requirements.min_cameras - 1
         n = max(len(best) - stride, fewest_bad + 1) if galloping \
@@ -93,11 +114,22 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
             continue
         (best, cams, ev), how = got
         family = family if how == "less" else "square"
-        out.best = Candidate("tilted", 0, 0, (), tuple(cams[0].position[:2]), 0.0, cams, ev,
+        out.best = Candidate(kind, 0, 0, (), tuple(cams[0].position[:2]), 0.0, cams, ev,
                              seed=family)
         stride *= 2
     out.seconds = time.perf_counter() - t0
+    out.complete = len(best) - fewest_bad <= 1
     return out
+
+
+def _repaired(attempt, start, most: int, time_left):
+    """The first count from the start's up to ``most`` at which a solve meets (None if
+    none): ``attempt(n, start)`` → (poses, cameras, evaluation), how) or None."""
+    for n in range(len(start), max(most, len(start)) + 1):
+        got = attempt(n, start)
+        if got is not None or not time_left():
+            return got
+    return None
 
 
 def _information(site: Site, cams, points):
