@@ -108,6 +108,25 @@ lattices); all four when the key is absent. The prediction is the reference mode
 seen when it projects 2 px inside the image; its error is `sqrt(trace(F⁻¹))`,
 `F = Σ Jᵢᵀ Jᵢ / σ²`. Examples: `layouts/*.site.yaml`.
 
+Tilted cameras and obstacles (optional):
+
+```yaml
+mounting:
+  max_tilt: 30          # degrees from straight down a camera may be tilted (0 to 75); 0 = level
+  wall_clearance: 0.0   # m: cameras hang at least this far inside the room's walls
+site:
+  keep_out:
+    - [[1, 1], [1.5, 1], [1.5, 1.5], [1, 1.5]]                    # a floor area left out
+    - {polygon: [[3, 2], [3.5, 2], [3.5, 2.5], [3, 2.5]], height: 3.0}  # a pillar that hides
+```
+
+With `mounting:`, `vlpcal plan` runs the CasADi optimiser over every camera's position, yaw
+and tilt (within `max_tilt`) from the best level layout and proposes the tilted layout with
+the fewest cameras; positions snap to the mounting grid, yaw, tilt and its direction to 5°.
+Without it the plan is of level cameras and says what tilting up to 30° would save. A keep-out
+item with a `height` is an obstacle: the reference model counts a point as seen by a camera
+only when the segment between them clears every obstacle (`plan`, `check` and the maps alike).
+
 ## Survey bundle (a folder)
 
 ```
