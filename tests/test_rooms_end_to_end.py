@@ -17,6 +17,7 @@ from vlpcal.cli import main
 CAMERA = {"width": 160, "height": 120, "fx": 153.3, "fy": 153.3, "cx": 79.5, "cy": 59.5,
           "dist": [0, 0, 0, 0, 0]}
 #: name: (ceiling m, room, keep-outs) — different shapes, a pillar, a corridor; level cameras
+#: except where TILTED allows the plan to tilt them (issue 27)
 ROOMS = {
     "lab": (2.5, [[0, 0], [3, 0], [3, 2.4], [0, 2.4]], []),
     "pillar": (2.8, [[0, 0], [4, 0], [4, 3], [0, 3]],
@@ -24,7 +25,10 @@ ROOMS = {
     "corridor": (2.6, [[0, 0], [6, 0], [6, 1.2], [0, 1.2]], []),
     "lshape": (2.6, [[0, 0], [4, 0], [4, 1.6], [2, 1.6], [2, 3], [0, 3]], []),
     "trapezoid": (2.7, [[0, 0], [4.5, 0], [3.5, 2.5], [1, 2.5]], []),
+    "tilted": (2.8, [[0, 0], [5, 0], [5, 3], [0, 3]], []),
 }
+#: rooms whose site allows tilted cameras: their mounting block
+TILTED = {"tilted": {"max_tilt": 30}}
 #: the calibrated cameras place the test frames within this many times the true cameras' mean
 #: error (the free survey's measured range on these rooms: 1.3–2.8 ×)
 WITHIN = 3.0
@@ -49,9 +53,13 @@ def planned(tmp_path_factory):
             "site": {"name": name, "ceiling_height": ceiling, "room": room, "keep_out": keep},
             "camera": CAMERA,
             "requirements": {"heights": [0.0, 0.5], "min_cameras": 2, "coverage": 0.9,
-                             "max_error_p95": 0.03, "pixel_noise": 0.3}}))
+                             "max_error_p95": 0.03, "pixel_noise": 0.3},
+            **({"mounting": TILTED[name]} if name in TILTED else {})}))
         said = _cli("plan", "--site", site, "--out", root / f"{name}.yaml")
         assert "links all" in said, said  # vlpcal plan says the free survey can link them
+        tilted = yaml.safe_load((root / f"{name}.yaml").read_text())["cameras"]
+        assert any(abs(np.linalg.norm(c["rotation"]) - np.pi) > 0.01 for c in tilted) \
+            == (name in TILTED)  # the tilted room's plan tilts cameras; the others do not
         said = _cli("survey", "plan", "-d", root / f"{name}.yaml", "--free",
                     "--out", root / f"{name}.plan.csv")
         assert "links all" in said, said
