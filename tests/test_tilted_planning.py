@@ -190,3 +190,59 @@ def test_a_room_with_a_pillar_and_a_shelf_plans_a_layout_that_meets_in_their_sha
     res = CliRunner().invoke(main, ["check", "--site", str(tmp_path / "s.yaml"), "-d",
                                     str(tmp_path / "p.yaml")])
     assert res.exit_code == 0 and "meets the site" in res.output
+
+
+def test_a_tilted_plan_is_hung_surveyed_by_tape_and_tracks_within_what_it_predicted(tmp_path):
+    """Issue 27's end to end: a tilted plan → `simulate -d` (hung with a careful install's
+    errors) → the tape survey → `locate` of test frames and `track` of a robot, both within
+    the plan's predicted mean error (at its 0.3 px spot noise) and within 3 × the true
+    cameras on the same frames."""
+    import csv
+
+    doc = copy.deepcopy(BAY)
+    doc["site"]["room"] = [[0, 0], [4, 0], [4, 2.4], [0, 2.4]]
+    doc["requirements"]["coverage"] = 0.9
+    doc["requirements"]["max_error_p95"] = 0.03
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(doc))
+
+    def cli(*args):
+        res = CliRunner().invoke(main, [str(a) for a in args])
+        assert res.exit_code == 0, res.output
+        return res.output
+
+    cli("plan", "-q", "--site", tmp_path / "s.yaml", "--out", tmp_path / "p.yaml")
+    plan = deployment.load(tmp_path / "p.yaml")
+    assert tilts(np.array([pose_of(c) for c in plan.cameras])).max() > 0
+    predicted = plan.extra["provenance"]["predicted"]["mean_error_m"]
+    sim = tmp_path / "sim"
+    cli("simulate", "-d", tmp_path / "p.yaml", "--survey-step", "0.4", "--test-points", 30,
+        "--robot-speed", "1", "--seconds", "2", "--out", sim)
+    cli("survey", "calibrate", "-d", sim / "nominal.yaml", "--survey", sim / "survey",
+        "--out", sim / "cal.yaml", "-q")
+    truth = {r["frame_id"]: r for r in csv.DictReader((sim / "frames.truth.csv").open())}
+
+    def located(dep):
+        cli("locate", "-d", dep, "--frames", sim / "frames", "--out", sim / f"{dep.stem}.csv",
+            "-q")
+        rows = [r for r in csv.DictReader((sim / f"{dep.stem}.csv").open())
+                if r["status"] == "ok"]
+        return np.mean([np.linalg.norm([float(r[a]) - float(truth[r["frame_id"]][a])
+                                        for a in "xyz"]) for r in rows]), len(rows)
+
+    calibrated, n_cal = located(sim / "cal.yaml")
+    exact, n_true = located(sim / "truth.yaml")
+    assert n_cal >= n_true >= 20
+    assert calibrated <= predicted and calibrated <= 3 * exact, (calibrated, exact, predicted)
+    cli("track", "-d", sim / "cal.yaml", "--frames", sim / "streams", "--out",
+        sim / "tracks.csv")
+    rows = np.genfromtxt(sim / "tracks.csv", delimiter=",", names=True, dtype=None,
+                         encoding="utf-8")
+    moving = np.genfromtxt(sim / "streams.truth.csv", delimiter=",", names=True, dtype=None,
+                           encoding="utf-8")
+    ok = rows["status"] == "ok"
+    assert ok.mean() > 0.8
+    order = np.argsort(moving["t"])
+    true_at = np.stack([np.interp(rows["t"][ok], moving["t"][order], moving[c][order])
+                        for c in "xyz"], -1)
+    err = np.linalg.norm(np.stack([rows[c][ok] for c in "xyz"], -1) - true_at, axis=1)
+    assert np.median(err) <= predicted, (np.median(err), predicted)
