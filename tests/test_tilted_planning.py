@@ -132,6 +132,17 @@ def test_tilting_plans_the_bay_with_at_most_nine_cameras(tmp_path):
     assert (tilts(poses) <= math.radians(30) + 1e-9).all() and tilts(poses).max() > 0
     assert np.allclose(poses[:, :2] / 0.1, np.rint(poses[:, :2] / 0.1), atol=1e-6)
     assert ((poses[:, :2] >= 0) & (poses[:, :2] <= (6, 3.6))).all()
+    # how to hang each camera: the lines an installer follows give each camera's lean
+    hang = [x for x in res.output.splitlines() if " m: turn " in x]
+    assert len(hang) == len(dep.cameras)
+    for line, cam in zip(hang, dep.cameras):
+        assert line.split()[0] == cam.id
+        if "toward" not in line:  # a level camera
+            assert cam.axis[2] < -math.cos(math.radians(0.5))
+            continue
+        toward = float(line.rsplit("toward", 1)[1].strip(" °"))
+        lean = math.degrees(math.atan2(cam.axis[1], cam.axis[0]))
+        assert abs((toward - lean + 180) % 360 - 180) < 0.5 + 1e-6
     res = CliRunner().invoke(main, ["check", "--site", str(tmp_path / "bay.yaml"), "-d",
                                     str(out)])
     assert res.exit_code == 0 and "meets the site" in res.output

@@ -328,7 +328,8 @@ def plan_maps(path, site, cand) -> None:
             for poly in site.keep_out:
                 ax.fill(*np.array(poly).T, color="0.85", ec="0.5")
             for ob in site.obstacles:  # an obstacle: darker, its height written on it
-                ax.fill(*np.array(ob.polygon).T, color="0.55", ec="0.2", hatch="///")
+                ax.fill(*np.array(ob.polygon).T, facecolor="0.7", edgecolor="0.1",
+                        hatch="////", lw=0.8)
                 ax.annotate(f"{ob.height:g} m", np.mean(ob.polygon, axis=0), fontsize=6,
                             ha="center", va="center", path_effects=halo)
             for c in cand.cameras:

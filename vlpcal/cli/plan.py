@@ -101,41 +101,67 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         yaml_file.write_text(dumps(dep, f"Planned by vlpcal plan from {site_path}: candidate "
                                         f"{candidate}."), encoding="utf-8")
     click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
+    _echo_mounting(chosen.cameras)
     _echo_linkage(dep)
+
+
+def _solves(t) -> str:
+    return (f"CasADi optimiser: {len(t.solves)} solve{'s' * (len(t.solves) != 1)}, "
+            f"{sum(s.iterations for s in t.solves)} iterations, {t.seconds:.1f} s")
 
 
 def _echo_tilted(site, result) -> None:
     """What the CasADi optimiser did beyond the lattices: the layout it mended when no
     lattice met, its tilted candidate and its cost when the site allows tilt, else what
     tilting would save."""
+    deg = f"{math.degrees(result.tilt):.0f}°"
+    m = result.mended
+    if m is not None:
+        tilted = site.mounting is not None and site.mounting.max_tilt > 0
+        click.echo(f"{m.best.family}: no lattice meets the exact reference model "
+                   f"(see above); the optimiser mended the best ({m.start} cameras) into "
+                   f"{m.best.count}" + (", tilted" if tilted else " level cameras")
+                   + f" ({_solves(m)})" if m.best is not None else
+                   f"the optimiser could not mend the best lattice ({m.start} cameras, which "
+                   f"fails the exact reference model; {_solves(m)})")
     t = result.tilted
     if t is None:
         return
-    deg = f"{math.degrees(result.tilt):.0f}°"
-    solves = (f"CasADi optimiser: {len(t.solves)} solve{'s' * (len(t.solves) != 1)}, "
-              f"{sum(s.iterations for s in t.solves)} iterations, {t.seconds:.1f} s")
-    if t.repaired:
-        click.echo(f"{t.best.family}: no lattice meets once obstacles' shadows and the lens "
-                   f"count; the optimiser mended the best ({t.start} cameras) into "
-                   f"{t.best.count}" + (f", tilted up to {deg}" if result.tilt else "")
-                   + f" ({solves})" if t.best is not None else
-                   f"the optimiser could not mend the best lattice ({t.start} cameras, which "
-                   f"fails once obstacles' shadows and the lens count; {solves})")
-    elif site.mounting is None and t.best is not None:
+    if site.mounting is None and t.best is not None:
         fewer = "" if t.complete else " or fewer (the what-if ran out of its time)"
         click.echo(f"with tilt up to {deg}: {t.best.count} cameras{fewer} instead of "
                    f"{t.start} — needs tilting brackets (the site's mounting: block allows "
-                   f"it; {solves})")
+                   f"it; {_solves(t)})")
     elif site.mounting is None:
-        click.echo(f"tilting up to {deg} would not save a camera ({solves})")
+        click.echo(f"tilting up to {deg} would not save a camera ({_solves(t)})")
     elif t.best is not None:
         from ..planning.poses import pose_of, tilts
 
         most = math.degrees(max(tilts([pose_of(c) for c in t.best.cameras])))
         click.echo(f"tilted: {t.best.count} cameras, tilted up to {most:.0f}° (of {deg} "
-                   f"allowed), from the best {t.best.seed} layout ({solves})")
+                   f"allowed), from the best {t.best.seed} layout ({_solves(t)})")
     else:
-        click.echo(f"tilted: none below {t.start} cameras with tilts up to {deg} ({solves})")
+        click.echo(f"tilted: none below {t.start} cameras with tilts up to {deg} "
+                   f"({_solves(t)})")
+
+
+def _echo_mounting(cameras) -> None:
+    """How to hang a layout whose cameras are not all level: per camera where, the bracket's
+    turn about the vertical, and which way and how far it tilts (what the maps draw)."""
+    from ..planning.poses import pose_of
+
+    poses = [pose_of(c) for c in cameras]
+    if all(math.hypot(p[3], p[4]) < math.radians(0.5) for p in poses):
+        return
+    click.echo("how to hang it (turn: the level camera's image x axis from the room's x "
+               "axis, set first; then tilt the optical axis toward the direction given, "
+               "degrees from the room's x axis):")
+    for c, p in zip(cameras, poses):
+        tilt = math.degrees(math.hypot(p[3], p[4]))
+        toward = round(math.degrees(math.atan2(p[3], -p[4]))) % 360  # leans along (−wy, wx)
+        click.echo(f"  {c.id:>4s} at ({p[0]:.2f}, {p[1]:.2f}) m: turn "
+                   f"{round(math.degrees(p[2])) % 360:3d}°, tilt {tilt:2.0f}°"
+                   + (f" toward {toward:3d}°" if tilt >= 0.5 else ""))
 
 
 def _echo_linkage(dep) -> None:

@@ -45,6 +45,8 @@ class Plan:
     #: rad: the tilt ``tilted`` allowed; for a site without ``mounting:`` it is
     #: :data:`HINT_TILT`, a what-if whose layout is not a candidate
     tilt: float = 0.0
+    #: the optimiser's mending of the best lattice when none met the exact model
+    mended: TiltedPlan | None = None
 
 
 def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool = True) -> Plan:
@@ -103,8 +105,8 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
             # the search's closed form ignores lens distortion: the reference model decides
             missing[family] = ("its best lattice fails the reference model once snapped to "
                                "the mounting grid" if cand is None else
-                               "its best lattice fails the reference model (the lens "
-                               "distortion and obstacles' shadows the search leaves out)")
+                               "its best lattice fails the reference model (the "
+                               + " and ".join(_left_out(site)) + " the search leaves out)")
             continue
         found[family] = cand
         best_n = min(best_n, cand.count)
@@ -125,22 +127,22 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
             say(f"  free: none below {seed.count} cameras ({time.perf_counter() - t1:.1f} s)")
     candidates = sorted((c for f, c in found.items() if f in site.families), key=rank_key)
     tilt = site.mounting.max_tilt if site.mounting else HINT_TILT * tilt_hint
-    tilted = None
+    mended = tilted = None
     if not candidates and failing:
-        # no lattice meets once shadows (or distortion) count: the optimiser repairs the
-        # best one — tilted if the site allows it, else level cameras moved and turned
-        repair = site.mounting.max_tilt if site.mounting else 0.0
-        say(f"  repair: the CasADi optimiser from the best lattice ({failing[0].count} "
+        # no lattice meets once shadows (or distortion) count: the optimiser mends the best
+        # one — tilted if the site allows it, else level cameras moved and turned
+        allowed = site.mounting.max_tilt if site.mounting else 0.0
+        say(f"  mend: the CasADi optimiser from the best lattice ({failing[0].count} "
             "cameras), which fails the reference model")
-        tilted = tilted_plan(site, min(failing, key=rank_key), step, repair, progress=say,
+        mended = tilted_plan(site, min(failing, key=rank_key), step, allowed, progress=say,
                              most=max_cameras)
-        if tilted.best is not None:
-            candidates, tilt = [tilted.best], repair
-            missing = {f: m for f, m in missing.items() if f != tilted.best.family}
+        if mended.best is not None:
+            candidates = [mended.best]
+            missing = {f: m for f, m in missing.items() if f != mended.best.family}
     closest = None
     if not candidates:
         closest = _densest(site, step)
-    if candidates and tilt > 0 and tilted is None:
+    if candidates and tilt > 0 and not (mended and site.mounting):
         say(f"  tilted: the CasADi optimiser, tilts up to {math.degrees(tilt):.0f}°"
             + ("" if site.mounting else " (a what-if: the site has no mounting: block)"))
         budget = math.inf if site.mounting else HINT_TIME * (time.perf_counter() - t0)
@@ -148,7 +150,13 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
         if site.mounting and tilted.best is not None:
             candidates = sorted(candidates + [tilted.best], key=rank_key)
     return Plan(candidates, tried, time.perf_counter() - t0, closest,
-                {f: m for f, m in missing.items() if f in site.families}, tilted, tilt)
+                {f: m for f, m in missing.items() if f in site.families}, tilted, tilt, mended)
+
+
+def _left_out(site: Site) -> list:
+    """What the lattice search's closed form leaves out of the reference model here."""
+    return (["the lens distortion"] if any(site.camera.dist) else []) \
+        + (["obstacles' shadows"] if site.obstacles else []) or ["rounding"]
 
 
 def fewest_possible(site: Site) -> int:

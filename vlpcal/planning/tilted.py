@@ -60,6 +60,7 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     area = ceiling_area(site)
     bounds = area.bounds
     out = TiltedPlan(None, start=start.count, repaired=not start.evaluation.meets)
+    kind = "tilted" if max_tilt > 0 else "free"
     problems = {}  # n → PoseProblem
 
     def judge(poses):
@@ -82,7 +83,7 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
             s = problems[n].solve(seed, bounds, max_tilt, judge)
             out.solves.append(s)
             got = s.judged or judge(s.poses)
-            say(f"  tilted {n}: from {name}, {s.iterations} iterations, {s.seconds:.1f} s"
+            say(f"  {kind} {n}: from {name}, {s.iterations} iterations, {s.seconds:.1f} s"
                 + (" — meets" if got else " — does not meet"))
             if got:
                 return got, ("grid" if "grid" in name else "less")
@@ -90,7 +91,6 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
                 break
         return None
 
-    kind = "tilted" if max_tilt > 0 else "free"
     best = np.array([pose_of(c) for c in start.cameras])
     family, fewest_bad, stride = start.family, site.requirements.min_cameras - 1, 1
     if not start.evaluation.meets:
