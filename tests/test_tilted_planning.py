@@ -39,6 +39,9 @@ BAY = {"format": "vlpcal-site", "version": 1,
     (["site", "keep_out"], [{"polygon": [[1, 1], [2, 1], [2, 2], [1, 2]], "height": -1}],
      "site.keep_out[0].height: expected 0 to 2.8 m"),
     (["site", "keep_out"], [{"height": 1.0}], "site.keep_out[0].polygon: missing"),
+    (["camera"], {"width": 160, "height": 120, "fx": 153.3},
+     "camera.fy: missing (and cx, cy, dist; a camera needs width, height, fx, fy, cx, cy, "
+     "dist)"),
     (["site", "keep_out"], [{"polygon": [[1, 1], [2, 1], [2, 2], [1, 2]], "hight": 1}],
      "site.keep_out[0].hight: unknown key (expected polygon, height)"),
 ])

@@ -113,9 +113,11 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         mounting = _mounting(doc["mounting"], room) if "mounting" in doc else None
         cam = _mapping(doc["camera"], "camera")
         _only(cam, CAMERA_KEYS, "camera")
-        for key in CAMERA_KEYS:
-            if key not in cam:
-                raise SiteError(f"camera.{key}: missing")
+        absent = [key for key in CAMERA_KEYS if key not in cam]
+        if absent:  # all at once: a camera block is often written from memory
+            raise SiteError(f"camera.{absent[0]}: missing"
+                            + (f" (and {', '.join(absent[1:])}; a camera needs "
+                               f"{', '.join(CAMERA_KEYS)})" if len(absent) > 1 else ""))
         check_intrinsics(cam, "camera")
         req = _mapping(doc["requirements"], "requirements")
         _only(req, REQUIREMENT_KEYS, "requirements")
