@@ -114,7 +114,7 @@ def _echo_tilted(site, result) -> None:
     """What the CasADi optimiser did beyond the lattices: the layout it mended when no
     lattice met, its tilted candidate and its cost when the site allows tilt, else what
     tilting would save."""
-    deg = f"{math.degrees(result.tilt):.0f}°"
+    deg = f"{math.degrees(result.tilt):.3g}°"
     m = result.mended
     if m is not None:
         tilted = site.mounting is not None and site.mounting.max_tilt > 0
@@ -130,8 +130,8 @@ def _echo_tilted(site, result) -> None:
     if site.mounting is None and t.best is not None:
         fewer = "" if t.complete else " or fewer (the what-if ran out of its time)"
         click.echo(f"with tilt up to {deg}: {t.best.count} cameras{fewer} instead of "
-                   f"{t.start} — needs tilting brackets (the site's mounting: block allows "
-                   f"it; {_solves(t)})")
+                   f"{t.start} — needs tilting brackets (a mounting: block in the site "
+                   f"would allow it; {_solves(t)})")
     elif site.mounting is None:
         click.echo(f"tilting up to {deg} would not save a camera ({_solves(t)})")
     elif t.best is not None:

@@ -17,6 +17,7 @@ Kept off the runtime path: casadi is imported only here, and only ``vlpcal plan`
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +47,7 @@ class Solve:
     iterations: int
     seconds: float
     judged: object = None  #: what the judge returned when it stopped the solve (else None)
+    late: bool = False  #: stopped at its deadline
 
 
 def _rotation(ca, yaw, wx, wy):
@@ -117,11 +119,13 @@ class PoseProblem:
             "ipopt.max_iter": MAX_ITERATIONS, "ipopt.tol": 1e-4, "error_on_fail": False,
             "iteration_callback": self.watch})
 
-    def solve(self, start, bounds, max_tilt: float, judge=None) -> Solve:
+    def solve(self, start, bounds, max_tilt: float, judge=None,
+              deadline: float = math.inf) -> Solve:
         """Optimise the poses ``start`` (n×5): positions within ``bounds`` (x0, y0, x1, y1),
         tilts within ``max_tilt`` (rad). ``judge`` (poses → a result or None) looks at the
         iterate every :data:`JUDGE_EVERY` iterations; a result stops the solve there (the
-        exact model need not wait for the smooth one to converge)."""
+        exact model need not wait for the smooth one to converge). ``deadline``
+        (``time.perf_counter()``): the solve stops there (:attr:`Solve.late`)."""
         import time
 
         from .poses import posed_cameras
@@ -139,17 +143,24 @@ class PoseProblem:
         if site.obstacles:  # hidden as seen from the start's positions
             for c, cam in enumerate(posed_cameras(site, begin)):
                 mask[c] = unobstructed(cam.center, self.points, site.obstacles)
-        self.watch.arm(judge)
+        self.watch.arm(judge, deadline)
         out = self.solver(x0=begin.ravel().tolist() + [0.0], lbx=lbx, ubx=ubx,
                           p=mask.ravel(order="F").tolist(), lbg=[0.0, 0.0] + [0.0] * n,
                           ubg=[np.inf, np.inf] + [max_tilt ** 2] * n)
         x = np.asarray(out["x"]).ravel()
         stats = self.solver.stats()
+        if self.watch.interrupt is not None:
+            raise self.watch.interrupt
+        if stats["return_status"] == "User_Requested_Stop" and self.watch.result is None \
+                and not self.watch.late:
+            raise KeyboardInterrupt  # stopped by no judge and no deadline: by the user
+
         poses, judged = x[:-1].reshape(n, 5), None
         if self.watch.result is not None:
             poses, judged = self.watch.poses, self.watch.result
         return Solve(start, poses, float(x[-1]), str(stats["return_status"]),
-                     int(stats["iter_count"]), time.perf_counter() - t0, judged)
+                     int(stats["iter_count"]), time.perf_counter() - t0, judged,
+                     self.watch.late)
 
 
 def _judge_class():
@@ -166,9 +177,10 @@ def _judge_class():
             self.arm(None)
             self.construct("judge", {})
 
-        def arm(self, judge):
-            """A new solve: its judge (None: none), nothing seen yet."""
+        def arm(self, judge, deadline=math.inf):
+            """A new solve: its judge (None: none) and the time it must end by."""
             self.judge, self.calls, self.result, self.poses = judge, 0, None, None
+            self.deadline, self.late, self.interrupt = deadline, False, None
 
         def get_n_in(self):
             return ca.nlpsol_n_out()
@@ -193,15 +205,26 @@ def _judge_class():
             return ca.Sparsity(0, 0)
 
         def eval(self, arg):
-            self.calls += 1
-            if self.judge is None or self.calls % JUDGE_EVERY:
-                return [0]
-            poses = np.asarray(arg[0]).ravel()[:-1].reshape(self.n, 5)
-            got = self.judge(poses)
-            if got is None:
-                return [0]
-            self.result, self.poses = got, poses
-            return [1]
+            import time
+
+            # a signal (Ctrl-C, SIGTERM) lands here, in the only Python IPOPT runs: stop the
+            # solve and let the caller raise it, not count the solve as one that failed
+            try:
+                self.calls += 1
+                if time.perf_counter() > self.deadline:
+                    self.late = True
+                    return [1]
+                if self.judge is None or self.calls % JUDGE_EVERY:
+                    return [0]
+                poses = np.asarray(arg[0]).ravel()[:-1].reshape(self.n, 5)
+                got = self.judge(poses)
+                if got is None:
+                    return [0]
+                self.result, self.poses = got, poses
+                return [1]
+            except BaseException as e:  # noqa: BLE001 — re-raised by the solve
+                self.interrupt = e
+                return [1]
 
     return Judge
 

@@ -59,12 +59,15 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     points = optimiser_points(site)
     area = ceiling_area(site)
     bounds = area.bounds
+    from shapely.geometry import Polygon
+
+    corner = Polygon(site.room).bounds[:2]  # the mounting grid's origin
     out = TiltedPlan(None, start=start.count, repaired=not start.evaluation.meets)
     kind = "tilted" if max_tilt > 0 else "free"
     problems = {}  # n → PoseProblem
 
     def judge(poses):
-        poses = _mounted(area, snapped(poses, step, max_tilt, *bounds[:2]), step)
+        poses = _mounted(area, snapped(poses, step, max_tilt, *corner), step, corner)
         cams = posed_cameras(site, poses)
         if not _meets_coarse(site, cams, points):
             return None
@@ -80,8 +83,10 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
                  for nx, ny in _grid_shapes(area, n)]:
             if n not in problems:
                 problems[n] = PoseProblem(site, n, points)
-            s = problems[n].solve(seed, bounds, max_tilt, judge)
+            s = problems[n].solve(seed, bounds, max_tilt, judge, t0 + seconds)
             out.solves.append(s)
+            if s.late and not s.judged:
+                break
             got = s.judged or judge(s.poses)
             say(f"  {kind} {n}: from {name}, {s.iterations} iterations, {s.seconds:.1f} s"
                 + (" — meets" if got else " — does not meet"))
@@ -177,7 +182,9 @@ def _less(site: Site, poses, k: int, points) -> np.ndarray:
         return poses
     seen, info = _information(site, posed_cameras(site, poses), points)
     views, total = seen.sum(axis=0), info.sum(axis=0)
-    scores = _met(site, views[None] - seen, total[None] - info).mean(axis=1)
+    scores = np.concatenate([  # a few cameras at a time: memory stays that of `info`
+        _met(site, views[None] - seen[i:i + 16], total[None] - info[i:i + 16]).mean(axis=1)
+        for i in range(0, len(poses), 16)])
     return np.delete(poses, np.argsort(-scores, kind="stable")[:k], axis=0)
 
 
@@ -218,7 +225,7 @@ def _grid_seed(area, nx: int, ny: int, n: int, lean: float) -> np.ndarray:
     return np.array(out)
 
 
-def _mounted(area, poses, step: float) -> np.ndarray:
+def _mounted(area, poses, step: float, corner) -> np.ndarray:
     """Poses moved onto the ceiling where they may hang: a position outside ``area`` goes to
     the nearest mounting-grid point inside it."""
     from shapely import contains_xy
@@ -226,7 +233,7 @@ def _mounted(area, poses, step: float) -> np.ndarray:
     from shapely.ops import nearest_points
 
     poses = poses.copy()
-    x0, y0 = area.bounds[:2]
+    x0, y0 = corner
     inside = contains_xy(area.buffer(1e-9), poses[:, 0], poses[:, 1])
     for k in np.flatnonzero(~inside):
         near = nearest_points(area, Point(poses[k, 0], poses[k, 1]))[0]
