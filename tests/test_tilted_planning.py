@@ -260,3 +260,59 @@ def test_a_tilted_plan_is_hung_surveyed_by_tape_and_tracks_within_what_it_predic
                         for c in "xyz"], -1)
     err = np.linalg.norm(np.stack([rows[c][ok] for c in "xyz"], -1) - true_at, axis=1)
     assert np.median(err) <= predicted, (np.median(err), predicted)
+
+
+def test_an_interrupt_inside_the_optimiser_is_raised_not_counted_as_a_failed_solve():
+    """From a hostile probe: Ctrl-C (or SIGTERM, which the CLI turns into the same) while
+    IPOPT ran ended that solve as one that "does not meet", and the plan went on to
+    overwrite its output with exit 0. The signal reaches Python in the iteration callback."""
+    from vlpcal.planning.optimiser import PoseProblem, optimiser_points
+
+    site = site_from_dict(BAY)
+    pts = optimiser_points(site)
+    start = np.array([[1.5, 1.0, 0, 0, 0], [4.5, 1.0, 0, 0, 0], [3.0, 2.6, 0, 0, 0]])
+
+    def judge(poses):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        PoseProblem(site, 3, pts).solve(start, (0, 0, 6, 3.6), math.radians(30), judge)
+
+
+def test_a_narrow_ceiling_where_no_level_lattice_meets_is_planned_tilted(tmp_path):
+    """From a hostile probe: 0.7 m of wall clearance in a 3.6 × 1.8 m room leaves a strip
+    where no level lattice meets; tilted cameras do, and the plan finds them (and a
+    --max-cameras under the level count is no reason to give up)."""
+    doc = copy.deepcopy(BAY)
+    doc["site"] = {"name": "strip", "ceiling_height": 2.3,
+                   "room": [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]}
+    doc["requirements"]["heights"] = [0.0, 0.7]
+    doc["mounting"] = {"max_tilt": 30, "wall_clearance": 0.7}
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(doc))
+    res = CliRunner().invoke(main, ["plan", "-q", "--site", str(tmp_path / "s.yaml"),
+                                    "--out", str(tmp_path / "p.yaml")])
+    assert res.exit_code == 0, res.output
+    cams = deployment.load(tmp_path / "p.yaml").cameras
+    assert evaluate(load_site(tmp_path / "s.yaml"), cams).meets
+    xy = np.array([c.position[:2] for c in cams])
+    assert (xy >= 0.7 - 1e-9).all() and (xy <= np.array([2.9, 1.1]) + 1e-9).all()
+
+
+def test_check_names_what_the_sites_mounting_does_not_allow(tmp_path):
+    doc = copy.deepcopy(BAY)
+    doc["mounting"] = {"max_tilt": 10, "wall_clearance": 0.5}
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(doc))
+    site = load_site(tmp_path / "s.yaml")
+    cams = posed_cameras(site, [[0.3, 1.8, 0, 0.0, -math.radians(25)],
+                                [3.0, 1.8, 0, 0, 0], [3.0, 1.8, 0, 0.1, 0]])
+    dep = deployment.Deployment("bay", 2.8, BAY["site"]["room"], cams)
+    (tmp_path / "d.yaml").write_text(deployment.dumps(dep))
+    res = CliRunner().invoke(main, ["check", "--site", str(tmp_path / "s.yaml"), "-d",
+                                    str(tmp_path / "d.yaml")])
+    assert res.exit_code == 1, res.output
+    assert "C1 (25.0°) tilt past the site's max_tilt (10°)" in res.output
+    assert "C1 (0.30 m) hang closer to a wall than the site's wall_clearance (0.5 m)" \
+        in res.output
+    assert "outside the room" not in res.output
+    # C2 and C3 hang at one place: what only they see cannot be triangulated
+    assert "p95 unbounded" in res.output and "nan" not in res.output

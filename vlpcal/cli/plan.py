@@ -55,6 +55,9 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                                    "raise --max-cameras, relax the requirements or use a "
                                    "camera with a wider view")
     if not result.candidates:
+        m = result.mended
+        tried = (f"; the CasADi optimiser's tilted cameras found none either ({_solves(m)})"
+                 if m is not None else "")
         c = result.closest
         best = (f"for comparison, a dense lattice of {c.count} camera"
                 f"{'s' if c.count != 1 else ''} covers {c.evaluation.coverage:.1%}"
@@ -63,7 +66,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                 if c else "no layout could be evaluated")
         raise click.ClickException(
             f"{site_path}: no layout of up to {max_cameras} cameras meets coverage "
-            f"{r.coverage:.0%} with p95 ≤ {r.max_error_p95 * 100:g} cm ({best}); relax the "
+            f"{r.coverage:.0%} with p95 ≤ {r.max_error_p95 * 100:g} cm ({best}{tried}); relax the "
             "requirements, lower the LED heights or use a camera with more pixels")
     k = len(result.candidates)
     click.echo(f"{site.name}: {result.candidates[0].count} cameras meet the requirements "
@@ -119,13 +122,15 @@ def _echo_tilted(site, result) -> None:
     if m is not None:
         tilted = site.mounting is not None and site.mounting.max_tilt > 0
         click.echo(f"{m.best.family}: no lattice meets the exact reference model "
-                   f"(see above); the optimiser mended the best ({m.start} cameras) into "
-                   f"{m.best.count}" + (", tilted" if tilted else " level cameras")
-                   + f" ({_solves(m)})" if m.best is not None else
-                   f"the optimiser could not mend the best lattice ({m.start} cameras, which "
-                   f"fails the exact reference model; {_solves(m)})")
+                   f"(see above); from one of {m.start} cameras the optimiser mended a "
+                   f"layout of {m.best.count}" + (" tilted" if tilted else " level")
+                   + f" cameras ({_solves(m)})")
     t = result.tilted
     if t is None:
+        if site.mounting is None and m is None and result.candidates:
+            click.echo(f"what tilting would save is not estimated for a layout this large "
+                       f"({result.candidates[0].count} cameras); a mounting: block in the "
+                       "site plans tilted cameras")
         return
     if site.mounting is None and t.best is not None:
         fewer = "" if t.complete else " or fewer (the what-if ran out of its time)"
@@ -233,11 +238,30 @@ def check(site_path, deployment_path, maps):
     if other:
         click.echo(f"  note: {', '.join(other[:5])}{' …' if len(other) > 5 else ''} have another "
                    "image size than the site's camera model; each camera is judged as it is")
-    from ..planning import Mounting, mount_step
+    from shapely import contains_xy, distance, points
+    from shapely.geometry import Polygon
 
     xy = np.array([c.position[:2] for c in dep.cameras]).reshape(-1, 2)
-    inside = Mounting(site, mount_step(site))(xy[:, 0], xy[:, 1])  # walls count as inside
+    room = Polygon(site.room)
+    walls = room.buffer(1e-9 * max(1.0, *np.ptp(np.array(site.room), axis=0)))
+    inside = contains_xy(walls, xy[:, 0], xy[:, 1])  # walls count as inside
     outside = [c.id for c, ok in zip(dep.cameras, inside) if not ok]
+    if site.mounting is not None:  # what the site's mounting allows, named (not judged)
+        lean = [math.degrees(math.atan2(math.hypot(*c.axis[:2]), -c.axis[2]))
+                for c in dep.cameras]
+        steep = [f"{c.id} ({t:.1f}°)" for c, t in zip(dep.cameras, lean)
+                 if t > math.degrees(site.mounting.max_tilt) + 0.05]
+        near = distance(room.exterior, points(xy)) if len(xy) else np.zeros(0)
+        close = [f"{c.id} ({d:.2f} m)" for c, d, ok in zip(dep.cameras, near, inside)
+                 if ok and d < site.mounting.wall_clearance - 1e-6]
+        if steep:
+            click.echo(f"  note: {', '.join(steep[:5])}{' …' if len(steep) > 5 else ''} tilt "
+                       f"past the site's max_tilt "
+                       f"({math.degrees(site.mounting.max_tilt):g}°); judged as they are")
+        if close:
+            click.echo(f"  note: {', '.join(close[:5])}{' …' if len(close) > 5 else ''} hang "
+                       f"closer to a wall than the site's wall_clearance "
+                       f"({site.mounting.wall_clearance:g} m); judged as they are")
     high = [c.id for c in dep.cameras if not 0 < c.position[2] <= site.ceiling_height]
     if outside or high:
         click.echo(f"  note: camera(s) {', '.join((outside + high)[:5])} hang outside the "
@@ -252,7 +276,9 @@ def check(site_path, deployment_path, maps):
     if ev.coverage < r.coverage:
         why.append(f"coverage {ev.coverage:.1%} < {r.coverage:.1%}")
     if not ev.p95 <= r.max_error_p95:
-        why.append(f"p95 {ev.p95 * 100:.3f} cm > {r.max_error_p95 * 100:.3f} cm")
+        why.append(f"p95 {ev.p95 * 100:.3f} cm > {r.max_error_p95 * 100:.3f} cm"
+                   if math.isfinite(ev.p95) else "p95 unbounded: some points are seen by "
+                   "cameras at one place only, which cannot triangulate them")
     if dep.room != site.room:
         click.echo("  note: the deployment's room differs from the site's; the site's is used")
     if maps is not None:

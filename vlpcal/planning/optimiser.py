@@ -230,15 +230,34 @@ def _judge_class():
 
 
 
-def optimiser_points(site: Site) -> np.ndarray:
+def optimiser_points(site: Site, cameras: int = 1) -> np.ndarray:
     """The smooth model's sample points: the reference model's grid, coarser where a camera's
-    footprint spans many cells (about :data:`CELLS_PER_FOOTPRINT` along its short side)."""
+    footprint spans many cells (about :data:`CELLS_PER_FOOTPRINT` along its short side), and
+    coarser still when ``cameras`` × points would pass :data:`MAX_PAIRS` (IPOPT's memory
+    grows with their product)."""
     from .families import footprint
-    from .reference import sample_points, sample_step
+    from .reference import floor, sample_levels, sample_points, sample_step
 
     step = max(sample_step(site), min(footprint(site)) / CELLS_PER_FOOTPRINT)
+    area = floor(site.room, site.keep_out).area * len(sample_levels(site))
+    step = max(step, math.sqrt(area * cameras / MAX_PAIRS))
     return sample_points(site, step)
+
+
+def too_coarse(site: Site, cameras: int) -> bool:
+    """Whether ``cameras`` would leave the smooth model coarser than its footprint-based
+    grid (:func:`optimiser_points` capped by :data:`MAX_PAIRS`): a room too large for one
+    solve to model finely."""
+    from .families import footprint
+    from .reference import floor, sample_levels, sample_step
+
+    step = max(sample_step(site), min(footprint(site)) / CELLS_PER_FOOTPRINT)
+    area = floor(site.room, site.keep_out).area * len(sample_levels(site))
+    return area / step ** 2 * cameras > MAX_PAIRS
 
 
 #: the smooth model's sample cells along a level camera's short footprint side
 CELLS_PER_FOOTPRINT = 9
+#: cameras × sample points the smooth model takes on at most (about 800 bytes each while
+#: IPOPT runs: every step of the model is kept for the gradient)
+MAX_PAIRS = 150_000

@@ -5,7 +5,7 @@ judged by the reference model itself."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -14,8 +14,9 @@ from .families import Candidate, ceiling_cameras, mount_step, rank_key
 from .free import fewer_cameras, snap
 from .lattice import lattice_search
 from .nadir import YAWS, NadirModel
+from .optimiser import too_coarse
 from .reference import evaluate
-from .site import Site
+from .site import CameraMounting, Site
 from .tilted import TiltedPlan, tilted_plan
 
 #: the searches' coarse models keep every n-th sample point along each axis (the exact model
@@ -24,7 +25,9 @@ SCREEN_EVERY, SEARCH_EVERY = 2, 3
 #: rad: for a site without ``mounting:``, the tilt the plan says what would save
 HINT_TILT = math.radians(30.0)
 #: the what-if's time, as a multiple of the level plan's own (a hint, not the plan)
-HINT_TIME = 2.0
+HINT_TIME = 4.0
+#: s: the least time tilted cameras are given when no level lattice meets at all
+MEND_TIME = 20.0
 #: sample-grid cells per LED height a plan takes on (a 200 × 100 m hall at 10 cm has 2·10⁶:
 #: gigabytes and hours)
 MAX_SAMPLE_CELLS = 500_000
@@ -135,18 +138,33 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
         say(f"  mend: the CasADi optimiser from the best lattice ({failing[0].count} "
             "cameras), which fails the reference model")
         mended = tilted_plan(site, min(failing, key=rank_key), step, allowed, progress=say,
-                             most=max_cameras)
+                             most=max_cameras, least=fewest)
         if mended.best is not None:
             candidates = [mended.best]
             missing = {f: m for f, m in missing.items() if f != mended.best.family}
     closest = None
     if not candidates:
         closest = _densest(site, step)
+    if not candidates and closest is not None and mended is None and site.mounting \
+            and site.mounting.max_tilt > 0:
+        # no level lattice meets at all (a narrow ceiling, a low --max-cameras): tilted
+        # cameras may, from the densest lattice — given a bounded time, as the answer may
+        # be that nothing meets
+        say(f"  mend: the CasADi optimiser from the densest lattice ({closest.count} cameras)")
+        budget = max(MEND_TIME, HINT_TIME * (time.perf_counter() - t0))
+        mended = tilted_plan(site, closest, step, site.mounting.max_tilt, progress=say,
+                             most=max_cameras, seconds=budget, least=fewest)
+        if mended.best is not None and mended.best.count <= max_cameras:
+            candidates = [mended.best]
+    if candidates and not site.mounting and too_coarse(site, candidates[0].count):
+        tilt = 0.0  # a what-if this large would model the room too coarsely to be worth it
     if candidates and tilt > 0 and not (mended and site.mounting):
         say(f"  tilted: the CasADi optimiser, tilts up to {math.degrees(tilt):.0f}°"
             + ("" if site.mounting else " (a what-if: the site has no mounting: block)"))
         budget = math.inf if site.mounting else HINT_TIME * (time.perf_counter() - t0)
-        tilted = tilted_plan(site, candidates[0], step, tilt, progress=say, seconds=budget)
+        least = fewest_possible(replace(site, mounting=CameraMounting(tilt, 0.0)))
+        tilted = tilted_plan(site, candidates[0], step, tilt, progress=say, seconds=budget,
+                             least=least)
         if site.mounting and tilted.best is not None:
             candidates = sorted(candidates + [tilted.best], key=rank_key)
     return Plan(candidates, tried, time.perf_counter() - t0, closest,
@@ -169,8 +187,32 @@ def fewest_possible(site: Site) -> int:
     r = site.requirements
     area = floor(site.room, site.keep_out)
     fw, fd = footprint(site)
+    seen = max(fw * fd, _tilted_footprint(site)) if site.mounting else fw * fd
     share = max(0.0, 3 * r.coverage - 2)
-    return max(r.min_cameras, math.ceil(r.min_cameras * share * area.area / (fw * fd) - 1e-9))
+    return max(r.min_cameras, math.ceil(r.min_cameras * share * area.area / seen - 1e-9))
+
+
+def _tilted_footprint(site: Site) -> float:
+    """m²: the largest floor area a camera tilted by the site's ``max_tilt`` sees at the
+    highest LED height, over the directions it may lean (a tilted view is larger: its far
+    side is further away); infinite when its view reaches the horizon."""
+    from .poses import posed_cameras
+
+    tilt = site.mounting.max_tilt
+    h = max(site.requirements.heights)
+    m = site.camera
+    corners = np.array([[-0.5, -0.5], [m.width - 0.5, -0.5], [m.width - 0.5, m.height - 0.5],
+                        [-0.5, m.height - 0.5]])
+    most = 0.0
+    for lean in np.radians(np.arange(0, 180, 15)):
+        cam = posed_cameras(site, [[0.0, 0.0, 0.0, tilt * math.cos(lean),
+                                    tilt * math.sin(lean)]])[0]
+        quad = cam.ground(corners, h)
+        if not np.isfinite(quad).all():
+            return math.inf
+        x, y = quad[:, 0], quad[:, 1]
+        most = max(most, 0.5 * abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1))))
+    return most
 
 
 def _yaw(camera) -> float:

@@ -143,8 +143,12 @@ def evaluate(site: Site, cameras: list[Camera], step: float | None = None) -> Ev
         else np.full(len(pts), np.nan)
     ok = views >= site.requirements.min_cameras
     coverage = float(ok.mean()) if len(pts) else 0.0
-    p95 = float(np.percentile(err[ok], 95)) if ok.any() else math.inf
-    mean = float(np.mean(err[ok])) if ok.any() else math.inf
+    # a point seen only from one place (cameras hung together) has no bounded error: inf
+    bounded = np.where(np.isfinite(err), err, np.inf)[ok]
+    with np.errstate(invalid="ignore"):
+        p95 = float(np.percentile(bounded, 95)) if ok.any() else math.inf
+    p95 = math.inf if math.isnan(p95) else p95
+    mean = float(np.mean(bounded)) if ok.any() else math.inf
     r = site.requirements
     return Evaluation(coverage, p95, mean, coverage >= r.coverage and p95 <= r.max_error_p95,
                       pts, views, err)

@@ -44,10 +44,11 @@ class TiltedPlan:
 
 
 def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
-                progress=None, seconds: float = math.inf, most: int = 0) -> TiltedPlan:
+                progress=None, seconds: float = math.inf, most: int = 0,
+                least: int = 0) -> TiltedPlan:
     """The fewest cameras below ``start.count`` that meet the requirements with tilts up to
     ``max_tilt`` (rad; 0: level cameras moved and turned freely), positions on the ``step``
-    mounting grid; stops after ``seconds``.
+    mounting grid; stops after ``seconds``; never tries fewer than ``least`` (a lower bound).
 
     A start that does not meet (a lattice whose obstacles' shadows or lens distortion the
     lattice search left out) is repaired first: the same count, then one camera more at a
@@ -56,7 +57,8 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     not."""
     t0 = time.perf_counter()
     say = progress or (lambda m: None)
-    points = optimiser_points(site)
+    points = optimiser_points(site, max(start.count, most if not start.evaluation.meets
+                                        else 0))
     area = ceiling_area(site)
     bounds = area.bounds
     from shapely.geometry import Polygon
@@ -97,20 +99,21 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
         return None
 
     best = np.array([pose_of(c) for c in start.cameras])
-    family, fewest_bad, stride = start.family, site.requirements.min_cameras - 1, 1
+    family, stride = start.family, 1
+    fewest_bad = max(site.requirements.min_cameras, least) - 1
     if not start.evaluation.meets:
-        best = _repaired(attempt, best, most, lambda: time.perf_counter() - t0 < seconds)
-        if best is None:
+        got, failed = _repaired(attempt, best, most,
+                                lambda: time.perf_counter() - t0 < seconds)
+        if got is None:
             out.seconds, out.complete = time.perf_counter() - t0, False
             return out
-        (best, cams, ev), how = best
+        (best, cams, ev), how = got
         family = family if how == "less" else "square"
         out.best = Candidate(kind, 0, 0, (), tuple(cams[0].position[:2]), 0.0, cams, ev,
                              seed=family)
-        fewest_bad = max(fewest_bad, len(best) - 1) if len(best) > len(start.cameras) \
-            else fewest_bad
+        fewest_bad = max(fewest_bad, failed)
     while len(best) - fewest_bad > 1 and time.perf_counter() - t0 < seconds:
-        galloping = fewest_bad == site.requirements.min_cameras - 1
+        galloping = fewest_bad == max(site.requirements.min_cameras, least) - 1
         n = max(len(best) - stride, fewest_bad + 1) if galloping \
             else (len(best) + fewest_bad + 1) // 2
         got = attempt(n, best)
@@ -128,13 +131,18 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
 
 
 def _repaired(attempt, start, most: int, time_left):
-    """The first count from the start's up to ``most`` at which a solve meets (None if
-    none): ``attempt(n, start)`` → (poses, cameras, evaluation), how) or None."""
-    for n in range(len(start), max(most, len(start)) + 1):
+    """The first count at which a solve meets, galloping up from the start's (n, n + 1,
+    n + 2, n + 4, … up to ``most``), and the last count that did not: ``attempt(n, start)``
+    → ((poses, cameras, evaluation), how) or None. (None, …) when none did."""
+    n, step, failed = len(start), 1, 0
+    while n <= max(most, len(start)):
         got = attempt(n, start)
         if got is not None or not time_left():
-            return got
-    return None
+            return got, failed
+        failed, n, step = n, min(n + step, max(most, len(start)) + 1), step * 2
+        if failed == max(most, len(start)):
+            break
+    return None, failed
 
 
 def _information(site: Site, cams, points):
