@@ -348,9 +348,10 @@ def plan_maps(path, site, cand) -> None:
                             fontsize=7, xytext=(3, 3), textcoords="offset points",
                             path_effects=halo)
                 if tilt >= 0.5:  # an arrow along the optical axis' lean
-                    a = c.axis[:2] / np.hypot(*c.axis[:2]) * 0.06 * size
+                    a = c.axis[:2] / np.hypot(*c.axis[:2]) * 0.09 * size
                     ax.annotate("", (px + a[0], py + a[1]), (px, py),
-                                arrowprops={"arrowstyle": "->", "lw": 0.9, "color": "k"})
+                                arrowprops={"arrowstyle": "-|>", "lw": 1.2,
+                                            "color": "tab:blue"})
             ax.set_aspect("equal")
             pad = 0.04 * size  # the room, not the footprints, sets the frame
             ax.set_xlim(room[:, 0].min() - pad, room[:, 0].max() + pad)
@@ -364,7 +365,7 @@ def plan_maps(path, site, cand) -> None:
                  "covered points\nred outline: a point that fails the requirement (too few "
                  "cameras, or too large an error); black bar: each image's long side\n"
                  "top row: each image's footprint at that height"
-                 + ("; arrow and °: a camera's tilt" if any(
+                 + ("; blue arrow and °: which way and how far a camera tilts" if any(
                      c.axis[2] > -np.cos(np.radians(0.5)) for c in cand.cameras) else "")
                  + ("; hatched: an obstacle that hides what is behind it (its height)"
                     if site.obstacles else ""), fontsize=10)

@@ -81,8 +81,9 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         sp = "×".join(f"{v:.2f}" for v in c.spacing) if c.spacing else "–"
         yaw = "/".join(str(a) for a in sorted({round(math.degrees(cam.yaw)) % 180
                                                for cam in c.cameras}))
-        if c.family == "tilted":
-            grid, yaw = "–", "any"
+        if c.family in ("tilted", "free") and len(xs) * len(ys) > c.count:
+            grid = "–"  # not a grid: the positions are in the deployment
+        yaw = yaw if len(yaw) <= 5 else "mixed"
         click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>5s} "
                    f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
                    f"{c.evaluation.p95 * 100:7.2f}")
