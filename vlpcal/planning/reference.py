@@ -93,33 +93,53 @@ def unobstructed(center, points, obstacles) -> np.ndarray:
     obstacle (N): its stretch below an obstacle's top, seen from above, must not meet the
     obstacle's polygon."""
     import shapely
-    from shapely.geometry import Polygon
 
     points = np.asarray(points, float)
     C = np.asarray(center, float)
     clear = np.ones(len(points), bool)
-    for ob in obstacles:
-        low = clear & (points[:, 2] < ob.height)
+    for height, poly in _by_height(obstacles):
+        low = clear & (points[:, 2] < height)
         if not low.any():
             continue
         P = points[low]
         rise = C[2] - P[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(rise > ob.height - P[:, 2], (ob.height - P[:, 2]) / rise, 1.0)
+            t = np.where(rise > height - P[:, 2], (height - P[:, 2]) / rise, 1.0)
         Q = P[:, :2] + t[:, None] * (C[:2] - P[:, :2])
-        poly = Polygon(ob.polygon)
         x0, y0, x1, y1 = poly.bounds
         near = (np.maximum(P[:, 0], Q[:, 0]) >= x0) & (np.minimum(P[:, 0], Q[:, 0]) <= x1) \
             & (np.maximum(P[:, 1], Q[:, 1]) >= y0) & (np.minimum(P[:, 1], Q[:, 1]) <= y1)
         if not near.any():
             continue
-        shapely.prepare(poly)
         lines = shapely.linestrings(np.stack([P[near, :2], Q[near]], axis=1))
         hit = np.zeros(len(P), bool)
         hit[near] = shapely.intersects(poly, lines)
         idx = np.flatnonzero(low)
         clear[idx[hit]] = False
     return clear
+
+
+def _by_height(obstacles) -> list:
+    """The obstacles as one prepared shape per height, tallest first: thousands of them
+    cost a handful of vectorised tests per camera, not one each."""
+    import shapely
+    from shapely.geometry import Polygon
+
+    key = tuple((o.height, tuple(map(tuple, o.polygon))) for o in obstacles)
+    got = _SHAPES.get(key)
+    if got is None:
+        heights = sorted({o.height for o in obstacles}, reverse=True)
+        got = [(h, shapely.union_all([Polygon(o.polygon).buffer(0) for o in obstacles
+                                      if o.height == h])) for h in heights]
+        for _, shape in got:
+            shapely.prepare(shape)
+        _SHAPES.clear()
+        _SHAPES[key] = got
+    return got
+
+
+#: the last site's obstacles by height (a plan asks for them thousands of times)
+_SHAPES: dict = {}
 
 
 def seen_by(site: Site, cameras: list[Camera], points) -> np.ndarray:
