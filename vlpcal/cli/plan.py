@@ -56,8 +56,13 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                                    "camera with a wider view")
     if not result.candidates:
         m = result.mended
-        tried = (f"; the CasADi optimiser's tilted cameras found none either ({_solves(m)})"
-                 if m is not None else "")
+        kind = "tilted" if site.mounting and site.mounting.max_tilt > 0 else "level"
+        tried = "" if m is None else (
+            f"; the CasADi optimiser's {kind} cameras found {m.best.count}, more than "
+            f"{max_cameras} ({_solves(m)})" if m.best is not None else
+            f"; the CasADi optimiser's {kind} cameras found none either ({_solves(m)})"
+            if m.complete else
+            f"; the CasADi optimiser's {kind} cameras found none in its time ({_solves(m)})")
         c = result.closest
         best = (f"for comparison, a dense lattice of {c.count} camera"
                 f"{'s' if c.count != 1 else ''} covers {c.evaluation.coverage:.1%}"
@@ -138,8 +143,11 @@ def _echo_tilted(site, result) -> None:
         click.echo(f"with tilt up to {deg}: {t.best.count} cameras{fewer} instead of "
                    f"{t.start} — needs tilting brackets (a mounting: block in the site "
                    f"would allow it; {_solves(t)})")
-    elif site.mounting is None:
+    elif site.mounting is None and t.complete:
         click.echo(f"tilting up to {deg} would not save a camera ({_solves(t)})")
+    elif site.mounting is None:
+        click.echo(f"what tilting up to {deg} would save was not found in the what-if's time "
+                   f"({_solves(t)}); a mounting: block in the site plans tilted cameras")
     elif t.best is not None:
         from ..planning.poses import pose_of, tilts
 

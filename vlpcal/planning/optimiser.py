@@ -12,7 +12,7 @@ and the good share at least 95 % of the covered share plus ``t`` (the p95 bound)
 hide points by a mask fixed from the start poses. The exact model (:func:`.reference.evaluate`)
 judges every answer; this model only steers.
 
-Kept off the runtime path: casadi is imported only here, and only ``vlpcal plan`` imports this.
+Kept off the runtime path: casadi is imported only here, and only when a solve is built.
 """
 
 from __future__ import annotations
@@ -81,15 +81,18 @@ class PoseProblem:
         def step(a):
             return 0.5 + 0.5 * ca.tanh(a / (2 * EDGE_PX))
 
+        near = site.ceiling_height - max(site.requirements.heights)  # the scene's depth
         F, count = [0.0] * 6, 0.0
         for c in range(n):
             R = _rotation(ca, P[2, c], P[3, c], P[4, c])
             D = (X[0] - P[0, c], X[1] - P[1, c], X[2] - site.ceiling_height)
             Xc = [R[i, 0] * D[0] + R[i, 1] * D[1] + R[i, 2] * D[2] for i in range(3)]
-            iz = 1 / Xc[2]
+            # in front: a point behind the camera would project into the image too
+            iz = 1 / ca.fmax(Xc[2], 0.01 * near)
             xn, yn = Xc[0] * iz, Xc[1] * iz
             u, v = m.fx * xn + m.cx, m.fy * yn + m.cy
-            seen = step(u - lo) * step(hi_u - u) * step(v - lo) * step(hi_v - v)
+            seen = step(u - lo) * step(hi_u - u) * step(v - lo) * step(hi_v - v) \
+                * (0.5 + 0.5 * ca.tanh((Xc[2] - 0.1 * near) / (0.05 * near)))
             if site.obstacles:
                 seen = seen * mask[c, :]
             a = [m.fx * iz * (R[0, k] - xn * R[2, k]) for k in range(3)]
@@ -134,11 +137,12 @@ class PoseProblem:
         n, site = self.n, self.site
         start = np.asarray(start, float).reshape(n, 5)
         x0, y0, x1, y1 = bounds
-        lbx = np.tile([x0, y0, -np.inf, -1.0, -1.0], n).tolist() + [-1.0]
-        ubx = np.tile([x1, y1, np.inf, 1.0, 1.0], n).tolist() + [1.0]
+        lbx = np.tile([x0, y0, -np.inf, -max_tilt, -max_tilt], n).tolist() + [-1.0]
+        ubx = np.tile([x1, y1, np.inf, max_tilt, max_tilt], n).tolist() + [1.0]
         begin = start.copy()
         begin[:, 0] = np.clip(begin[:, 0], x0, x1)
         begin[:, 1] = np.clip(begin[:, 1], y0, y1)
+        begin[:, 3:] = np.clip(begin[:, 3:], -max_tilt, max_tilt)
         mask = np.ones((n, len(self.points)))
         if site.obstacles:  # hidden as seen from the start's positions
             for c, cam in enumerate(posed_cameras(site, begin)):

@@ -26,7 +26,7 @@ SCREEN_EVERY, SEARCH_EVERY = 2, 3
 HINT_TILT = math.radians(30.0)
 #: the what-if's time, as a multiple of the level plan's own (a hint, not the plan)
 HINT_TIME = 4.0
-#: s: the least time tilted cameras are given when no level lattice meets at all
+#: s: the least time the optimiser is given to mend a plan no lattice meets
 MEND_TIME = 20.0
 #: sample-grid cells per LED height a plan takes on (a 200 × 100 m hall at 10 cm has 2·10⁶:
 #: gigabytes and hours)
@@ -129,16 +129,18 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
             missing["free"] = f"no layout beyond lattices with fewer than {seed.count} cameras"
             say(f"  free: none below {seed.count} cameras ({time.perf_counter() - t1:.1f} s)")
     candidates = sorted((c for f, c in found.items() if f in site.families), key=rank_key)
-    tilt = site.mounting.max_tilt if site.mounting else HINT_TILT * tilt_hint
+    tilt = site.mounting.max_tilt if site.mounting else (HINT_TILT if tilt_hint else 0.0)
     mended = tilted = None
     if not candidates and failing:
         # no lattice meets once shadows (or distortion) count: the optimiser mends the best
         # one — tilted if the site allows it, else level cameras moved and turned
         allowed = site.mounting.max_tilt if site.mounting else 0.0
-        say(f"  mend: the CasADi optimiser from the best lattice ({failing[0].count} "
-            "cameras), which fails the reference model")
-        mended = tilted_plan(site, min(failing, key=rank_key), step, allowed, progress=say,
-                             most=max_cameras, least=fewest)
+        lattice = min(failing, key=rank_key)
+        say(f"  mend: the CasADi optimiser from the best lattice ({lattice.count} cameras), "
+            "which fails the reference model")
+        mended = tilted_plan(site, lattice, step, allowed, progress=say, most=max_cameras,
+                             least=fewest,
+                             seconds=max(MEND_TIME, HINT_TIME * (time.perf_counter() - t0)))
         if mended.best is not None:
             candidates = [mended.best]
             missing = {f: m for f, m in missing.items() if f != mended.best.family}

@@ -164,11 +164,12 @@ def evaluate(site: Site, cameras: list[Camera], step: float | None = None) -> Ev
     ok = views >= site.requirements.min_cameras
     coverage = float(ok.mean()) if len(pts) else 0.0
     # a point seen only from one place (cameras hung together) has no bounded error: inf
-    bounded = np.where(np.isfinite(err), err, np.inf)[ok]
-    with np.errstate(invalid="ignore"):
-        p95 = float(np.percentile(bounded, 95)) if ok.any() else math.inf
-    p95 = math.inf if math.isnan(p95) else p95
-    mean = float(np.mean(bounded)) if ok.any() else math.inf
+    unbounded = 1e300  # finite, so that the percentile's interpolation stays a number
+    bounded = np.where(np.isfinite(err), err, unbounded)[ok]
+    p95 = float(np.percentile(bounded, 95)) if ok.any() else math.inf
+    p95 = math.inf if p95 >= unbounded / 2 else p95
+    mean = float(np.mean(np.where(bounded < unbounded, bounded, np.inf))) if ok.any() \
+        else math.inf
     r = site.requirements
     return Evaluation(coverage, p95, mean, coverage >= r.coverage and p95 <= r.max_error_p95,
                       pts, views, err)

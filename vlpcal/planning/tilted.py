@@ -14,13 +14,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from enum import Enum
 
 import numpy as np
 
 from .families import Candidate, ceiling_area
 from .nadir import PAIRS
 from .optimiser import PoseProblem, Solve, optimiser_points
-from .poses import pose_of, posed_cameras, snapped, tilts
+from .poses import pose_of, posed_cameras, snapped
 from .reference import evaluate
 from .site import Site
 
@@ -28,6 +29,8 @@ from .site import Site
 GRID_SEEDS = 2
 #: share of max_tilt the grid seeds' outer cameras start with
 SEED_LEAN = 0.7
+#: a mend tries at most this many times the cameras it started from
+MEND_GROWTH = 2
 
 
 @dataclass
@@ -36,7 +39,7 @@ class TiltedPlan:
     start did), every solve, and the time."""
 
     best: Candidate | None
-    solves: list = field(default_factory=list)  # Solve
+    solves: list[Solve] = field(default_factory=list)
     seconds: float = 0.0
     complete: bool = True  #: False when the time allowed ran out before the search ended
     start: int = 0  #: cameras of the layout it started from
@@ -57,16 +60,21 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     not."""
     t0 = time.perf_counter()
     say = progress or (lambda m: None)
-    points = optimiser_points(site, max(start.count, most if not start.evaluation.meets
-                                        else 0))
+    mending = not start.evaluation.meets
+    # a mend gallops up to twice the start at most: memory grows with cameras × points
+    most = min(max(most, start.count), MEND_GROWTH * start.count) if mending else start.count
+    points = optimiser_points(site, most)
     area = ceiling_area(site)
     bounds = area.bounds
     from shapely.geometry import Polygon
 
     corner = Polygon(site.room).bounds[:2]  # the mounting grid's origin
-    out = TiltedPlan(None, start=start.count, repaired=not start.evaluation.meets)
+    out = TiltedPlan(None, start=start.count, repaired=mending)
     kind = "tilted" if max_tilt > 0 else "free"
     problems = {}  # n → PoseProblem
+
+    def out_of_time():
+        return time.perf_counter() - t0 >= seconds
 
     def judge(poses):
         poses = _mounted(area, snapped(poses, step, max_tilt, *corner), step, corner)
@@ -76,73 +84,93 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
         ev = evaluate(site, cams)
         return (poses, cams, ev) if ev.meets else None
 
-    def attempt(n, base):
+    def attempt(n, base) -> Attempt:
         first = [] if n > len(base) else [
             (f"the {len(base)}-camera layout less {len(base) - n}" if n < len(base) else
              f"the {len(base)}-camera layout", _less(site, base, len(base) - n, points))]
         for name, seed in first + \
                 [(f"a {nx}×{ny} grid", _grid_seed(area, nx, ny, n, SEED_LEAN * max_tilt))
                  for nx, ny in _grid_shapes(area, n)]:
+            if out_of_time():
+                return Attempt(Outcome.OUT_OF_TIME)
             if n not in problems:
                 problems[n] = PoseProblem(site, n, points)
             s = problems[n].solve(seed, bounds, max_tilt, judge, t0 + seconds)
             out.solves.append(s)
-            if s.late and not s.judged:
-                break
-            got = s.judged or judge(s.poses)
+            got = s.judged or (None if s.late else judge(s.poses))
             say(f"  {kind} {n}: from {name}, {s.iterations} iterations, {s.seconds:.1f} s"
-                + (" — meets" if got else " — does not meet"))
+                + (" — meets" if got else " — out of time" if s.late else " — does not meet"))
             if got:
-                return got, ("grid" if "grid" in name else "less")
-            if time.perf_counter() - t0 >= seconds:
-                break
-        return None
+                return Attempt(Outcome.MET, *got, from_grid=name.startswith("a "))
+            if s.late:
+                return Attempt(Outcome.OUT_OF_TIME)
+        return Attempt(Outcome.NOT_MET)
+
+    def won(a: Attempt, family: str) -> str:
+        family = "square" if a.from_grid else family  # the grid seeds are square lattices
+        out.best = Candidate(kind, 0, 0, (), tuple(a.cameras[0].position[:2]), 0.0,
+                             a.cameras, a.evaluation, seed=family)
+        return family
 
     best = np.array([pose_of(c) for c in start.cameras])
     family, stride = start.family, 1
     fewest_bad = max(site.requirements.min_cameras, least) - 1
-    if not start.evaluation.meets:
-        got, failed = _repaired(attempt, best, most,
-                                lambda: time.perf_counter() - t0 < seconds)
-        if got is None:
-            out.seconds, out.complete = time.perf_counter() - t0, False
+    if mending:
+        got, failed = _repaired(attempt, best, most)
+        if got.outcome is not Outcome.MET:
+            out.seconds, out.complete = time.perf_counter() - t0, got.outcome is Outcome.NOT_MET
             return out
-        (best, cams, ev), how = got
-        family = family if how == "less" else "square"
-        out.best = Candidate(kind, 0, 0, (), tuple(cams[0].position[:2]), 0.0, cams, ev,
-                             seed=family)
+        best, family = got.poses, won(got, family)
         fewest_bad = max(fewest_bad, failed)
-    while len(best) - fewest_bad > 1 and time.perf_counter() - t0 < seconds:
+    timed_out = False
+    while len(best) - fewest_bad > 1:
         galloping = fewest_bad == max(site.requirements.min_cameras, least) - 1
         n = max(len(best) - stride, fewest_bad + 1) if galloping \
             else (len(best) + fewest_bad + 1) // 2
         got = attempt(n, best)
-        if got is None:
+        if got.outcome is Outcome.OUT_OF_TIME:
+            timed_out = True
+            break
+        if got.outcome is Outcome.NOT_MET:
             fewest_bad = n
             continue
-        (best, cams, ev), how = got
-        family = family if how == "less" else "square"
-        out.best = Candidate(kind, 0, 0, (), tuple(cams[0].position[:2]), 0.0, cams, ev,
-                             seed=family)
+        best, family = got.poses, won(got, family)
         stride *= 2
     out.seconds = time.perf_counter() - t0
-    out.complete = len(best) - fewest_bad <= 1
+    out.complete = not timed_out
     return out
 
 
-def _repaired(attempt, start, most: int, time_left):
-    """The first count at which a solve meets, galloping up from the start's (n, n + 1,
-    n + 2, n + 4, … up to ``most``), and the last count that did not: ``attempt(n, start)``
-    → ((poses, cameras, evaluation), how) or None. (None, …) when none did."""
-    n, step, failed = len(start), 1, 0
-    while n <= max(most, len(start)):
+class Outcome(Enum):
+    """How one count's attempt ended."""
+
+    MET = "met"
+    NOT_MET = "not met"  #: every start was solved and judged; none met
+    OUT_OF_TIME = "out of time"  #: the time allowed ran out first: nothing is known
+
+
+@dataclass
+class Attempt:
+    """One count's attempt: how it ended and, when a layout met, the layout."""
+
+    outcome: Outcome
+    poses: np.ndarray | None = None
+    cameras: list | None = None
+    evaluation: object = None
+    from_grid: bool = False  #: the winning start was a grid seed (else the layout less some)
+
+
+def _repaired(attempt, start, most: int):
+    """The first count at which a solve meets, galloping up from the start's (n, then 1, 2,
+    4, … more, up to ``most``), and the last count that did not meet: ``attempt(n, start)`` →
+    :class:`Attempt`. The attempt that ended the gallop is returned as it is (not met, or
+    out of time)."""
+    n, step, failed, top = len(start), 1, 0, max(most, len(start))
+    while True:
         got = attempt(n, start)
-        if got is not None or not time_left():
+        if got.outcome is not Outcome.NOT_MET or n >= top:
             return got, failed
-        failed, n, step = n, min(n + step, max(most, len(start)) + 1), step * 2
-        if failed == max(most, len(start)):
-            break
-    return None, failed
+        failed, n, step = n, min(n + step, top), step * 2
 
 
 def _information(site: Site, cams, points):
@@ -168,7 +196,7 @@ def _met(site: Site, views, info) -> np.ndarray:
     r = site.requirements
     tr, det = trace_adjugate_det(*np.moveaxis(info, -1, 0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        ok = tr / det <= r.max_error_p95 ** 2
+        ok = (det > 0) & (tr / det <= r.max_error_p95 ** 2)
     return (views >= r.min_cameras) & ok
 
 
@@ -258,4 +286,4 @@ def _mounted(area, poses, step: float, corner) -> np.ndarray:
     return poses
 
 
-__all__ = ["Solve", "TiltedPlan", "tilted_plan", "tilts"]
+__all__ = ["Attempt", "Outcome", "TiltedPlan", "tilted_plan"]
