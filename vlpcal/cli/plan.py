@@ -26,9 +26,12 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     Every lattice of the site's grid families (square with two spacings, triangular, linear)
     on the 10 cm mounting grid, both camera yaws, cameras clipped to the room; then, when the
     site allows "free" layouts (the default), a local search from the best lattice removes
-    cameras and moves the others while the layout still meets the requirements. Every
-    candidate is judged by the reference model of docs/formats.md (coverage and predicted
-    95th-percentile error). Prints the ranked candidates, writes the chosen one.
+    cameras and moves the others while the layout still meets the requirements. When the
+    site's mounting: block allows tilt, the CasADi optimiser then moves, turns and tilts the
+    cameras of the best layout while fewer still meet (without it, the plan says what tilting
+    would save). Every candidate is judged by the reference model of docs/formats.md
+    (coverage and predicted 95th-percentile error, obstacles' shadows counted). Prints the
+    ranked candidates, writes the chosen one and, for tilted cameras, how to hang each.
 
     Example: vlpcal plan --site layouts/paper-linear.site.yaml --out deployment.yaml
     """
