@@ -555,9 +555,13 @@ def dumps(deployment: Deployment, header: str = "") -> str:
     doc = deployment.to_dict()
     from_dict(doc, f"{deployment.name} (not written)")
     cams = doc.pop("cameras")
-    text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+    from .reading import yaml_dumper
+
+    dumper = yaml_dumper()
+    text = yaml.dump(doc, Dumper=dumper, sort_keys=False, default_flow_style=None)
     lines = ["cameras:"] + [
-        "  - " + yaml.safe_dump(c, sort_keys=False, default_flow_style=True, width=10_000).strip()
+        "  - " + yaml.dump(c, Dumper=dumper, sort_keys=False, default_flow_style=True,
+                           width=10_000).strip()
         for c in cams]
     out = text + "\n".join(lines) + "\n"
     if header:

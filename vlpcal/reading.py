@@ -145,12 +145,26 @@ def _loader():
 
     BoundedLoader.add_constructor("tag:yaml.org,2002:int", BoundedLoader.construct_yaml_int)
     # YAML 1.2 (and JSON) floats without a dot, 1e5 and -2E-3, are numbers, not text
-    import re as _re
-
-    BoundedLoader.add_implicit_resolver(
-        "tag:yaml.org,2002:float", _re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$"),
-        list("-+0123456789"))
+    BoundedLoader.add_implicit_resolver("tag:yaml.org,2002:float", DOTLESS_FLOAT,
+                                        list("-+0123456789"))
     return BoundedLoader
+
+
+#: a float without a dot (1e5, -2E-3): a number to :func:`load_yaml`, text to PyYAML
+DOTLESS_FLOAT = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
+
+
+def yaml_dumper():
+    """PyYAML's safe dumper that quotes what :func:`load_yaml` would read as a number (an id
+    ``0E0`` written plain would come back as 0.0)."""
+    import yaml
+
+    class Dumper(yaml.SafeDumper):
+        pass
+
+    Dumper.add_implicit_resolver("tag:yaml.org,2002:float", DOTLESS_FLOAT,
+                                 list("-+0123456789"))
+    return Dumper
 
 
 class _Refused(Exception):
