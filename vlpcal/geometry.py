@@ -261,6 +261,12 @@ class Camera:
         """Unit optical axis in the world frame."""
         return self.R[2].copy()
 
+    @property
+    def tilt(self) -> float:
+        """rad: the optical axis from straight down (atan2, not acos: exact near 0)."""
+        a = self.R[2]
+        return math.atan2(math.hypot(a[0], a[1]), -a[2])
+
     # -- projection -----------------------------------------------------------------------------
     def to_camera(self, X) -> np.ndarray:
         """World points ``N×3`` → camera-frame points ``N×3``."""
@@ -318,6 +324,13 @@ class Camera:
         xy = self.center[:2] + t[..., None] * d[..., :2]
         xy[~(np.isfinite(t) & (t > 0))] = np.nan
         return xy
+
+    def footprint(self, height: float = 0.0) -> np.ndarray:
+        """Where the image falls on the level plane z = ``height``: its four corners' rays,
+        closed (5×2); NaN where a corner's ray does not reach the plane."""
+        w, h = self.width - 0.5, self.height - 0.5
+        return self.ground(np.array([[-0.5, -0.5], [w, -0.5], [w, h], [-0.5, h],
+                                     [-0.5, -0.5]]), height)
 
     def jacobian(self, X) -> np.ndarray:
         """``N×2×3`` derivative of pixels with respect to world position (distortion included).

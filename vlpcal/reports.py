@@ -257,15 +257,6 @@ def _lens_panel(ax, rows) -> None:
     ax.grid(alpha=0.3, axis="y")
 
 
-def _footprint(camera, height: float):
-    """Where a camera's image falls on the level plane z = ``height``: its four corners'
-    rays (4+1 × 2, closed), or None when a corner's ray does not reach the plane."""
-    w, h = camera.width - 0.5, camera.height - 0.5
-    quad = camera.ground(np.array([[-0.5, -0.5], [w, -0.5], [w, h], [-0.5, h], [-0.5, -0.5]]),
-                         height)
-    return quad if np.isfinite(quad).all() else None
-
-
 def plan_maps(path, site, cand) -> None:
     """Per LED height: how many cameras see each point (discrete colours, one scale for every
     height) and the predicted RMS error (one scale that includes the requirement, its cut
@@ -335,15 +326,15 @@ def plan_maps(path, site, cand) -> None:
             for c in cand.cameras:
                 px, py = c.position[:2]
                 if row == 0:  # where the camera's image falls at this height
-                    quad = _footprint(c, h)
-                    if quad is not None:
+                    quad = c.footprint(h)
+                    if np.isfinite(quad).all():
                         ax.plot(quad[:, 0], quad[:, 1], "-", color="0.15", lw=0.5,
                                 alpha=0.6)
                 d = np.asarray(c.R[0][:2], float)  # the image's x axis (its long side)
                 d = d / (np.hypot(*d) or 1.0) * 0.04 * size
                 ax.plot([px - d[0], px + d[0]], [py - d[1], py + d[1]], "k-", lw=1.2)
                 ax.plot(px, py, "c^", ms=6, mec="k")
-                tilt = np.degrees(np.arctan2(np.hypot(*c.axis[:2]), -c.axis[2]))
+                tilt = np.degrees(c.tilt)
                 ax.annotate(c.id + (f" {tilt:.0f}°" if tilt >= 0.5 else ""), (px, py),
                             fontsize=7, xytext=(3, 3), textcoords="offset points",
                             path_effects=halo)

@@ -259,8 +259,7 @@ def check(site_path, deployment_path, maps):
     inside = contains_xy(walls, xy[:, 0], xy[:, 1])  # walls count as inside
     outside = [c.id for c, ok in zip(dep.cameras, inside) if not ok]
     if site.mounting is not None:  # what the site's mounting allows, named (not judged)
-        lean = [math.degrees(math.atan2(math.hypot(*c.axis[:2]), -c.axis[2]))
-                for c in dep.cameras]
+        lean = [math.degrees(c.tilt) for c in dep.cameras]
         steep = [f"{c.id} ({t:.1f}°)" for c, t in zip(dep.cameras, lean)
                  if t > math.degrees(site.mounting.max_tilt) + 0.05]
         near = distance(room.exterior, points(xy)) if len(xy) else np.zeros(0)

@@ -38,8 +38,7 @@ def show(deployment_path, deployment_option):
     click.echo(f"\n{'camera':8s} {'image':>9s} {'fx':>7s} {'fy':>7s} {'cx':>6s} {'cy':>6s} "
                f"{'lens k1':>8s} {'x m':>7s} {'y m':>7s} {'z m':>6s} {'tilt°':>6s} {'yaw°':>5s}")
     for c in dep.cameras:
-        axis = c.R[2]  # the optical axis in the world
-        tilt = math.degrees(math.acos(max(-1.0, min(1.0, -axis[2]))))
+        tilt = math.degrees(c.tilt)
         yaw = round(math.degrees(c.yaw)) % 360  # as printed: 359.7 shows as 0, not 360
         x, y, z = c.position
         click.echo(f"{c.id[:8]:8s} {f'{c.width}×{c.height}':>9s} {c.fx:7.1f} {c.fy:7.1f} "

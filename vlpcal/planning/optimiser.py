@@ -3,7 +3,7 @@ position on the ceiling, yaw and tilt, solved by IPOPT on a smooth form of the r
 model (DESIGN.md).
 
 The smooth model is the reference model with its steps softened: a camera sees a sample point
-by a smooth step of the point's margin inside the image (width :data:`EDGE_PX`), a point is
+by a smooth step of the point's margin inside the image (width :data:`EDGE_SHARE` of it), a point is
 covered by a smooth step of its (soft) camera count at ``min_cameras``, and it is good when
 also its predicted error ``sqrt(trace(F⁻¹))`` — the same Fisher matrix ``Σ JᵀJ / σ²``, written
 in CasADi's symbols — is by a smooth step within the error bound. The requirements become two
@@ -22,11 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..triangulation import trace_adjugate_det
 from .reference import MARGIN_PX, unobstructed
 from .site import Site
 
-#: px: width of the smooth step at the image's edges
-EDGE_PX = 3.0
+#: width of the smooth step at the image's edges, as a share of the image's short side
+#: (3 px of a 160 × 120 image)
+EDGE_SHARE = 0.025
 #: width of the smooth step of the camera count, and of the error's within-bound step (as a
 #: share of the bound squared)
 COUNT_SOFTNESS, ERROR_SOFTNESS = 0.25, 0.15
@@ -78,8 +80,10 @@ class PoseProblem:
         X = [ca.DM(self.points[:, k]).T for k in range(3)]
         lo, hi_u, hi_v = MARGIN_PX - 0.5, m.width - 0.5 - MARGIN_PX, m.height - 0.5 - MARGIN_PX
 
+        edge = EDGE_SHARE * min(m.width, m.height)  # px
+
         def step(a):
-            return 0.5 + 0.5 * ca.tanh(a / (2 * EDGE_PX))
+            return 0.5 + 0.5 * ca.tanh(a / (2 * edge))
 
         near = site.ceiling_height - max(site.requirements.heights)  # the scene's depth
         F, count = [0.0] * 6, 0.0
@@ -102,11 +106,8 @@ class PoseProblem:
             count = count + seen
         # a small ridge keeps a point seen once (F of rank 2) finite: its error is then huge
         ridge = 1e-6 * (m.fx / site.ceiling_height) ** 2
-        a00, a01, a02, a11, a12, a22 = (F[0] + ridge, F[1], F[2], F[3] + ridge, F[4],
-                                        F[5] + ridge)
-        c00, c01 = a11 * a22 - a12 * a12, a01 * a22 - a02 * a12
-        det = a00 * c00 - a01 * c01 + a02 * (a01 * a12 - a02 * a11)
-        trace_adj = c00 + (a00 * a22 - a02 * a02) + (a00 * a11 - a01 * a01)
+        trace_adj, det = trace_adjugate_det(F[0] + ridge, F[1], F[2], F[3] + ridge, F[4],
+                                            F[5] + ridge)  # plain arithmetic: symbols too
         error2 = r.pixel_noise ** 2 * trace_adj / det
         covered = 0.5 + 0.5 * ca.tanh((count - (r.min_cameras - 0.5)) / (2 * COUNT_SOFTNESS))
         good = covered * (0.5 + 0.5 * ca.tanh((1 - error2 / r.max_error_p95 ** 2)
@@ -234,29 +235,35 @@ def _judge_class():
 
 
 
-def optimiser_points(site: Site, cameras: int = 1) -> np.ndarray:
-    """The smooth model's sample points: the reference model's grid, coarser where a camera's
-    footprint spans many cells (about :data:`CELLS_PER_FOOTPRINT` along its short side), and
-    coarser still when ``cameras`` × points would pass :data:`MAX_PAIRS` (IPOPT's memory
-    grows with their product)."""
-    from .families import footprint
-    from .reference import floor, sample_levels, sample_points, sample_step
-
-    step = max(sample_step(site), min(footprint(site)) / CELLS_PER_FOOTPRINT)
-    area = floor(site.room, site.keep_out).area * len(sample_levels(site))
-    step = max(step, math.sqrt(area * cameras / MAX_PAIRS))
-    return sample_points(site, step)
-
-
-def too_coarse(site: Site, cameras: int) -> bool:
-    """Whether ``cameras`` would leave the smooth model coarser than its footprint-based
-    grid (:func:`optimiser_points` capped by :data:`MAX_PAIRS`): a room too large for one
-    solve to model finely."""
+def _fine_step(site: Site) -> tuple[float, float]:
+    """The smooth model's grid step before any cap (the reference model's, coarser where a
+    camera's footprint spans many cells: about :data:`CELLS_PER_FOOTPRINT` along its short
+    side) and the floor area it samples, all levels (m, m²)."""
     from .families import footprint
     from .reference import floor, sample_levels, sample_step
 
     step = max(sample_step(site), min(footprint(site)) / CELLS_PER_FOOTPRINT)
-    area = floor(site.room, site.keep_out).area * len(sample_levels(site))
+    return step, floor(site.room, site.keep_out).area * len(sample_levels(site))
+
+
+def optimiser_step(site: Site, cameras: int = 1) -> float:
+    """m: the smooth model's sample grid: :func:`_fine_step`'s, coarser when ``cameras`` ×
+    points would pass :data:`MAX_PAIRS` (IPOPT's memory grows with their product)."""
+    step, area = _fine_step(site)
+    return max(step, math.sqrt(area * cameras / MAX_PAIRS))
+
+
+def optimiser_points(site: Site, cameras: int = 1) -> np.ndarray:
+    """The smooth model's sample points (N×3), on :func:`optimiser_step`'s grid."""
+    from .reference import sample_points
+
+    return sample_points(site, optimiser_step(site, cameras))
+
+
+def too_coarse(site: Site, cameras: int) -> bool:
+    """Whether ``cameras`` would leave the smooth model coarser than its fine grid (a room
+    too large for one solve to model finely)."""
+    step, area = _fine_step(site)
     return area / step ** 2 * cameras > MAX_PAIRS
 
 

@@ -198,22 +198,19 @@ def _tilted_footprint(site: Site) -> float:
     """m²: the largest floor area a camera tilted by the site's ``max_tilt`` sees at the
     highest LED height, over the directions it may lean (a tilted view is larger: its far
     side is further away); infinite when its view reaches the horizon."""
+    from shapely.geometry import Polygon
+
     from .poses import posed_cameras
 
     tilt = site.mounting.max_tilt
-    h = max(site.requirements.heights)
-    m = site.camera
-    corners = np.array([[-0.5, -0.5], [m.width - 0.5, -0.5], [m.width - 0.5, m.height - 0.5],
-                        [-0.5, m.height - 0.5]])
     most = 0.0
     for lean in np.radians(np.arange(0, 180, 15)):
         cam = posed_cameras(site, [[0.0, 0.0, 0.0, tilt * math.cos(lean),
                                     tilt * math.sin(lean)]])[0]
-        quad = cam.ground(corners, h)
+        quad = cam.footprint(max(site.requirements.heights))
         if not np.isfinite(quad).all():
             return math.inf
-        x, y = quad[:, 0], quad[:, 1]
-        most = max(most, 0.5 * abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1))))
+        most = max(most, Polygon(quad).area)
     return most
 
 

@@ -41,7 +41,7 @@ def pose_of(camera: Camera) -> np.ndarray:
     left once the tilt is undone."""
     d = camera.axis
     h = math.hypot(d[0], d[1])
-    theta = math.atan2(h, -d[2])  # not acos: exact near straight down
+    theta = camera.tilt
     w = (theta * d[1] / h, -theta * d[0] / h) if h > 1e-12 else (0.0, 0.0)
     # R = N·Rz(yaw)ᵀ·Q(w)ᵀ  ⇒  Rz(yaw)ᵀ = Nᵀ·R·Q(w)
     Rz = (rodrigues(NADIR).T @ camera.R @ rodrigues((w[0], w[1], 0.0))).T

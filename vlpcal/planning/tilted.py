@@ -20,9 +20,9 @@ import numpy as np
 
 from .families import Candidate, ceiling_area
 from .nadir import PAIRS
-from .optimiser import PoseProblem, Solve, optimiser_points
+from .optimiser import PoseProblem, Solve, optimiser_step
 from .poses import pose_of, posed_cameras, snapped
-from .reference import evaluate
+from .reference import evaluate, sample_points
 from .site import Site
 
 #: the grid seeds tried per count, best aspect first
@@ -63,7 +63,8 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     mending = not start.evaluation.meets
     # a mend gallops up to twice the start at most: memory grows with cameras × points
     most = min(max(most, start.count), MEND_GROWTH * start.count) if mending else start.count
-    points = optimiser_points(site, most)
+    coarse = optimiser_step(site, most)
+    points = sample_points(site, coarse)
     area = ceiling_area(site)
     bounds = area.bounds
     from shapely.geometry import Polygon
@@ -79,7 +80,7 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     def judge(poses):
         poses = _mounted(area, snapped(poses, step, max_tilt, *corner), step, corner)
         cams = posed_cameras(site, poses)
-        if not _meets_coarse(site, cams, points):
+        if not evaluate(site, cams, coarse).meets:  # a quick look on the coarser grid
             return None
         ev = evaluate(site, cams)
         return (poses, cams, ev) if ev.meets else None
@@ -198,17 +199,6 @@ def _met(site: Site, views, info) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         ok = (det > 0) & (tr / det <= r.max_error_p95 ** 2)
     return (views >= r.min_cameras) & ok
-
-
-def _meets_coarse(site: Site, cams, points) -> bool:
-    """The reference model's verdict on the optimiser's coarser grid (a quick look before the
-    exact one)."""
-    r = site.requirements
-    seen, info = _information(site, cams, points)
-    views = seen.sum(axis=0)
-    covered = views >= r.min_cameras
-    good = _met(site, views, info.sum(axis=0))
-    return covered.mean() >= r.coverage and good.sum() >= 0.95 * covered.sum()
 
 
 def _less(site: Site, poses, k: int, points) -> np.ndarray:
