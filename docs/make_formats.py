@@ -206,11 +206,17 @@ Beside the calibrated deployment: `held_out_m` (per comparison — nominal or ca
 point got a fix, and `fixed`, the share of held-out points with a fix), `folds`, `cameras` (per
 camera `rms_px`, `points`, `outliers`, `moved_m` (and `moved_cm`), `moved_share` (of its
 distance to the survey), `turned_deg`, the fitted intrinsics, `lens_model` (the one used),
-`lens_forced`, `lens_candidates` (per lens model tried: `held_out_px`, `supported` and the
-`reason` when not, and for the models compared `excess_px2` — its mean squared held-out error
-above the best model's — with its standard error `se_px2`: the simplest model whose excess is
-within one standard error is chosen) and `lens`, the decision in words), `lens` (those
-sentences), `precision` (`point_sigma_m`, whether it was `estimated`, `pixel_sigma_px`),
+`lens_forced`, `lens_candidates` (per lens model fitted: `held_out_3d_m`, the held-out 3D
+error of survey points with this camera in that model and the others as chosen, `held_out_px`,
+its own held-out reprojection error, `supported` (fitted), `determined` (whether the survey
+pins it) and the `reason` when not) and `lens`, the decision in words), `lens` (those
+sentences), `lens_decision` (`held_out_3d_m` of the choice, `opencv_held_out_3d_m` of plain
+OpenCV `calibrateCamera` with its full lens on the same folds, `one_model_for_all_m` per
+model, `models`, the `points` they count: those seen by two or more cameras, and
+`starts_disagree`: per camera whose fit has more than one minimum, its `model`, the
+`chained_principal_px` from the simpler model's fit, the `kept_principal_px` of the lowest
+cost and the `cost_ratio` between them; `null` when the lens was forced as `pose`),
+`precision` (`point_sigma_m`, whether it was `estimated`, `pixel_sigma_px`),
 `fusion` (the one chosen; its region map and residual limit are in the deployment's `fusion`
 block), `mismeasured` (`point_id`, `moved_m`) and `notes`; with `--test-points`,
 `test_points` (`points`, `mean`, `median`, `p90`, `p95`, `max` in m, `fixed`, and `per_point`

@@ -270,7 +270,8 @@ def test_the_schur_step_is_the_sparse_solve_step(rng, wand):
     from scipy.sparse import csr_matrix, diags
     from scipy.sparse.linalg import spsolve
 
-    from vlpcal.survey.calibration import _pattern, _SchurSolver
+    from vlpcal.survey.calibration import _pattern
+    from vlpcal.survey.least_squares import SchurSolver as _SchurSolver
 
     npars, n_pts = [6, 9, 7], 40
     obs = [(np.sort(rng.choice(n_pts, 25, replace=False)), None) for _ in npars]

@@ -1,6 +1,7 @@
-"""The lens model chosen by the data (issue 12): the same at any scale, refused where the survey
-cannot determine it, never worse than the nominal lens when that lens is right, and on real
-data (MyPTV) as good as plain OpenCV on the same split."""
+"""The lens model chosen by the data (issues 12, 28): by the held-out 3D error of survey points,
+the same at any scale, warned (not refused) where the survey pins it only weakly, never worse
+than the nominal lens when that lens is right, and on real data (MyPTV, OpenPTV's cavity) at
+least as good as plain OpenCV on the same split."""
 
 import math
 import sys
@@ -68,27 +69,36 @@ def test_same_scene_at_any_scale_calibrates_the_same(rng):
             assert np.allclose(a.dist, b.dist, atol=1e-3)
 
 
-def test_too_little_depth_spread_keeps_the_lens_and_says_why_at_every_scale(rng):
-    """Points on two planes 0.1 % of the distance apart: the focal length cannot be told from
-    the distance; every camera keeps the deployment's lens and the report says why."""
+def test_too_little_depth_spread_is_judged_by_the_fixes_warned_and_the_same_at_every_scale(
+        rng):
+    """Points on two planes 0.1 % of the distance apart: the focal length trades against the
+    distance. The lens is neither refused nor kept for that: each camera's model is the one
+    whose held-out 3D error is lowest, the same at every scale, a weakly pinned focal length
+    is said with what it does to the fixes, and a forced full lens is fitted, as OpenCV
+    would fit it."""
     true = cheap_lens_rig()
     nominal = as_planned(true, rng)
     flat = survey_grid(heights=(0.0, 0.0023), step=0.2)
     uv = observe(true, flat, rng, noise=0.08)
+    models = None
     for s in (0.01, 1.0, 100.0):
         res = run(nominal, flat, uv, s)
+        got = [c["lens_model"] for c in res.cameras]
+        assert models is None or got == models
+        models = got
+        d = res.decision
         for cam, words in zip(res.cameras, res.lens):
-            assert cam["lens_model"] == "pose", words
-            focal = cam["lens_candidates"]["focal"]
-            assert not focal["supported"] and "focal length cannot be told" in focal["reason"]
-            assert "lens kept as in the deployment" in words and "survey at more heights" \
-                in words
-        # forcing the lens on such a survey is refused, in one line naming the camera
-        from vlpcal.survey import SurveyError
-
-        with pytest.raises(SurveyError, match="camera C1: cannot fit its lens"):
-            run(nominal, flat, uv, s, lens="full")
-    # the same survey with depth: the lens is fitted
+            cand = cam["lens_candidates"]
+            assert not cand["focal"]["determined"] and "focal length" in cand["focal"]["reason"]
+            # the choice fixes held-out points at least as well as the deployment's lens
+            assert cand[cam["lens_model"]]["held_out_3d_m"] <= cand["pose"]["held_out_3d_m"]
+            if cam["lens_model"] != "pose" and not cand[cam["lens_model"]]["determined"]:
+                assert "weakly determined" in words and "the fixes" in words, words
+        assert d.held_out_m <= d.opencv_m
+    forced = run(nominal, flat, uv, 1.0, lens="full")
+    assert [c["lens_model"] for c in forced.cameras] == ["full"] * 3
+    assert all("weakly determined" in w and "the fixes" in w for w in forced.lens), forced.lens
+    # the same survey with depth: the lens is fitted, and pinned
     deep = survey_grid(step=0.2)
     res = run(nominal, deep, observe(true, deep, rng, noise=0.08))
     assert all(c["lens_model"] != "pose" for c in res.cameras)
@@ -115,15 +125,47 @@ def test_a_right_nominal_lens_is_not_made_worse(rng):
     assert sum(c["lens_model"] == "pose" for c in auto.cameras) >= 2
 
 
-def test_real_myptv_dots_as_well_as_plain_opencv():
-    """Real data: every held-out dot seen by two cameras is fixed, within 1.2× of OpenCV's
-    mean error on the same split (measured in the same run)."""
+@pytest.mark.parametrize("case", ["myptv", "cavity", "cavity-top"])
+def test_real_rigs_locate_held_out_dots_at_least_as_well_as_plain_opencv(case):
+    """Real data nobody here made: with default flags and with the full lens forced, every
+    held-out dot seen by two cameras is fixed, no worse on average than plain OpenCV
+    (calibrateCamera, full lens, from the same start) on the same split, measured in the same
+    run; nothing refused."""
+    real = _real()
+    dep, survey, test, uv_test = real.load(case)
+    seen2 = np.isfinite(uv_test).all(axis=2).sum(axis=0) >= 2
+    opencv = np.nanmean(real.opencv_errors(dep, survey, test, uv_test)[seen2])
+    for kw in ({}, {"lens": "full"}):
+        err, res = real.vlpcal_errors(dep, survey, uv_test, test, **kw)
+        assert np.isfinite(err[seen2]).all(), (case, kw)
+        assert np.mean(err[seen2]) <= opencv, (case, kw, np.mean(err[seen2]), opencv)
+        # the survey ran OpenCV as its own baseline on its folds, and its choice is no worse
+        d = res.decision
+        assert d is not None and d.points > 0
+        if not kw:
+            assert d.held_out_m <= d.opencv_m or not math.isfinite(d.opencv_m)
+    if case == "myptv":
+        assert all(c["lens_model"] != "pose" for c in res.cameras)
+        assert res.precision["point_sigma_m"] < 1e-4  # a machined target, not a tape measure
+
+
+def test_a_thousand_real_dots_beat_the_published_peer_tools():
+    """The proPTV / OpenPTV / MyPTV comparison (1083 dots × 4 cameras of 2560 × 2160 px): the
+    default calibration locates the 722 held-out dots better than plain OpenCV and than every
+    peer's own published per-dot errors on the same split."""
+    import json
+
+    real = _real()
+    dep, survey, test, uv_test = real.load("proptv")
+    err, _ = real.vlpcal_errors(dep, survey, uv_test, test)
+    assert np.isfinite(err).all()
+    peers = json.loads((real.DATA / "proptv" / "peers.json").read_text())["peers"]
+    assert err.mean() < min(p["mean_m"] for p in peers.values())
+    assert err.mean() < np.mean(real.opencv_errors(dep, survey, test, uv_test))
+
+
+def _real():
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     import real
 
-    r = real.run()
-    assert r["vlpcal_fixed"] == 1.0
-    assert r["vlpcal_mean_m"] <= 1.2 * r["opencv_mean_m"]
-    assert math.isfinite(r["opencv_mean_m"]) and r["opencv_mean_m"] < 2e-4  # OpenCV worked
-    assert all(m != "pose" for m in r["lens"].values())
-    assert r["point_sigma_m"] < 1e-4  # a machined target, not a tape measure
+    return real

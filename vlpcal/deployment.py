@@ -222,8 +222,10 @@ class Deployment:
 MAX_LENGTH = 1e5
 #: focal length as a multiple of the image width: from a 179° view to a 0.06° one
 FOCAL_RANGE = (0.01, 1000.0)
-#: |distortion coefficient|: OpenCV's fits of wide lenses stay well inside
+#: |a distortion term at the image corner|: OpenCV's fits of real lenses stay well inside
 MAX_DISTORTION = 1e3
+#: the power of the corner's radius each of k1, k2, p1, p2, k3 multiplies
+DISTORTION_POWERS = (2, 4, 1, 1, 6)
 #: radians: the length of a rotation vector (one turn is 2π; a fit may wrap once more)
 MAX_ROTATION = 4 * math.pi
 
@@ -371,10 +373,23 @@ def check_intrinsics(c: dict, where: str) -> None:
         _number(c[key], f"{where}.{key}", positive=True,
                 within=(FOCAL_RANGE[0] * w, FOCAL_RANGE[1] * w),
                 unit=f" px ({FOCAL_RANGE[0]:g}× to {FOCAL_RANGE[1]:g}× the image width)")
-    for key, side in (("cx", w), ("cy", h)):
-        _number(c[key], f"{where}.{key}", within=(-side, 2 * side),
-                unit=" px (the principal point within one image of the image)")
-    _vector(c["dist"], 5, f"{where}.dist", (-MAX_DISTORTION, MAX_DISTORTION))
+    # a narrow view's principal point trades against its tilt (an offset of one focal length
+    # is a 45° tilt): within one image of the image, or one focal length of its centre
+    for key, side, f in (("cx", w, c["fx"]), ("cy", h, c["fy"])):
+        reach = max(1.5 * side, f)
+        _number(c[key], f"{where}.{key}", within=(side / 2 - reach, side / 2 + reach),
+                unit=" px (the principal point within one image of the image, or one focal "
+                     "length of its centre)")
+    dist = _vector(c["dist"], 5, f"{where}.dist")
+    # each term as it acts at the image corner: a narrow lens's k3 of 10⁵ bends its corner
+    # less than a wide lens's k1 of 0.3 (r: the corner's radius in focal lengths)
+    r = math.hypot(max(c["cx"], w - c["cx"]) / c["fx"], max(c["cy"], h - c["cy"]) / c["fy"])
+    for i, (value, power) in enumerate(zip(dist, DISTORTION_POWERS)):
+        if not abs(value) * r ** power <= MAX_DISTORTION:
+            raise DeploymentError(
+                f"{where}.dist[{i}]: expected a coefficient whose term at the image corner "
+                f"(× r^{power}, r = {r:.3g}) is within -{MAX_DISTORTION:g} to "
+                f"{MAX_DISTORTION:g}, got {shown(value)}")
 
 
 def _near_the_room(position, room, height: float, where: str) -> None:

@@ -624,11 +624,12 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
             raise UserError(f"{survey_path}: {name} is for a free survey (a free/ folder); "
                             "this bundle has none")
     try:
-        with click.progressbar(length=folds + 1, label="calibrating (lens choice and all, "
-                               "then k-fold)", hidden=quiet, file=sys.stderr) as bar:
+        with click.progressbar(length=len(dep.cameras) + 1 + folds, label="calibrating "
+                               "(each camera's lens models, jointly, then k-fold)",
+                               hidden=quiet, file=sys.stderr) as bar:
             result = calibrate_survey(
                 dep, X, uv, ids, lens, folds, point_sigma,
-                progress=lambda i, n: bar.update(1),
+                progress=lambda i, n: bar.update(max(i - bar.pos, 0)),
                 sources={"deployment": str(deployment_path), "survey": str(survey_path)})
     except SurveyError as e:
         raise UserError(f"{survey_path}: {e}") from None
@@ -896,6 +897,56 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                f"{paths[2]}")
 
 
+def _print_lens_table(result) -> None:
+    """Per camera and lens model, the held-out 3D error with the other cameras as chosen;
+    then the choice beside plain OpenCV on the same folds."""
+    from ..survey import LENS_MODELS
+    from ..survey.calibration import format_length
+
+    rows = [r for r in result.cameras if r.get("lens_candidates")]
+    d = result.decision
+    if not rows or d is None:
+        return
+    figures = [c.get("held_out_3d_m") for r in rows for c in r["lens_candidates"].values()]
+    unit, scale = _unit_for([f for f in figures if f is not None])
+    click.echo(f"held-out 3D error per camera's lens model, {unit} (each camera fitted alone, "
+               f"the others as chosen; * chosen; – not fitted):\n  {'camera':8s}"
+               + "".join(f"{m:>11s}" for m in LENS_MODELS))
+    for r in rows:
+        cells = []
+        for m in LENS_MODELS:
+            v = r["lens_candidates"].get(m, {}).get("held_out_3d_m")
+            cell = "–" if v is None else f"{v * scale:.3g}" + ("*" if m == r["lens_model"]
+                                                                else "")
+            cells.append(f"{cell:>11s}")
+        click.echo(f"  {r['camera']:8s}" + "".join(cells))
+    import math
+
+    if math.isfinite(d.opencv_m):
+        click.echo(f"  this choice {format_length(d.held_out_m)}; plain OpenCV calibrateCamera "
+                   f"(full lens, from the deployment's) {format_length(d.opencv_m)} on the "
+                   f"same folds ({d.points} points seen by two or more cameras; the joint fit "
+                   "below refines both cameras and points)")
+    else:
+        click.echo(f"  this choice {format_length(d.held_out_m)}; plain OpenCV calibrateCamera "
+                   "could not fit every camera on every fold")
+    for cid, s in d.starts_disagree.items():
+        click.echo(f"  {cid}: its fit ({s.model}) has more than one minimum: the principal point "
+                   f"at ({s.chained[0]:.0f}, {s.chained[1]:.0f}) px from the simpler model's "
+                   f"fit, at ({s.best[0]:.0f}, {s.best[1]:.0f}) px from the data's own starts, "
+                   f"{s.cost_ratio:.3g} × lower in cost: kept")
+    if d.held_out_m > d.opencv_m:
+        click.echo(f"warning: plain OpenCV locates the held-out survey points better "
+                   f"({format_length(d.opencv_m)} against {format_length(d.held_out_m)})",
+                   err=True)
+
+
+def _unit_for(values) -> tuple[str, float]:
+    """One unit for a table, chosen so that its smallest figure reads with three digits."""
+    return next(((u, f) for u, f in (("m", 1.0), ("cm", 100.0), ("mm", 1000.0), ("µm", 1e6))
+                 if values and min(values) * f >= 0.1), ("µm", 1e6))
+
+
 def _print_calibration(result, folds: int) -> None:
     """The lens decisions, the held-out table, the per-camera verdicts and the mis-measured
     points."""
@@ -905,32 +956,17 @@ def _print_calibration(result, folds: int) -> None:
 
     n = len(result.points)
     prec = result.precision
-    click.echo("\nlens, per camera (chosen by held-out reprojection error unless --lens forces "
-               "one):")
+    click.echo("\nlens, per camera (chosen by the held-out 3D error of survey points unless "
+               "--lens forces one):")
     for sentence in result.lens:
         click.echo(f"  {sentence}")
-    rows = [r for r in result.cameras if r.get("lens_candidates")]
-    if rows:
-        from ..survey import LENS_MODELS
-
-        click.echo(f"held-out reprojection error per lens model, px (* chosen; – not "
-                   f"supported or not tried):\n  {'camera':8s}"
-                   + "".join(f"{m:>11s}" for m in LENS_MODELS))
-        for r in rows:
-            cells = []
-            for m in LENS_MODELS:
-                px = r["lens_candidates"].get(m, {}).get("held_out_px")
-                cell = "–" if px is None else f"{px:.3g}" + ("*" if m == r["lens_model"] else "")
-                cells.append(f"{cell:>11s}")
-            click.echo(f"  {r['camera']:8s}" + "".join(cells))
+    _print_lens_table(result)
     how = "estimated from the fit" if prec["estimated"] else "as stated"
     click.echo(f"survey positions: ±{format_length(prec['point_sigma_m'])} per axis ({how}); spots "
                f"±{prec['pixel_sigma_px']:.2g} px")
     # one unit for the table, chosen so that the best row reads with three figures
-    means = [st["mean"] for st in result.stats.values() if st["mean"] is not None]
-    unit, scale = next(((u, f) for u, f in (("m", 1.0), ("cm", 100.0), ("mm", 1000.0),
-                                            ("µm", 1e6)) if means and min(means) * f >= 0.1),
-                       ("µm", 1e6))
+    unit, scale = _unit_for([st["mean"] for st in result.stats.values()
+                             if st["mean"] is not None])
     click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), {unit}; the "
                "reference is the measured position itself "
                f"(±{format_length(prec['point_sigma_m'])} per axis ≈ "

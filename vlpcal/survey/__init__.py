@@ -1,9 +1,13 @@
 """Survey layer: what measured LED positions teach about an install.
 
-- :mod:`.calibration`: each camera's pose and lens from the survey points it saw, the lens
-  model chosen by held-out error, then every camera and surveyed position together, with the
-  survey's measurement precision estimated from the fit;
-- :mod:`.lens`: the nested lens models and whether a survey determines them;
+- :mod:`.calibration`: each camera's pose and lens from the survey points it saw, then every
+  camera and surveyed position together, with the survey's measurement precision estimated
+  from the fit;
+- :mod:`.camera_fit`: one camera fitted to its points; :mod:`.least_squares`: the robust
+  solvers behind every fit;
+- :mod:`.lens`: the nested lens models and how well a survey determines them;
+  :mod:`.lens_decision`: each camera's model chosen by the held-out 3D error, beside plain
+  OpenCV;
 - :mod:`.held_out`: honest accuracy, k-fold by survey point;
 - :mod:`.regions`: the paper's approach (c), the best pair per floor region;
 - :mod:`.plan`: where to put the LED; :mod:`.spots`: the survey's spots as the locator sees
@@ -12,16 +16,14 @@
 
 from .calibration import (
     Calibration,
-    CameraFit,
     LensChoice,
     SurveyError,
     calibrate,
-    choose_lens,
     estimate_precision,
-    fit_camera,
     fold_of,
     refine_jointly,
 )
+from .camera_fit import CameraFit, fit_camera
 from .held_out import HELD_OUT, error_stats, held_out
 from .lens import LENS_MODELS, MIN_POINTS_POSE, lens_params, lens_support
 from .pipeline import (
@@ -46,7 +48,7 @@ from .spots import WandSpots, free_spots, survey_spots, wand_spots
 __all__ = [
     "FUSION_OF", "HELD_OUT", "LENS_MODELS", "MIN_POINTS_PLANNED", "MIN_POINTS_POSE",
     "Calibration", "CameraFit", "LensChoice", "SurveyError", "SurveyPlan", "SurveyResult",
-    "calibrate", "calibrate_survey", "choose_lens", "error_stats", "estimate_precision",
+    "calibrate", "calibrate_survey", "error_stats", "estimate_precision",
     "fit_camera", "fold_of", "held_out", "learn_region_map", "lens_params", "lens_support",
     "plan_survey", "plan_references", "free_route", "FreeRoute", "refine_jointly", "region_cell",
     "survey_spots",

@@ -1,9 +1,10 @@
-"""Cameras fitted to a survey: each camera on its own, its lens model chosen by held-out error,
-then every camera and every surveyed position together, with the survey's measurement
-precision estimated from the fit when it is not stated.
+"""Cameras fitted to a survey: each camera on its own (:mod:`.camera_fit`), its lens model
+decided by the held-out 3D error (:mod:`.lens_decision`), then every camera and every surveyed
+position together, with the survey's measurement precision estimated from the fit when it is
+not stated.
 
 Every decision is relative to the scene: outliers against the fit's own residual spread and
-the image size, lens support against the survey's perspective (:mod:`.lens`), the positions'
+the image size, lens models against the held-out points' own errors, the positions'
 precision against the spot noise. The same survey scaled by any factor calibrates the same.
 """
 
@@ -14,138 +15,22 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import Camera
+from .camera_fit import CameraFit, fit_camera
 from .errors import SurveyError
+from .least_squares import SchurSolver, levenberg_marquardt
 from .lens import (
     LENS_MODELS,
-    MIN_POINTS_POSE,
-    Support,
+    SINGULAR,
     from_vector,
     lens_params,
-    lens_support,
-    min_points,
     project_with_jacobian,
     to_vector,
 )
+from .lens_decision import as_start, data_starts, decide
 
-#: an observation further off than this many robust standard deviations is an outlier …
-OUTLIER_SIGMAS = 5.0
-#: … and never closer than this share of the image diagonal (a spot's own blur)
-OUTLIER_IMAGE_SHARE = 0.005
 #: a camera whose spots scatter about its best fit by more than this share of its image
 #: diagonal is not seeing the LED (random spots, a wrong id)
 GARBAGE_IMAGE_SHARE = 0.025
-
-
-@dataclass
-class CameraFit:
-    """One camera's calibration: the camera, its reprojection RMS (px) and its outliers."""
-
-    camera: Camera
-    rms_px: float
-    used: int
-    outliers: list  # point ids whose spot was rejected for this camera
-    model: str = "pose"
-    resid_px: float = float("nan")  # robust standard deviation of a residual component
-    support: Support | None = None
-    keep: np.ndarray | None = field(default=None, repr=False)  # mask over the points given
-
-
-def robust_sigma(r) -> float:
-    """Standard deviation of residual components from their median absolute value."""
-    r = np.asarray(r, float).ravel()
-    r = r[np.isfinite(r)]
-    return float(1.4826 * np.median(np.abs(r))) if len(r) else float("nan")
-
-
-def _outlier_limit(cam: Camera, sigma: float) -> float:
-    diag = float(np.hypot(cam.width, cam.height))
-    return max(OUTLIER_SIGMAS * np.sqrt(2) * sigma, OUTLIER_IMAGE_SHARE * diag)
-
-
-def _pnp_start(nominal: Camera, X, uv) -> Camera:
-    """OpenCV's SQPnP on the nominal lens, unless it lands worse than the nominal pose."""
-    from dataclasses import replace
-
-    import cv2
-
-    xy = nominal.normalise(uv)
-    good = np.isfinite(xy).all(axis=1)
-    if good.sum() < MIN_POINTS_POSE:
-        return nominal
-    try:
-        ok, rvec, tvec = cv2.solvePnP(X[good].reshape(-1, 1, 3), xy[good].reshape(-1, 1, 2),
-                                      np.eye(3), None, flags=cv2.SOLVEPNP_SQPNP)
-    except cv2.error:  # degenerate points (all at one place): the fit below will say so
-        return nominal
-    if not ok or not np.isfinite(rvec).all():
-        return nominal
-    R = cv2.Rodrigues(rvec)[0]
-    start = replace(nominal, rotation=rvec.ravel(), position=-R.T @ tvec.ravel())
-
-    def med(c):
-        e = np.linalg.norm(c.project(X)[0] - uv, axis=1)
-        return np.median(np.where(np.isfinite(e), e, np.inf))
-    return start if med(start) <= med(nominal) else nominal
-
-
-def fit_camera(nominal: Camera, X, uv, ids, model: str = "pose", outlier_px: float | None = None,
-               start: Camera | None = None, intrinsics: bool | None = None) -> CameraFit:
-    """Pose (and the lens numbers ``model`` frees) of one camera from survey points it saw.
-
-    Starts from OpenCV's SQPnP on the nominal lens (so a rough or tilted nominal guess does
-    not matter) or from ``start``, then robust least squares on the reprojection error
-    (soft-L1 at the fit's own scale); observations further off than ``outlier_px`` (default:
-    :data:`OUTLIER_SIGMAS` robust standard deviations, at least
-    :data:`OUTLIER_IMAGE_SHARE` of the image diagonal) are dropped and the fit repeated (a
-    wrong spot, a mis-measured point), and reported by point id. ``intrinsics=True`` is
-    ``model="full"``.
-    """
-    from scipy.optimize import least_squares
-
-    if intrinsics is not None:
-        model = "full" if intrinsics else model
-    X = np.asarray(X, float)
-    uv = np.asarray(uv, float)
-    need = min_points(model)
-    if len(X) < need:
-        raise SurveyError(f"camera {nominal.id}: sees {len(X)} survey points, needs at least "
-                          f"{need}" + (f" to fit its lens ({model})" if model != "pose" else ""))
-    cam0 = start if start is not None else _pnp_start(nominal, X, uv)
-    keep = np.ones(len(X), bool)
-    scale = OUTLIER_IMAGE_SHARE * float(np.hypot(nominal.width, nominal.height))  # 1 px at 160 px
-
-    def solve(c0, mask):
-        Xm, uvm = X[mask], uv[mask]
-
-        def resid(p):
-            r = from_vector(nominal, p, model).project(Xm)[0] - uvm
-            return np.nan_to_num(r, nan=1e3 * scale).ravel()
-
-        def jac(p):
-            J = project_with_jacobian(from_vector(nominal, p, model), Xm, model)[1]
-            return J.reshape(2 * len(Xm), -1)
-
-        sol = least_squares(resid, to_vector(c0, model), jac=jac, loss="soft_l1",
-                            f_scale=scale, x_scale="jac", max_nfev=200)
-        return from_vector(nominal, sol.x, model), sol
-
-    cam, sol = solve(cam0, keep)
-    for _ in range(4):
-        err = np.linalg.norm(cam.project(X)[0] - uv, axis=1)
-        sigma = robust_sigma(cam.project(X[keep])[0] - uv[keep])
-        limit = outlier_px if outlier_px is not None else _outlier_limit(cam, sigma)
-        new = err <= limit
-        scale_new = max(sigma, 1e-6 * np.hypot(cam.width, cam.height))
-        if new.sum() < need or (np.array_equal(new, keep) and scale_new >= scale / 2):
-            break
-        keep, scale = new, scale_new
-        cam, sol = solve(cam, keep)
-    r = cam.project(X[keep])[0] - uv[keep]
-    sigma = robust_sigma(r)
-    rms = float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))
-    support = lens_support(cam, model, sol.jac, sigma, X[keep], uv[keep], nominal)
-    return CameraFit(cam, rms, int(keep.sum()), [i for i, k in zip(ids, keep) if not k],
-                     model, sigma, support, keep)
 
 
 # -- the lens model, chosen by held-out error -----------------------------------------------
@@ -157,14 +42,16 @@ class LensChoice:
     camera_id: str
     chosen: str
     forced: bool
-    #: model → {"held_out_px": RMS px or None, "supported": bool, "reason": str, and for the
-    #: models compared "excess_px2" (mean squared error above the best model's, px²) and
-    #: "se_px2" (its standard error): the simplest with excess ≤ se is chosen}
+    #: model → {"held_out_px": RMS px or None, "held_out_3d_m": mean m (the other cameras as
+    #: chosen) or None, "supported": whether it was fitted, "determined": whether the survey
+    #: pins it, "reason": why not}
     candidates: dict
     depth_rel_range: float = float("nan")
     scene_per_px: float = float("nan")  # m per px at the camera's points (distance / f)
     #: why the model was set rather than chosen, when the survey (not the user) set it
     reason: str = ""
+    #: what the survey determines only weakly in the chosen model (a warning, not a refusal)
+    weak: str = ""
 
 
 def _lens_choice(fit: CameraFit, camera_id: str, forced: bool, candidates: dict,
@@ -177,76 +64,34 @@ def _lens_choice(fit: CameraFit, camera_id: str, forced: bool, candidates: dict,
                       float(np.median(depth) / (0.5 * (cam.fx + cam.fy))))
 
 
-def _held_out_px(nominal, X, uv, model, fold, starts: dict):
-    """Per point: reprojection error (px) when the point's fold was left out of the fit; and
-    each fold's fitted camera. Each fold's fit starts from ``starts[fold]`` (the simpler
-    model's fit on the same fold) or from PnP, never from a fit that saw its test points."""
-    err = np.full(len(X), np.nan)
-    cams = {}
-    for f in np.unique(fold):
-        test = fold == f
-        try:
-            fit = fit_camera(nominal, X[~test], uv[~test], [""] * int((~test).sum()), model,
-                             start=starts.get(f))
-        except SurveyError:
-            return np.full(len(X), np.nan), {}
-        cams[f] = fit.camera
-        err[test] = np.linalg.norm(fit.camera.project(X[test])[0] - uv[test], axis=1)
-    return err, cams
+def _model_starts(nominal: Camera, X, uv, model: str) -> tuple:
+    """The data's own starts for ``model`` (:func:`~.lens_decision.data_starts`) where it
+    frees the principal point, whose fit has several minima; none otherwise."""
+    if "cx" not in lens_params(model):
+        return ()
+    return tuple(as_start(s, nominal, model) for s in data_starts(nominal, X, uv))
 
 
-def choose_lens(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> tuple[CameraFit,
-                                                                                LensChoice]:
-    """Fit ``models`` (nested, simplest first) to one camera's points and choose by held-out
-    reprojection error over the folds ``fold`` (N fold indices): the simplest model within one
-    standard error of the best (paired over the points; errors capped at the outlier limit so
-    that a wrong spot cannot decide). A model the survey does not determine
-    (:func:`~.lens.lens_support`) is not a candidate, nor is any richer one.
-    Returns the chosen model's full fit and the decision."""
-    X = np.asarray(X, float)
-    uv = np.asarray(uv, float)
-    fits, errs, cand, fold_cams = {}, {}, {}, {}
-    for model in models:
-        if len(X) < min_points(model):
-            cand[model] = {"held_out_px": None, "supported": False,
-                           "reason": f"needs {min_points(model)} points, sees {len(X)}"}
-            break
-        fit = fit_camera(nominal, X, uv, ids, model,
-                         start=fits[list(fits)[-1]].camera if fits else None)
-        if not fit.support.ok:
-            cand[model] = {"held_out_px": None, "supported": False,
-                           "reason": fit.support.reason}
-            break
-        err, fold_cams = _held_out_px(nominal, X, uv, model, fold, fold_cams)
-        if not np.isfinite(err).any():
-            if model == "pose":
-                fits[model] = fit
-            cand[model] = {"held_out_px": None, "supported": False,
-                           "reason": f"a held-out fold leaves fewer than {min_points(model)} "
-                                     "points to fit it"}
-            break
-        fits[model], errs[model] = fit, err
-    if not errs:  # not even the pose could be checked on held-out points: keep the pose
-        fit = fits.get("pose") or fit_camera(nominal, X, uv, ids, "pose")
-        cand.setdefault("pose", {"held_out_px": None, "supported": True, "reason": ""})
-        return fit, _lens_choice(fit, nominal.id, False, cand, X)
-    richest = fits[list(errs)[-1]]
-    cap = _outlier_limit(richest.camera, richest.resid_px)
-    loss = {m: np.fmin(e, cap) ** 2 for m, e in errs.items()}  # a failed prediction: the cap
-    ok = np.logical_and.reduce([np.isfinite(v) for v in loss.values()])
-    for m, v in loss.items():
-        cand[m] = {"held_out_px": float(np.sqrt(np.mean(v[ok]))) if ok.any() else None,
-                   "supported": True, "reason": ""}
-    chosen = "pose"
-    if ok.sum() > 1:
-        best = min(loss, key=lambda m: loss[m][ok].mean())
-        for m in loss:  # simplest first: the first within one standard error of the best
-            d = loss[m][ok] - loss[best][ok]
-            se = float(d.std(ddof=1) / np.sqrt(len(d)))
-            cand[m]["excess_px2"], cand[m]["se_px2"] = float(d.mean()), se
-        chosen = next(m for m in loss if cand[m]["excess_px2"] <= cand[m]["se_px2"])
-    fit = fits[chosen]
-    return fit, _lens_choice(fit, nominal.id, False, cand, X)
+def _decided_choice(decision, camera_id: str, fit: CameraFit, X) -> LensChoice:
+    """The decision record of one camera from the held-out figures of ``decision``
+    (:class:`~.lens_decision.LensDecision`): per model its held-out reprojection (px) and,
+    with the other cameras as chosen, held-out 3D error (m)."""
+    cand = {}
+    for model, mf in decision.fits[camera_id].items():
+        r = mf.reprojection_px[np.isfinite(mf.reprojection_px)]
+        cand[model] = {"held_out_px": float(np.sqrt(np.mean(r ** 2))) if len(r) else None,
+                       "held_out_3d_m": _finite_or_none(
+                           decision.per_camera_m.get(camera_id, {}).get(model)),
+                       "supported": True, "determined": bool(mf.fit.support.ok),
+                       "reason": mf.fit.support.reason}
+    choice = _lens_choice(fit, camera_id, False, cand, X)
+    if not fit.support.ok:
+        choice.weak = fit.support.reason
+    return choice
+
+
+def _finite_or_none(x) -> float | None:
+    return float(x) if x is not None and np.isfinite(x) else None
 
 
 # -- every camera and position together -----------------------------------------------------
@@ -355,138 +200,11 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
         return csr_matrix((np.nan_to_num(np.concatenate(data), nan=0.0, posinf=0.0,
                                          neginf=0.0), (rows, cols)), shape=shape)
 
-    solve = _SchurSolver(off[-1], len(X), None if lengths is None else (li, lj))
-    x = _sparse_levenberg_marquardt(resid, jac, p0, f_scale=3.0, iterations=iterations,
-                                    solve=solve)
+    solve = SchurSolver(off[-1], len(X), None if lengths is None else (li, lj))
+    x = levenberg_marquardt(resid, jac, p0, f_scale=3.0, iterations=iterations, solve=solve)[0]
     cams = [from_vector(c, x[off[k]:off[k + 1]], m)
             for k, (c, m) in enumerate(zip(cameras, models))]
     return cams, x[off[-1]:].reshape(-1, 3)
-
-
-class _SchurSolver:
-    """Solve a bundle adjustment's damped normal equations by the Schur complement: the
-    points' blocks (3 × 3, or 6 × 6 for two points held a length apart, in general one block
-    per group of linked points) are inverted in one batch and eliminated, leaving a dense
-    system in the cameras' few parameters (Triggs et al., "Bundle adjustment — a modern
-    synthesis", §6.1). ``n_cam``: camera parameters first, then ``n_pts`` × 3 coordinates;
-    ``pairs``: index arrays of linked points. Returns None where a block is singular (the
-    caller falls back to a general sparse solve)."""
-
-    def __init__(self, n_cam: int, n_pts: int, pairs=None):
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-
-        self.n_cam = n_cam
-        if pairs is not None and len(pairs[0]):
-            i, j = pairs
-            g = coo_matrix((np.ones(len(i)), (i, j)), shape=(n_pts, n_pts))
-            _, comp = connected_components(g, directed=False)
-        else:
-            comp = np.arange(n_pts)
-        order = np.argsort(comp, kind="stable")  # points grouped by their block
-        c_sorted = comp[order]
-        starts = np.flatnonzero(np.r_[True, c_sorted[1:] != c_sorted[:-1]])
-        sizes = np.diff(np.r_[starts, n_pts])
-        rank = np.empty(n_pts, int)
-        rank[order] = np.arange(n_pts) - np.repeat(starts, sizes)
-        block_of = np.empty(n_pts, int)
-        block_of[order] = np.repeat(np.arange(len(starts)), sizes)
-        self.block = np.repeat(block_of, 3)  # per coordinate: its block,
-        self.local = (3 * rank[:, None] + np.arange(3)).ravel()  # and its place in it
-        self.size = 3 * sizes  # per block
-        # per block size: the blocks of that size and their coordinates (B × s, global)
-        self.groups = []
-        for sz in np.unique(self.size):
-            blocks = np.flatnonzero(self.size == sz)
-            coords = np.zeros((len(blocks), sz), int)
-            where = np.full(len(starts), -1)
-            where[blocks] = np.arange(len(blocks))
-            q = np.flatnonzero(where[self.block] >= 0)
-            coords[where[self.block[q]], self.local[q]] = q
-            self.groups.append((sz, blocks, coords, where))
-
-    def __call__(self, A, g, damping):
-        """``step`` solving ``(A + diag(damping)) step = -g`` (``A``: CSC), or None."""
-        from scipy.sparse import coo_matrix
-
-        nc = self.n_cam
-        A = A.tocsr()
-        U = A[:nc, :nc].toarray() + np.diag(damping[:nc])
-        W = A[:nc, nc:]
-        V = A[nc:, nc:].tocoo()
-        dp = damping[nc:]
-        keep = self.block[V.row] == self.block[V.col]
-        r, c, v = V.row[keep], V.col[keep], V.data[keep]
-        rows, cols, vals = [], [], []
-        for sz, blocks, coords, where in self.groups:
-            mine = where[self.block[r]] >= 0
-            B = np.zeros((len(blocks), sz, sz))
-            np.add.at(B, (where[self.block[r[mine]]], self.local[r[mine]],
-                          self.local[c[mine]]), v[mine])
-            B[:, np.arange(sz), np.arange(sz)] += dp[coords]
-            try:
-                Binv = np.linalg.inv(B)
-            except np.linalg.LinAlgError:
-                return None
-            rows.append(np.repeat(coords, sz, axis=1).ravel())
-            cols.append(np.tile(coords, (1, sz)).ravel())
-            vals.append(Binv.ravel())
-        n = A.shape[0] - nc
-        Vinv = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(n, n)).tocsr()
-        WV = W @ Vinv
-        S = U - (WV @ W.T).toarray()
-        gc, gp = g[:nc], g[nc:]
-        try:
-            dc = np.linalg.solve(S, -(gc - WV @ gp))
-        except np.linalg.LinAlgError:
-            return None
-        step = np.r_[dc, Vinv @ (-gp - W.T @ dc)]
-        return step if np.isfinite(step).all() else None
-
-
-def _sparse_levenberg_marquardt(resid, jac, p0, f_scale: float, iterations: int = 60,
-                                solve=None):
-    """Minimise the soft-L1 cost of ``resid`` (scale ``f_scale``) from ``p0``: Levenberg–
-    Marquardt on the sparse normal equations, reweighted at each step (the robust loss's
-    weights ρ′). ``solve(A, g, damping)``: a solver that knows the problem's structure
-    (:class:`_SchurSolver`), else (or where it returns None) a general direct sparse solve."""
-    from scipy.sparse import diags
-    from scipy.sparse.linalg import spsolve
-
-    def cost_of(r):
-        z = (r / f_scale) ** 2
-        return f_scale ** 2 * np.sum(np.sqrt(1 + z) - 1)
-
-    p = np.asarray(p0, float).copy()
-    r = resid(p)
-    cost = cost_of(r)
-    lam = 1e-3
-    for _ in range(iterations):
-        J = jac(p)
-        w = 1.0 / np.sqrt(1 + (r / f_scale) ** 2)
-        A = (J.T @ diags(w) @ J).tocsc()
-        g = J.T @ (w * r)
-        d = A.diagonal()
-        d = np.where(d > 0, d, 1.0)
-        while True:
-            step = solve(A, g, lam * d) if solve is not None else None
-            if step is None:
-                step = spsolve((A + diags(lam * d)).tocsc(), -g)
-            trial = p + step
-            r_new = resid(trial)
-            new = cost_of(r_new)
-            if np.isfinite(new) and new <= cost:
-                break
-            lam *= 4
-            if lam > 1e12:
-                return p
-        small = cost - new <= 1e-10 * max(cost, 1e-300)
-        p, r, cost = trial, r_new, new
-        lam = max(lam / 3, 1e-9)
-        if small:
-            break
-    return p
 
 
 def _redundancy(cameras, adjusted, obs, point_sigma, pixel_sigma, n_cam_params,
@@ -579,36 +297,6 @@ def estimate_precision(cameras, X, obs, models, pixel_sigma: float, iterations: 
     return s_x, s_px, cams, adj
 
 
-def _references(cams, X, uv, obs, point_sigma: float, pixel_sigma: float) -> list:
-    """Per camera, the survey positions as the *other* cameras see them: each point
-    triangulated from the other cameras' kept spots, averaged with its measured position by
-    their precisions (the triangulation's predicted error, the survey's ``point_sigma``), the
-    measured position alone where fewer than two others saw it. A lens judged against these
-    is judged below the tape's noise, without its own spots in the reference."""
-    from ..triangulation import predicted_rms_error, triangulate
-
-    clean = np.full_like(uv, np.nan)
-    for k, (idx, uvk) in enumerate(obs):
-        clean[k, idx] = uvk
-    w_m = 1.0 / (3 * point_sigma ** 2)
-    refs = []
-    for k in range(len(cams)):
-        others = clean.copy()
-        others[k] = np.nan
-        tri = triangulate(cams, others)
-        ok = np.isfinite(tri.X).all(axis=1) & (tri.used.sum(axis=0) >= 2)
-        R = X.copy()
-        if ok.any():
-            sig = predicted_rms_error(cams, np.where(ok[:, None], tri.X, X), tri.used & ok,
-                                      pixel_sigma)
-            good = ok & np.isfinite(sig) & (sig > 0)
-            w_t = np.where(good, 1.0 / np.where(good, sig, 1.0) ** 2, 0.0)
-            R = np.where(good[:, None], (w_t[:, None] * np.nan_to_num(tri.X) + w_m * X)
-                         / (w_t + w_m)[:, None], X)
-        refs.append(R)
-    return refs
-
-
 @dataclass
 class Calibration:
     """The cameras fitted to a survey, and what the fit found."""
@@ -621,6 +309,9 @@ class Calibration:
     point_sigma: float = float("nan")  # m per axis, as stated or estimated
     pixel_sigma: float = float("nan")  # px, the spots' estimated scatter
     point_sigma_estimated: bool = False
+    #: the held-out 3D figures behind the lens models (:class:`~.lens_decision.LensDecision`),
+    #: when they were decided or a forced model weighed
+    decision: object = None
 
     @property
     def models(self) -> dict:
@@ -638,14 +329,22 @@ def fold_of(n: int, folds: int, seed: int = 0) -> np.ndarray:
 
 def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
               point_sigma: float | str = 0.003, outlier_px: float | None = None,
-              lens: str | dict | None = None, folds: int = 5, seed: int = 0) -> Calibration:
+              lens: str | dict | None = None, folds: int = 5, seed: int = 0,
+              starts: list[Camera] | None = None, decide_forced: bool = True,
+              pixel_sigma: float | None = None, progress=None) -> Calibration:
     """Calibrate every camera from the survey: ``X`` N×3 measured positions, ``uv`` C×N×2
     spots (NaN: not seen), ``ids`` the point ids.
 
-    ``lens``: ``"auto"`` (each camera's model chosen by :func:`choose_lens` over ``folds``
-    folds), one of :data:`~.lens.LENS_MODELS` for every camera, or camera id → model; default
-    ``"full"`` with ``intrinsics`` else ``"pose"``. A forced model the survey does not determine
-    is refused. ``point_sigma``: metres, or ``"auto"`` (:func:`estimate_precision`).
+    ``lens``: ``"auto"`` (each camera's model decided by the held-out 3D error over ``folds``
+    folds, :mod:`.lens_decision`), one of :data:`~.lens.LENS_MODELS` for every camera, or
+    camera id → model; default ``"full"`` with ``intrinsics`` else ``"pose"``. A forced model
+    is fitted even where the survey determines it only weakly; unless ``decide_forced`` is
+    false, its held-out 3D error is weighed against the deployment's lens for the report.
+    ``starts``: a camera per camera to start each fit from (a fold of a calibration: the
+    same minimum as the whole). ``point_sigma``: metres, or ``"auto"``
+    (:func:`estimate_precision`); with it, ``pixel_sigma`` (px) stated too (a fold of a
+    calibration: the whole survey's) leaves one joint fit to do. ``progress(i, n)`` counts the
+    cameras whose lens models are weighed.
 
     Per camera, then jointly (:func:`refine_jointly`). A point rejected by two or more of the
     cameras that saw it is reported as mis-measured (a wrong tape reading moves it in every
@@ -666,30 +365,40 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
                           "the extent itself: metres expected (or 'auto')")
     fits, obs, choices = [], [], []
     rejected: dict = {}
+    decision = None
     for k, cam in enumerate(nominal):
-        seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
-        if not len(seen):
+        if not np.isfinite(uv[k]).all(axis=1).any():
             raise SurveyError(f"camera {cam.id}: saw none of the {len(X)} survey points "
                               "(check its frames, its id, or where it looks)")
+    fold = fold_of(len(X), folds, seed)
+    if lens == "auto" or (isinstance(lens, str) and lens != "pose" and decide_forced):
+        asked = LENS_MODELS if lens == "auto" else ("pose", lens)
+        decision = decide(nominal, X, uv, ids, fold, asked,
+                          fixed=None if lens == "auto" else {c.id: lens for c in nominal},
+                          progress=progress)
+    for k, cam in enumerate(nominal):
+        seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
         pid = [ids[i] for i in seen]
         if lens == "auto":
-            if len(seen) < min_points("pose"):
-                raise SurveyError(f"camera {cam.id}: sees {len(seen)} survey points, needs at "
-                                  f"least {min_points('pose')}")
-            fit, choice = choose_lens(cam, X[seen], uv[k, seen], pid, fold_of(len(seen), folds,
-                                                                              seed))
-            choices.append(choice)
+            model = decision.models[cam.id]
+            fit = decision.fits[cam.id][model].fit
+            choices.append(_decided_choice(decision, cam.id, fit, X[seen]))
         else:
             model = lens.get(cam.id, "pose") if isinstance(lens, dict) else lens
-            fit = fit_camera(cam, X[seen], uv[k, seen], pid, model, outlier_px)
-            while isinstance(lens, dict) and model != "pose" and not fit.support.ok:
-                # a fold of an automatic choice: the next simpler model, as the choice would
-                model = LENS_MODELS[LENS_MODELS.index(model) - 1]
-                fit = fit_camera(cam, X[seen], uv[k, seen], pid, model, outlier_px)
-            if not fit.support.ok:
+            if decision is not None and model in decision.fits[cam.id]:
+                fit = decision.fits[cam.id][model].fit
+            else:
+                fit = fit_camera(cam, X[seen], uv[k, seen], pid, model, outlier_px,
+                                 start=None if starts is None else starts[k],
+                                 starts=_model_starts(cam, X[seen], uv[k, seen], model)
+                                 if starts is None else ())
+            if not fit.support.rcond > SINGULAR:  # no fit at all, as OpenCV's would not be
                 raise SurveyError(f"camera {cam.id}: cannot fit its lens ({model}): "
-                                  f"{fit.support.reason} (or let --lens auto decide)")
-            choices.append(_lens_choice(fit, cam.id, True, {}, X[seen]))
+                                  f"{fit.support.reason}")
+            choice = _decided_choice(decision, cam.id, fit, X[seen]) if decision else \
+                _lens_choice(fit, cam.id, True, {}, X[seen])
+            choice.forced = True
+            choices.append(choice)
         fits.append(fit)
         for p in fit.outliers:
             rejected[p] = rejected.get(p, 0) + 1
@@ -702,25 +411,14 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
                               f"{fit.resid_px:.3g} px, {fit.resid_px / diag:.1%} of its image "
                               "diagonal): check its frames, its id, or what it sees")
     models = [f.model for f in fits]
-    pixel_sigma = float(np.sqrt(np.nanmean([f.resid_px ** 2 for f in fits])))
-    pixel_sigma = float(np.fmax(pixel_sigma, 1e-6))
     stated = None if estimated else float(point_sigma)
+    rounds = 1 if pixel_sigma is not None and stated is not None else 5
+    if pixel_sigma is None:
+        pixel_sigma = float(np.sqrt(np.nanmean([f.resid_px ** 2 for f in fits])))
+    pixel_sigma = float(np.fmax(pixel_sigma, 1e-6))
     point_sigma, pixel_sigma, cams, adjusted = estimate_precision(
-        [f.camera for f in fits], X, obs, models, pixel_sigma, point_sigma=stated)
-    if lens == "auto" and len(nominal) >= 3:
-        # again, against references free of the tape: where the other cameras see each point
-        refs = _references(cams, X, uv, obs, point_sigma, pixel_sigma)
-        choices, starts = [], []
-        for k, cam in enumerate(nominal):
-            seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
-            fit2, choice = choose_lens(cam, refs[k][seen], uv[k, seen], [ids[i] for i in seen],
-                                       fold_of(len(seen), folds, seed))
-            choices.append(choice)
-            fits[k].model, fits[k].support = fit2.model, fit2.support
-            starts.append(fit2.camera)
-        models = [f.model for f in fits]
-        point_sigma, pixel_sigma, cams, adjusted = estimate_precision(
-            starts, X, obs, models, pixel_sigma, point_sigma=stated)
+        [f.camera for f in fits], X, obs, models, pixel_sigma, point_sigma=stated,
+        iterations=rounds)
     seen_by = np.isfinite(uv).all(axis=2).sum(axis=0)
     suspects = [i for i, pid in enumerate(ids)
                 if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]
@@ -734,26 +432,43 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
         err = np.linalg.norm(cam.project(adjusted[idx])[0] - uvk, axis=1)
         fit.camera, fit.rms_px = cam, float(np.sqrt(np.mean(err ** 2))) if len(err) else 0.0
     return Calibration(cams, fits, adjusted, bad, choices, float(point_sigma),
-                       float(pixel_sigma), estimated)
+                       float(pixel_sigma), estimated, decision)
 
 
 def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
     """The lens decision for one camera in a surveyor's words, with the held-out figures
-    behind it (px, and what that is at the camera's points)."""
+    behind it: the 3D error of held-out points where the choice was made by it, else the
+    reprojection (px, and what that is at the camera's points); and what the survey pins only
+    weakly, with what that costs the fixes."""
     from .lens import LENS_WORDS, describe_lens
 
+    cand = choice.candidates
+    in_3d = any(c.get("held_out_3d_m") is not None for c in cand.values())
+
     def fig(model):
-        px = choice.candidates.get(model, {}).get("held_out_px")
+        if in_3d:
+            m = cand.get(model, {}).get("held_out_3d_m")
+            return None if m is None else format_length(m)
+        px = cand.get(model, {}).get("held_out_px")
         if px is None:
             return None
         return f"{px:.2f} px ({format_length(px * choice.scene_per_px)} at its points)"
 
+    what = "held-out 3D error" if in_3d else "held-out"
     cid, chosen = choice.camera_id, choice.chosen
+    weak = ""
+    if choice.weak:
+        weak = f"; weakly determined: {choice.weak}"
+        if in_3d and chosen != "pose" and fig(chosen) and fig("pose"):
+            better = cand[chosen]["held_out_3d_m"] <= cand["pose"]["held_out_3d_m"]
+            weak += (f" ({'harmless to' if better else 'it costs'} the fixes: {what} "
+                     f"{fig(chosen)} with it, {fig('pose')} with the lens as in the "
+                     "deployment)")
     if choice.forced and choice.reason:
         return f"{cid}: lens model {chosen} ({LENS_WORDS[chosen]}): {choice.reason}"
     if choice.forced:
         return f"{cid}: lens model {chosen} as asked ({LENS_WORDS[chosen]}): " \
-               f"{describe_lens(camera, nominal, chosen)}"
+               f"{describe_lens(camera, nominal, chosen)}" + weak
     if chosen != "pose":
         off = ""
         if "cx" in lens_params(chosen) and not (-0.5 <= camera.cx <= camera.width - 0.5
@@ -761,20 +476,20 @@ def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
             off = ("; its principal point lands outside the image: in a view this narrow it "
                    "trades against the camera's tilt, which is harmless for fixes inside the "
                    "surveyed volume but says nothing about the lens itself")
-        return (f"{cid}: lens fitted ({describe_lens(camera, nominal, chosen)}): held-out "
+        return (f"{cid}: lens fitted ({describe_lens(camera, nominal, chosen)}): {what} "
                 f"{fig(chosen)} instead of {fig('pose')} with the lens as in the deployment"
-                + off)
-    refused = [m for m, c in choice.candidates.items() if not c["supported"]]
-    tried = [m for m, c in choice.candidates.items() if c["supported"] and m != "pose"
-             and c["held_out_px"] is not None]
+                + off + weak)
+    tried = [m for m, c in cand.items() if c["supported"] and m != "pose" and fig(m)]
     if tried and fig("pose"):
-        best = min(tried, key=lambda m: choice.candidates[m]["held_out_px"])
-        why = (f"fitting it did not clearly help: held-out {fig('pose')} as in the deployment, "
+        key = "held_out_3d_m" if in_3d else "held_out_px"
+        best = min(tried, key=lambda m: cand[m][key])
+        why = (f"fitting it did not clearly help: {what} {fig('pose')} as in the deployment, "
                f"{fig(best)} with {best}")
     else:
         why = "nothing richer could be fitted"
+    refused = [m for m, c in cand.items() if not c["supported"]]
     if refused:
-        why += f"; {refused[0]} not fitted: {choice.candidates[refused[0]]['reason']}"
+        why += f"; {refused[0]} not fitted: {cand[refused[0]]['reason']}"
     return f"{cid}: lens kept as in the deployment ({why})"
 
 

@@ -685,7 +685,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
         chosen, held = _joint_lens_choice(cams, adj, prior(s_x), uv_all, keep, free, s_px,
                                           lengths=lengths_of(keep), aspect=aspect)
         models = [chosen] * C
-        from .calibration import _lens_choice, fit_camera
+        from .calibration import _lens_choice
+        from .camera_fit import fit_camera
 
         for k, cam in enumerate(cams):
             idx = np.flatnonzero(keep[k])
@@ -769,7 +770,8 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
     while step < total:  # the steps that had nothing to do (a reference no camera pair saw)
         tick()
     if not choices:
-        from .calibration import _lens_choice, fit_camera
+        from .calibration import _lens_choice
+        from .camera_fit import fit_camera
 
         for k, cam in enumerate(cams):
             idx = np.flatnonzero(keep[k])

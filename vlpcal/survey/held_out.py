@@ -35,12 +35,15 @@ HELD_OUT = (("nominal, (a) mean of pairs", "nominal", "mean"),
 def held_out(nominal: list[Camera], X, uv, ids, room, lens: str | dict = "pose", folds: int = 5,
              point_sigma: float = 0.003, progress=None, seed: int = 0,
              per_point: dict | None = None, pair_method: str = "paper",
-             max_residual: float = 2.0, nominal_max_residual: float | None = None) -> dict:
+             max_residual: float = 2.0, nominal_max_residual: float | None = None,
+             starts: list[Camera] | None = None, pixel_sigma: float | None = None) -> dict:
     """k-fold accuracy by survey point: calibrate on the other folds (with the lens models
     ``lens`` and the positions' precision ``point_sigma`` m), locate this fold's points from
     their spots, compare with their measured positions. Never the fitted points. The nominal
     cameras are judged with ``nominal_max_residual`` (their own file's limit), the calibrated
-    ones with ``max_residual``.
+    ones with ``max_residual``. ``starts``: the calibration on every point, whose minimum each
+    fold's fit starts from, and ``pixel_sigma`` its spots' precision (px): each fold is then
+    one joint fit, the whole survey's starts and precision taken as they are.
 
     Returns label → :func:`error_stats` (metres) over all folds, for :data:`HELD_OUT`; the
     per-point errors go into ``per_point`` (label → N errors, m) when given.
@@ -55,7 +58,8 @@ def held_out(nominal: list[Camera], X, uv, ids, room, lens: str | dict = "pose",
         test, train = np.flatnonzero(fold == f), np.flatnonzero(fold != f)
         try:
             cal = calibrate(nominal, X[train], uv[:, train], [ids[i] for i in train],
-                            point_sigma=point_sigma, lens=lens)
+                            point_sigma=point_sigma, lens=lens, starts=starts,
+                            decide_forced=False, pixel_sigma=pixel_sigma)
         except SurveyError as e:
             raise SurveyError(f"too few points for a {folds}-fold held-out check ({e} in a "
                               f"fold of {len(train)}); add points or use fewer folds") from None

@@ -5,7 +5,7 @@ as in the deployment), ``focal`` (+ fx, fy), ``principal`` (+ cx, cy), ``k1`` (+
 term), ``k2`` (+ k2 and the tangential p1, p2), ``full`` (+ k3). A fit's parameters are a flat
 vector: rotation (3), position (3), then the model's lens numbers in that order.
 
-Whether a survey *determines* a model is judged from the fit itself, never in metres. Free
+How well a survey *determines* a model is judged from the fit itself, never in metres. Free
 focal lengths trade against the camera's distance unless the points spread in depth: the
 perspective the survey shows — its depth range relative to the distance, times the points'
 radius from the image centre — must stand :data:`PERSPECTIVE_SNR` times above the fit's own residual
@@ -13,6 +13,9 @@ spread, the fit's information matrix (columns scaled to unit norm) must not be s
 its covariance must pin the focal length (relative standard error) more finely than the
 depth span relative to the distance.
 Both are ratios of the scene to itself: the same survey at any scale gets the same verdict.
+The verdict is a warning, never a refusal: a focal length that trades against the distance
+costs the fixes nothing, and whether a model helps is decided by what it does to them
+(:mod:`.lens_decision`).
 """
 
 from __future__ import annotations
@@ -126,21 +129,19 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv,
     if persp >= PERSPECTIVE_SNR * resid_px and focal_se > rel:
         return Support(False, persp, rel, resid_px, rcond,
                        f"its points span only {rel:.2%} of their distance in depth, which pins "
-                       f"its focal length only to ±{focal_se:.2%} with this lens model: survey "
-                       "at more heights to fit its lens")
+                       f"its focal length only to ±{focal_se:.2%} with this lens model: it "
+                       "trades against the camera's distance along the view")
     ok = bool(persp >= PERSPECTIVE_SNR * resid_px)
     if ok and nominal is not None:
         ratio = (cam.fx + cam.fy) / (nominal.fx + nominal.fy)
         if not 0.5 <= ratio <= 2.0:
             return Support(False, persp, rel, resid_px, rcond,
                            f"the fit moved its focal length {ratio:.2g} times the deployment's "
-                           "(a lens this far off is a degenerate fit, not a lens): survey at "
-                           "more heights to fit its lens")
+                           "(a lens this far off is a trade against the pose, not a lens)")
     reason = "" if ok else (
         f"its points span only {rel:.2%} of their distance in depth, giving {persp:.2g} px of "
         f"perspective, less than {PERSPECTIVE_SNR:g}× its {resid_px:.2g} px of spot scatter, so "
-        "its focal length cannot be told from its distance; survey at more heights to fit its "
-        "lens")
+        "its focal length cannot be told from its distance (more heights would)")
     return Support(ok, persp, rel, resid_px, rcond, reason)
 
 

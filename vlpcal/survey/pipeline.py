@@ -51,11 +51,16 @@ class SurveyResult:
     lens: list = field(default_factory=list)  #: per camera, the lens decision in words
     folds: int = 5  #: of the held-out check
     test_points: dict | None = None  #: :func:`test_point_errors`, when test points were given
+    #: the held-out 3D figures behind the lens models, beside plain OpenCV's
+    #: (:class:`~.lens_decision.LensDecision`; None when the lens was forced as "pose")
+    decision: object = None
 
     def report(self, notes=()) -> dict:
         out = {"held_out_m": self.stats, "folds": self.folds, "cameras": self.cameras,
                "fusion": self.fusion,
                "lens": self.lens, "precision": self.precision,
+               "lens_decision": None if self.decision is None else decision_report(
+                   self.decision),
                "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
                "notes": list(notes)}
         if self.test_points is not None:
@@ -72,7 +77,8 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     (``point_sigma="auto"``) or as given (m) — measure the held-out accuracy (k-fold) with
     those choices, learn the region map (approach (c)) and choose the fusion with the lowest
     held-out mean; returns the calibrated deployment, its provenance naming ``sources``.
-    ``progress(i, n)`` counts the full fit and each fold. ``intrinsics=True``: ``lens="full"``.
+    ``progress(i, n)`` counts each camera's lens models, the joint fit and each fold.
+    ``intrinsics=True``: ``lens="full"``.
     """
     from ..deployment import Deployment, provenance
     from ..geometry import rodrigues
@@ -81,16 +87,20 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     if intrinsics:
         lens = "full"
     cams = dep.cameras
-    cal = calibrate(cams, X, uv, ids, point_sigma=point_sigma, lens=lens, folds=folds)
+    total = len(cams) + 1 + folds
+    cal = calibrate(cams, X, uv, ids, point_sigma=point_sigma, lens=lens, folds=folds,
+                    progress=(lambda i, n: progress(i, total)) if progress else None)
     if progress:
-        progress(1, folds + 1)
+        progress(len(cams) + 1, total)
     per_point: dict = {}
     stated = dep.extra.get("fusion", {}).get("max_residual")
     limit = float(stated) if stated is not None else residual_limit(cal)
     stats = held_out(cams, X, uv, ids, dep.room, cal.models, folds, cal.point_sigma,
-                     progress=(lambda i, n: progress(i + 1, n + 1)) if progress else None,
+                     progress=(lambda i, n: progress(len(cams) + 1 + i, total))
+                     if progress else None,
                      per_point=per_point, pair_method=dep.pair_method, max_residual=limit,
-                     nominal_max_residual=dep.max_residual)
+                     nominal_max_residual=dep.max_residual, starts=cal.cameras,
+                     pixel_sigma=cal.pixel_sigma)
     rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
     best = min(FUSION_OF, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
                else np.inf)
@@ -125,7 +135,20 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
                             extra)
     return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
-                        np.asarray(X, float), precision, words, folds)
+                        np.asarray(X, float), precision, words, folds, decision=cal.decision)
+
+
+def decision_report(decision) -> dict:
+    """The report's ``lens_decision``: the held-out 3D means (m) of the choice, of plain
+    OpenCV on the same folds, and of every camera with one model."""
+    return {"held_out_3d_m": _finite(decision.held_out_m),
+            "opencv_held_out_3d_m": _finite(decision.opencv_m),
+            "one_model_for_all_m": {m: _finite(v) for m, v in decision.uniform_m.items()},
+            "models": dict(decision.models), "points": decision.points,
+            "starts_disagree": {c: {"model": d.model, "chained_principal_px": list(d.chained),
+                                    "kept_principal_px": list(d.best),
+                                    "cost_ratio": d.cost_ratio}
+                                for c, d in decision.starts_disagree.items()}}
 
 
 @dataclass

@@ -24,9 +24,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+from rough_rig import looking_at, write_bundles, write_deployment  # noqa: E402
 
 
 def main(src):
@@ -55,40 +56,18 @@ def main(src):
                                               None, flags=cv2.CALIB_USE_INTRINSIC_GUESS)
         R = cv2.Rodrigues(rv[0])[0]
         pos = np.round(-R.T @ tv[0].ravel(), 2)
-        # image right in the world, from the data: the least-squares gradient of u over x, y
-        A = np.c_[X[m, :2], np.ones(m.sum())]
-        right = np.r_[np.linalg.lstsq(A, uv[k, m, 0], rcond=None)[0][:2], 0.0]
-        z = centre - pos
-        z /= np.linalg.norm(z)
-        x = right - z * (right @ z)
-        x /= np.linalg.norm(x)
-        Rn = np.stack([x, np.cross(z, x), z])
         cams.append({"id": f"C{k + 1}", "width": 1280, "height": 1024, "fx": 6000.0,
                      "fy": 6000.0, "cx": 639.5, "cy": 511.5, "dist": [0.0] * 5,
                      "position": [float(v) for v in pos],
-                     "rotation": [float(v) for v in cv2.Rodrigues(Rn)[0].ravel()]})
-    dep = {"format": "vlpcal-deployment", "version": 1,
-           "site": {"name": "myptv-example", "ceiling_height": 0.6,
-                    "room": [[-0.1, -0.05], [0.2, -0.05], [0.2, 0.15], [-0.1, 0.15]],
-                    "keep_out": []},
-           "cameras": cams}
-    (HERE / "nominal.yaml").write_text(
+                     "rotation": looking_at(pos, centre, X[m], uv[k, m, 0])})
+    write_deployment(
+        HERE / "nominal.yaml",
         "# MyPTV example rig (ronshnapp/MyPTV, MIT): the rough deployment before calibration\n"
-        "# (tests/data/myptv/derive.py says how it was made)\n"
-        + yaml.safe_dump(dep, sort_keys=False))
-    for name, sel in (("survey", ~test), ("test", test)):
-        d = HERE / name
-        d.mkdir(exist_ok=True)
-        with open(d / "points.csv", "w") as f:
-            f.write("point_id,x,y,z\n")
-            for i in np.flatnonzero(sel):
-                f.write(f"{ids[i]},{X[i, 0]:.6f},{X[i, 1]:.6f},{X[i, 2]:.6f}\n")
-        with open(d / "observations.csv", "w") as f:
-            f.write("point_id,camera_id,u,v\n")
-            for i in np.flatnonzero(sel):
-                for k in range(3):
-                    if np.isfinite(uv[k, i, 0]):
-                        f.write(f"{ids[i]},C{k + 1},{uv[k, i, 0]:.2f},{uv[k, i, 1]:.2f}\n")
+        "# (tests/data/myptv/derive.py says how it was made)\n",
+        {"name": "myptv-example", "ceiling_height": 0.6,
+         "room": [[-0.1, -0.05], [0.2, -0.05], [0.2, 0.15], [-0.1, 0.15]], "keep_out": []},
+        cams)
+    write_bundles(HERE, ids, X, uv, ["C1", "C2", "C3"], test)
 
 
 if __name__ == "__main__":
