@@ -212,7 +212,9 @@ its own held-out reprojection error, `supported` (fitted), `determined` (whether
 pins it) and the `reason` when not) and `lens`, the decision in words), `lens` (those
 sentences), `lens_decision` (`held_out_3d_m` of the choice, `opencv_held_out_3d_m` of plain
 OpenCV `calibrateCamera` with its full lens on the same folds, `one_model_for_all_m` per
-model, `models`, the `points` they count: those seen by two or more cameras, and
+model, `models`, the `points` they count: those seen by two or more cameras, `cap_m`, where
+a failed or wild prediction counts (ten times the typical error), `opencv_capped`, the points
+plain OpenCV could not fit or put past it, and
 `starts_disagree`: per camera whose fit has more than one minimum, its `model`, the
 `chained_principal_px` from the simpler model's fit, the `kept_principal_px` of the lowest
 cost and the `cost_ratio` between them; `null` when the lens was forced as `pose`),

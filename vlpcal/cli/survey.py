@@ -907,10 +907,24 @@ def _print_lens_table(result) -> None:
     d = result.decision
     if not rows or d is None:
         return
+    if not d.points:
+        click.echo("  no survey point was seen by two cameras: each lens was chosen by its own "
+                   "held-out reprojection error")
+        return
     figures = [c.get("held_out_3d_m") for r in rows for c in r["lens_candidates"].values()]
     unit, scale = _unit_for([f for f in figures if f is not None])
+    for cid, s in d.starts_disagree.items():
+        nom = next(c for c in result.deployment.cameras if c.id == cid)
+        centre = ((nom.width - 1) / 2, (nom.height - 1) / 2)
+        click.echo(f"  {cid}: its fit ({s.model}) has more than one minimum: the principal point "
+                   f"{s.chained[0] - centre[0]:+.0f}, {s.chained[1] - centre[1]:+.0f} px from "
+                   f"the image centre (from the simpler fits) or {s.best[0] - centre[0]:+.0f}, "
+                   f"{s.best[1] - centre[1]:+.0f} px (from the data's own starts, "
+                   f"{s.cost_ratio:.3g} × lower in cost): the lower kept, then refined with "
+                   "the rest")
     click.echo(f"held-out 3D error per camera's lens model, {unit} (each camera fitted alone, "
-               f"the others as chosen; * chosen; – not fitted):\n  {'camera':8s}"
+               f"the others as chosen; * chosen: the simplest within one standard error of "
+               f"the lowest; – not fitted):\n  {'camera':8s}"
                + "".join(f"{m:>11s}" for m in LENS_MODELS))
     for r in rows:
         cells = []
@@ -922,19 +936,14 @@ def _print_lens_table(result) -> None:
         click.echo(f"  {r['camera']:8s}" + "".join(cells))
     import math
 
-    if math.isfinite(d.opencv_m):
-        click.echo(f"  this choice {format_length(d.held_out_m)}; plain OpenCV calibrateCamera "
-                   f"(full lens, from the deployment's) {format_length(d.opencv_m)} on the "
-                   f"same folds ({d.points} points seen by two or more cameras; the joint fit "
-                   "below refines both cameras and points)")
-    else:
-        click.echo(f"  this choice {format_length(d.held_out_m)}; plain OpenCV calibrateCamera "
-                   "could not fit every camera on every fold")
-    for cid, s in d.starts_disagree.items():
-        click.echo(f"  {cid}: its fit ({s.model}) has more than one minimum: the principal point "
-                   f"at ({s.chained[0]:.0f}, {s.chained[1]:.0f}) px from the simpler model's "
-                   f"fit, at ({s.best[0]:.0f}, {s.best[1]:.0f}) px from the data's own starts, "
-                   f"{s.cost_ratio:.3g} × lower in cost: kept")
+    capped = (f"; {d.opencv_capped} of its points past the {format_length(d.cap_m)} cap, "
+              "where a fold it could not fit or a wild fix counts" if d.opencv_capped else "")
+    click.echo(f"  this choice {format_length(d.held_out_m)}; plain OpenCV calibrateCamera "
+               f"(full lens, from the deployment's) "
+               f"{format_length(d.opencv_m) if math.isfinite(d.opencv_m) else 'no fit'} on the "
+               f"same folds{capped} ({d.points} points seen by two or more cameras, "
+               "triangulated by least squares; the k-fold table below fits cameras and points "
+               "jointly and fixes points as the locator does)")
     if d.held_out_m > d.opencv_m:
         click.echo(f"warning: plain OpenCV locates the held-out survey points better "
                    f"({format_length(d.opencv_m)} against {format_length(d.held_out_m)})",
@@ -989,10 +998,14 @@ def _print_calibration(result, folds: int) -> None:
                    f"{', '.join(r['outliers']) or '–'}")
     for r in result.cameras:
         if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
+            traded = r["lens_model"] != "pose" and any(
+                w in r["lens"] for w in ("weakly determined", "principal point lands outside"))
+            why = ("; its lens line says its fit trades the lens against the pose: the move "
+                   "may be that, not the camera" if traded else
+                   ": is this survey from this site, and are the camera ids the same?")
             click.echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
                        f"({r['moved_share']:.0%} of its distance to the survey) and turned "
-                       f"{r['turned_deg']:.0f}° from the deployment: is this survey from this "
-                       "site, and are the camera ids the same?", err=True)
+                       f"{r['turned_deg']:.0f}° from the deployment{why}", err=True)
     if result.mismeasured:
         click.echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
                    "from its record the calibrated cameras put the LED):")

@@ -456,29 +456,33 @@ def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
 
     what = "held-out 3D error" if in_3d else "held-out"
     cid, chosen = choice.camera_id, choice.chosen
-    weak = ""
-    if choice.weak:
-        weak = f"; weakly determined: {choice.weak}"
-        if in_3d and chosen != "pose" and fig(chosen) and fig("pose"):
-            better = cand[chosen]["held_out_3d_m"] <= cand["pose"]["held_out_3d_m"]
-            weak += (f" ({'harmless to' if better else 'it costs'} the fixes: {what} "
-                     f"{fig(chosen)} with it, {fig('pose')} with the lens as in the "
-                     "deployment)")
     if choice.forced and choice.reason:
         return f"{cid}: lens model {chosen} ({LENS_WORDS[chosen]}): {choice.reason}"
+    notes = ""
+    if "cx" in lens_params(chosen) and not (-0.5 <= camera.cx <= camera.width - 0.5
+                                            and -0.5 <= camera.cy <= camera.height - 0.5):
+        notes += ("; its principal point lands outside the image: in a view this narrow it "
+                  "trades against the camera's tilt, which is harmless for fixes inside the "
+                  "surveyed volume but says nothing about the lens itself")
+    if choice.weak:
+        notes += f"; weakly determined: {choice.weak}"
+        if in_3d and choice.forced and chosen != "pose" and fig(chosen) and fig("pose"):
+            better = cand[chosen]["held_out_3d_m"] <= cand["pose"]["held_out_3d_m"]
+            notes += (f" ({'harmless to' if better else 'it costs'} the fixes: {what} "
+                      f"{fig(chosen)} with it, {fig('pose')} with the lens as in the "
+                      "deployment" + ("" if better else "; the automatic choice avoids it")
+                      + ")")
+        elif in_3d:
+            notes += ": chosen for what it does to the fixes, which the held-out 3D error counts"
     if choice.forced:
         return f"{cid}: lens model {chosen} as asked ({LENS_WORDS[chosen]}): " \
-               f"{describe_lens(camera, nominal, chosen)}" + weak
+               f"{describe_lens(camera, nominal, chosen)}" + notes
     if chosen != "pose":
-        off = ""
-        if "cx" in lens_params(chosen) and not (-0.5 <= camera.cx <= camera.width - 0.5
-                                                and -0.5 <= camera.cy <= camera.height - 0.5):
-            off = ("; its principal point lands outside the image: in a view this narrow it "
-                   "trades against the camera's tilt, which is harmless for fixes inside the "
-                   "surveyed volume but says nothing about the lens itself")
-        return (f"{cid}: lens fitted ({describe_lens(camera, nominal, chosen)}): {what} "
-                f"{fig(chosen)} instead of {fig('pose')} with the lens as in the deployment"
-                + off + weak)
+        said = (f"{what} {fig(chosen)} with every camera as chosen, {fig('pose')} with this "
+                "one's lens as in the deployment" if in_3d else
+                f"{what} {fig(chosen)} instead of {fig('pose')} with the lens as in the "
+                "deployment")
+        return f"{cid}: lens fitted ({describe_lens(camera, nominal, chosen)}): {said}" + notes
     tried = [m for m, c in cand.items() if c["supported"] and m != "pose" and fig(m)]
     if tried and fig("pose"):
         key = "held_out_3d_m" if in_3d else "held_out_px"

@@ -128,9 +128,10 @@ def lens_support(cam: Camera, model: str, jac, resid_px: float, X, uv,
     focal_se = float(np.sqrt(max((cov[6, 6] + cov[7, 7] + 2 * cov[6, 7]) / 4, 0.0)) / f)
     if persp >= PERSPECTIVE_SNR * resid_px and focal_se > rel:
         return Support(False, persp, rel, resid_px, rcond,
-                       f"its points span only {rel:.2%} of their distance in depth, which pins "
-                       f"its focal length only to ±{focal_se:.2%} with this lens model: it "
-                       "trades against the camera's distance along the view")
+                       f"its points span only {rel:.2%} of their distance in depth: fits that "
+                       f"place them equally well differ in focal length by ±{focal_se:.2%} "
+                       "with this lens model (it trades against the camera's distance along "
+                       "the view)")
     ok = bool(persp >= PERSPECTIVE_SNR * resid_px)
     if ok and nominal is not None:
         ratio = (cam.fx + cam.fy) / (nominal.fx + nominal.fy)

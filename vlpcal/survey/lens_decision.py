@@ -64,6 +64,8 @@ class LensDecision:
     #: camera id → :class:`StartsDisagree`, where its chosen model's starts reached different
     #: minima
     starts_disagree: dict = field(default_factory=dict)
+    cap_m: float = float("inf")  #: where a failed or wild prediction counts (m)
+    opencv_capped: int = 0  #: points plain OpenCV could not fit or put past the cap
 
 
 @dataclass
@@ -295,7 +297,8 @@ def decide(nominal: list[Camera], X, uv, ids, fold, models=LENS_MODELS, progress
     disagree = {c: d for c in ids_c if (d := _disagreement(fits[c][assign[c]].fit)) is not None}
     return LensDecision(assign, chosen, held.mean(e_cv),
                         {m: held.mean(e) for m, e in uniform.items()}, per_camera,
-                        int(held.counted.sum()), fits, disagree)
+                        int(held.counted.sum()), fits, disagree, float(held.cap),
+                        int((e_cv[held.counted] >= held.cap).sum()))
 
 
 def _disagreement(fit) -> StartsDisagree | None:

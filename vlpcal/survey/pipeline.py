@@ -145,6 +145,7 @@ def decision_report(decision) -> dict:
             "opencv_held_out_3d_m": _finite(decision.opencv_m),
             "one_model_for_all_m": {m: _finite(v) for m, v in decision.uniform_m.items()},
             "models": dict(decision.models), "points": decision.points,
+            "cap_m": _finite(decision.cap_m), "opencv_capped": decision.opencv_capped,
             "starts_disagree": {c: {"model": d.model, "chained_principal_px": list(d.chained),
                                     "kept_principal_px": list(d.best),
                                     "cost_ratio": d.cost_ratio}
