@@ -17,7 +17,7 @@ from pathlib import Path
 from .blink import BlinkCode, check_codes
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
-from .geometry import Camera
+from .geometry import Camera, max_radius2
 from .reading import ID_RULE, is_id, shown
 
 FORMAT, VERSION = "vlpcal-deployment", 1
@@ -224,6 +224,9 @@ MAX_LENGTH = 1e5
 FOCAL_RANGE = (0.01, 1000.0)
 #: |a distortion term at the image corner|: OpenCV's fits of real lenses stay well inside
 MAX_DISTORTION = 1e3
+#: a lens whose radial distortion turns back (r · (1 + k1 r² + …) stops growing) nearer the
+#: centre than this share of the corner's radius images nothing there: not a lens
+FOLD_SHARE = 0.5
 #: the power of the corner's radius each of k1, k2, p1, p2, k3 multiplies
 DISTORTION_POWERS = (2, 4, 1, 1, 6)
 #: radians: the length of a rotation vector (one turn is 2π; a fit may wrap once more)
@@ -390,6 +393,11 @@ def check_intrinsics(c: dict, where: str) -> None:
                 f"{where}.dist[{i}]: expected a coefficient whose term at the image corner "
                 f"(× r^{power}, r = {r:.3g}) is within -{MAX_DISTORTION:g} to "
                 f"{MAX_DISTORTION:g}, got {shown(value)}")
+    fold = math.sqrt(max_radius2(dist))
+    if fold < FOLD_SHARE * r:
+        raise DeploymentError(
+            f"{where}.dist: expected a lens that images the middle of its picture, got one "
+            f"whose distortion folds back at {fold / r:.1%} of the way to the image corner")
 
 
 def _near_the_room(position, room, height: float, where: str) -> None:

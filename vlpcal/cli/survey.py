@@ -638,6 +638,13 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     paths = _write_or_refuse(out, result, notes, survey_path,
                              f"Calibrated by vlpcal survey calibrate from {survey_path}.")
     label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
+    if all(st["mean"] is None for st in result.stats.values()):
+        click.echo("warning: no held-out survey point got a fix (none was seen by two "
+                   "cameras): nothing says how well these cameras locate; survey where they "
+                   "overlap", err=True)
+        click.echo(f"\nwrote {paths[0]} (fusion {result.fusion}: no fusion could be compared), "
+                   f"{paths[1]}, {paths[2]}")
+        return
     click.echo(f"\nwrote {paths[0]} (fusion {result.fusion}: the table's row '{label}', the "
                f"best held out), {paths[1]}, {paths[2]}")
 
@@ -998,8 +1005,7 @@ def _print_calibration(result, folds: int) -> None:
                    f"{', '.join(r['outliers']) or '–'}")
     for r in result.cameras:
         if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
-            traded = r["lens_model"] != "pose" and any(
-                w in r["lens"] for w in ("weakly determined", "principal point lands outside"))
+            traded = r["lens_model"] != "pose" and "weakly determined" in r["lens"]
             why = ("; its lens line says its fit trades the lens against the pose: the move "
                    "may be that, not the camera" if traded else
                    ": is this survey from this site, and are the camera ids the same?")

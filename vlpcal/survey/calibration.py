@@ -23,6 +23,7 @@ from .lens import (
     SINGULAR,
     from_vector,
     lens_params,
+    min_points,
     project_with_jacobian,
     to_vector,
 )
@@ -385,6 +386,10 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
             choices.append(_decided_choice(decision, cam.id, fit, X[seen]))
         else:
             model = lens.get(cam.id, "pose") if isinstance(lens, dict) else lens
+            while isinstance(lens, dict) and model != "pose" and len(seen) < min_points(model):
+                # a fold of a calibration whose camera saw few points: the next simpler model,
+                # as its choice would have been on this fold
+                model = LENS_MODELS[LENS_MODELS.index(model) - 1]
             if decision is not None and model in decision.fits[cam.id]:
                 fit = decision.fits[cam.id][model].fit
             else:
@@ -392,7 +397,8 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
                                  start=None if starts is None else starts[k],
                                  starts=_model_starts(cam, X[seen], uv[k, seen], model)
                                  if starts is None else ())
-            if not fit.support.rcond > SINGULAR:  # no fit at all, as OpenCV's would not be
+            if isinstance(lens, str) and not fit.support.rcond > SINGULAR:
+                # asked for, and no fit at all (as OpenCV's would not be)
                 raise SurveyError(f"camera {cam.id}: cannot fit its lens ({model}): "
                                   f"{fit.support.reason}")
             choice = _decided_choice(decision, cam.id, fit, X[seen]) if decision else \

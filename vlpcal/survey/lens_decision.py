@@ -24,7 +24,7 @@ import numpy as np
 from ..geometry import Camera
 from .camera_fit import fit_camera
 from .errors import SurveyError
-from .lens import LENS_MODELS, lens_params, min_points
+from .lens import LENS_MODELS, SINGULAR, lens_params, min_points
 
 #: principal-point starts: a grid of this many per image axis over the image's central half
 #: (OpenCV from each; the lowest cost is kept)
@@ -157,23 +157,30 @@ def holdable(cam: Camera) -> bool:
     return True
 
 
-def fit_models(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS, starts=()) -> dict:
+def fit_models(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS) -> dict:
     """``models`` (nested, simplest first) fitted to one camera's points ``X``/``uv``: each
     on all of them (from the simpler model's fit and, where the model frees the principal
-    point, from ``starts`` too) and on each fold's complement (from the fit on all: the same
-    minimum, found without the fold). Returns model → :class:`ModelFit`; a model the points
-    cannot fit (too few) is absent, and so is every richer one; so is a fit no deployment can
-    hold (:func:`holdable`)."""
+    point, from :func:`data_starts` on the spots the first fit kept) and on each fold's
+    complement (from the fit on all: the same minimum, found without the fold). Returns
+    model → :class:`ModelFit`; a model the points cannot fit (too few, or a singular fit)
+    is absent, and so is every richer one; so is a fit no deployment can hold
+    (:func:`holdable`)."""
     out: dict = {}
-    prev = None
+    prev, starts = None, None  # the simpler model's fit, the data's starts
     for model in models:
         if len(X) < min_points(model):
             break
+        if starts is None and "cx" in lens_params(model):
+            kept = prev.keep if prev is not None else slice(None)
+            starts = data_starts(nominal, X[kept], uv[kept])  # a wrong spot would mislead
         extra = tuple(as_start(s, nominal, model) for s in starts) \
             if "cx" in lens_params(model) else ()
         try:
-            fit = fit_camera(nominal, X, uv, ids, model, start=prev, starts=extra)
+            fit = fit_camera(nominal, X, uv, ids, model, starts=extra,
+                             start=None if prev is None else prev.camera)
         except SurveyError:
+            break
+        if not fit.support.rcond > SINGULAR:  # the points cannot separate lens and pose
             break
         if not holdable(fit.camera):
             continue
@@ -190,13 +197,19 @@ def fit_models(nominal: Camera, X, uv, ids, fold, models=LENS_MODELS, starts=())
             folds[f] = cam
             err[test] = np.linalg.norm(cam.project(X[test])[0] - uv[test], axis=1)
         out[model] = ModelFit(fit, folds, err)
-        prev = fit.camera
+        prev = fit
     return out
 
 
 def _opencv_folds(nominal: Camera, X, uv, fold) -> dict:
     """Plain OpenCV's camera on each fold's complement (fold → Camera or None)."""
     return {f: opencv_camera(nominal, X[fold != f], uv[fold != f]) for f in np.unique(fold)}
+
+
+#: a choice that could not be fitted on a fold (see :meth:`_HeldOut.errors`)
+FAILED = "failed"
+#: plain OpenCV's fit, judged beside the models
+OPENCV = "opencv"
 
 
 class _HeldOut:
@@ -211,18 +224,22 @@ class _HeldOut:
         self.cap = np.inf
 
     def errors(self, cams_of) -> np.ndarray:
-        """``cams_of(f)``: the C cameras of fold f (None where a camera has no fit there)."""
+        """``cams_of(f)``: the C cameras of fold f: a Camera, :data:`FAILED` where this
+        choice could not be fitted there (the points it saw count as failed), or None where
+        no choice could (a camera too thin on that fold: left out, as for every choice)."""
         err = np.full(len(self.X), np.nan)
         for f in np.unique(self.fold):
             test = np.flatnonzero((self.fold == f) & self.counted)
             cams = cams_of(f)
             if not len(test):
                 continue
-            if any(c is None for c in cams):
-                err[test] = np.inf
-                continue
-            Xh = self._tri(cams, self.uv[:, test]).X
-            err[test] = np.linalg.norm(Xh - self.X[test], axis=1)
+            have = [k for k, c in enumerate(cams) if isinstance(c, Camera)]
+            if len(have) >= 2:
+                Xh = self._tri([cams[k] for k in have], self.uv[have][:, test]).X
+                err[test] = np.linalg.norm(Xh - self.X[test], axis=1)
+            failed = [k for k, c in enumerate(cams) if c is FAILED]
+            if failed:
+                err[test[np.isfinite(self.uv[failed][:, test]).all(axis=2).any(axis=0)]] = np.inf
         err = np.where(self.counted, np.nan_to_num(err, nan=np.inf), np.nan)
         return np.fmin(err, self.cap)
 
@@ -240,12 +257,12 @@ def decide(nominal: list[Camera], X, uv, ids, fold, models=LENS_MODELS, progress
     X = np.asarray(X, float)
     uv = np.asarray(uv, float)
     C = len(nominal)
-    fits, opencv = {}, []
+    fits, opencv = {}, {}
+    clean = uv.copy()  # the spots each camera's first fit kept: a wrong one judges no lens
     for k, cam in enumerate(nominal):
         seen = np.flatnonzero(np.isfinite(uv[k]).all(axis=1))
-        starts = data_starts(cam, X[seen], uv[k, seen])
         per = fit_models(cam, X[seen], uv[k, seen], [ids[i] for i in seen], fold[seen],
-                         models, starts)
+                         models)
         if not per:
             raise SurveyError(f"camera {cam.id}: sees {len(seen)} survey points, needs at "
                               f"least {min_points('pose')}")
@@ -254,21 +271,28 @@ def decide(nominal: list[Camera], X, uv, ids, fold, models=LENS_MODELS, progress
             full[seen] = mf.reprojection_px
             mf.reprojection_px = full
         fits[cam.id] = per
-        opencv.append(_opencv_folds(cam, X[seen], uv[k, seen], fold[seen]))
+        clean[k, seen[~next(iter(per.values())).fit.keep]] = np.nan
+        opencv[cam.id] = _opencv_folds(cam, X[seen], uv[k, seen], fold[seen])
         if progress:
             progress(k + 1, C)
-    held = _HeldOut(X, uv, fold)
+    held = _HeldOut(X, clean, fold)
     ids_c = [c.id for c in nominal]
 
+    def fold_camera(c, model, f):
+        found = fits[c][model].folds.get(f) if model in fits[c] else opencv[c].get(f)
+        if found is not None:
+            return found
+        return FAILED if any(f in mf.folds for mf in fits[c].values()) else None
+
     def errors(assign):
-        return held.errors(lambda f: [fits[c][assign[c]].folds.get(f) for c in ids_c])
+        return held.errors(lambda f: [fold_camera(c, assign[c], f) for c in ids_c])
 
     uniform = {m: errors({c: m if m in fits[c] else list(fits[c])[-1] for c in ids_c})
                for m in models}
     typical = [np.nanmedian(e[held.counted]) for e in uniform.values() if held.counted.any()]
     held.cap = ERROR_CAP * min(typical) if typical and np.isfinite(min(typical)) else np.inf
     uniform = {m: np.fmin(e, held.cap) for m, e in uniform.items()}
-    e_cv = held.errors(lambda f: [o.get(f) for o in opencv])
+    e_cv = held.errors(lambda f: [fold_camera(c, OPENCV, f) for c in ids_c])
     assign = {c: min(models, key=lambda m: held.mean(uniform[m])
                      if all(m in fits[d] for d in ids_c) else np.inf) for c in ids_c}
     assign = {c: m if m in fits[c] else list(fits[c])[-1] for c, m in assign.items()}
