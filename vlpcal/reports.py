@@ -192,7 +192,7 @@ def survey_plan_figure(path, dep, plan, route=None) -> list:
 def calibration_figure(path, stats, per_point, X, cameras, lens_rows=()) -> None:
     """Held-out errors: map over the floor (nominal vs calibrated, all-camera LS) and CDF; with
     ``lens_rows`` (the report's per-camera rows) a panel of each camera's lens models and
-    their held-out reprojection error, the chosen one marked."""
+    the held-out error that chose among them, the chosen one marked."""
     plt = _pyplot()
     nom = per_point["nominal, all-camera LS"] * 100
     cal = per_point["calibrated, all-camera LS"] * 100
@@ -234,24 +234,29 @@ def calibration_figure(path, stats, per_point, X, cameras, lens_rows=()) -> None
 
 
 def _lens_panel(ax, rows) -> None:
-    """Per camera, the held-out reprojection error (px) of each lens model tried; the chosen
-    model filled, the others hollow; models the survey could not support are not drawn."""
+    """Per camera, the held-out error that chose its lens model, for each model fitted: the 3D
+    error of held-out survey points (cm) where the choice was made by it, else the camera's
+    held-out reprojection error (px); the chosen model filled, the others hollow."""
     from .survey import LENS_MODELS
 
+    in_3d = any(c.get("held_out_3d_m") is not None
+                for r in rows for c in r.get("lens_candidates", {}).values())
+    key, scale = ("held_out_3d_m", 100.0) if in_3d else ("held_out_px", 1.0)
     width = 0.8 / len(LENS_MODELS)
     for j, model in enumerate(LENS_MODELS):
         xs, ys, chosen = [], [], []
         for i, r in enumerate(rows):
-            px = r.get("lens_candidates", {}).get(model, {}).get("held_out_px")
-            if px is not None:
+            v = r.get("lens_candidates", {}).get(model, {}).get(key)
+            if v is not None:
                 xs.append(i - 0.4 + (j + 0.5) * width)
-                ys.append(px)
+                ys.append(v * scale)
                 chosen.append(model == r.get("lens_model"))
         colour = f"C{j}"
         ax.bar(xs, ys, width, color=[colour if c else "none" for c in chosen],
                edgecolor=colour, label=model)
     ax.set_xticks(range(len(rows)), [r["camera"] for r in rows], fontsize=7)
-    ax.set_ylabel("held-out reprojection error (px)")
+    ax.set_ylabel("held-out 3D error (cm; the other cameras as chosen)" if in_3d
+                  else "held-out reprojection error (px)")
     ax.set_title("lens model per camera (filled: chosen)", fontsize=9)
     ax.legend(fontsize=6, ncol=2)
     ax.grid(alpha=0.3, axis="y")
