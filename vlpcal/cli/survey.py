@@ -552,7 +552,7 @@ class PointSigma(click.ParamType):
               help="Calibrated deployment to write; a report (.report.json, .png) goes beside.")
 @click.option("--lens", default="auto", show_default=True,
               type=click.Choice(("auto", "pose", "focal", "principal", "k1", "k2", "full")),
-              help="Lens model per camera: auto chooses by held-out error among the nested "
+              help="Lens model per camera: auto chooses by held-out 3D error among the nested "
                    "models pose (lens as in the deployment), focal (+ fx, fy), principal "
                    "(+ cx, cy), k1 (+ radial k1), k2 (+ radial k2, tangential p1, p2), full "
                    "(+ radial k3); the others force one for every camera.")
