@@ -331,7 +331,7 @@ def fold_of(n: int, folds: int, seed: int = 0) -> np.ndarray:
 def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
               point_sigma: float | str = 0.003, outlier_px: float | None = None,
               lens: str | dict | None = None, folds: int = 5, seed: int = 0,
-              starts: list[Camera] | None = None, decide_forced: bool = True,
+              starts: list[Camera] | None = None,
               pixel_sigma: float | None = None, progress=None) -> Calibration:
     """Calibrate every camera from the survey: ``X`` N×3 measured positions, ``uv`` C×N×2
     spots (NaN: not seen), ``ids`` the point ids.
@@ -339,8 +339,9 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     ``lens``: ``"auto"`` (each camera's model decided by the held-out 3D error over ``folds``
     folds, :mod:`.lens_decision`), one of :data:`~.lens.LENS_MODELS` for every camera, or
     camera id → model; default ``"full"`` with ``intrinsics`` else ``"pose"``. A forced model
-    is fitted even where the survey determines it only weakly; unless ``decide_forced`` is
-    false, its held-out 3D error is weighed against the deployment's lens for the report.
+    is fitted even where the survey determines it only weakly; a forced string is weighed by
+    its held-out 3D error against the deployment's lens for the report (a dict, a fold's
+    models, is not).
     ``starts``: a camera per camera to start each fit from (a fold of a calibration: the
     same minimum as the whole). ``point_sigma``: metres, or ``"auto"``
     (:func:`estimate_precision`); with it, ``pixel_sigma`` (px) stated too (a fold of a
@@ -372,7 +373,7 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
             raise SurveyError(f"camera {cam.id}: saw none of the {len(X)} survey points "
                               "(check its frames, its id, or where it looks)")
     fold = fold_of(len(X), folds, seed)
-    if lens == "auto" or (isinstance(lens, str) and lens != "pose" and decide_forced):
+    if lens == "auto" or (isinstance(lens, str) and lens != "pose"):
         asked = LENS_MODELS if lens == "auto" else ("pose", lens)
         decision = decide(nominal, X, uv, ids, fold, asked,
                           fixed=None if lens == "auto" else {c.id: lens for c in nominal},

@@ -59,7 +59,7 @@ def held_out(nominal: list[Camera], X, uv, ids, room, lens: str | dict = "pose",
         try:
             cal = calibrate(nominal, X[train], uv[:, train], [ids[i] for i in train],
                             point_sigma=point_sigma, lens=lens, starts=starts,
-                            decide_forced=False, pixel_sigma=pixel_sigma)
+                            pixel_sigma=pixel_sigma)
         except SurveyError as e:
             raise SurveyError(f"too few points for a {folds}-fold held-out check ({e} in a "
                               f"fold of {len(train)}); add points or use fewer folds") from None

@@ -83,6 +83,11 @@ def opencv_camera(nominal: Camera, X, uv, principal=None) -> Camera | None:
     """Plain OpenCV: ``calibrateCamera`` on one camera's points with the full 5-term lens,
     from the deployment's lens (``CALIB_USE_INTRINSIC_GUESS``, as a non-planar target needs)
     or with the principal point at ``principal``; None where OpenCV refuses."""
+    return _opencv_fit(nominal, X, uv, principal)[0]
+
+
+def _opencv_fit(nominal: Camera, X, uv, principal=None) -> tuple[Camera | None, float]:
+    """:func:`opencv_camera` and OpenCV's own reprojection RMS (px; inf where it refused)."""
     import cv2
 
     X = np.asarray(X, float)
@@ -91,17 +96,17 @@ def opencv_camera(nominal: Camera, X, uv, principal=None) -> Camera | None:
     if principal is not None:
         K[0, 2], K[1, 2] = principal
     try:
-        _, K, d, rv, tv = cv2.calibrateCamera(
+        rms, K, d, rv, tv = cv2.calibrateCamera(
             [X.astype(np.float32)], [uv.astype(np.float32)], (nominal.width, nominal.height),
             K, np.zeros(5), flags=cv2.CALIB_USE_INTRINSIC_GUESS)
     except cv2.error:
-        return None
+        return None, np.inf
     R = cv2.Rodrigues(rv[0])[0]
     cam = Camera(nominal.id, nominal.width, nominal.height, K[0, 0], K[1, 1], K[0, 2], K[1, 2],
                  tuple(d.ravel()[:5]), -R.T @ tv[0].ravel(), rv[0].ravel())
     ok = np.isfinite([cam.fx, cam.fy, cam.cx, cam.cy, *cam.dist]).all() and cam.fx > 0 \
         and cam.fy > 0
-    return cam if ok else None
+    return (cam, float(rms)) if ok else (None, np.inf)
 
 
 def data_starts(nominal: Camera, X, uv) -> list[Camera]:
@@ -109,29 +114,11 @@ def data_starts(nominal: Camera, X, uv) -> list[Camera]:
     deployment's lens and from :data:`PRINCIPAL_STARTS`² principal points over the image's
     central half (a narrow view's principal point has several minima), the lowest of those
     by OpenCV's own cost."""
-    import cv2
-
-    starts = []
-    first = opencv_camera(nominal, X, uv)
-    if first is not None:
-        starts.append(first)
     grid = [(nominal.width * a, nominal.height * b)
             for a in np.linspace(0.25, 0.75, PRINCIPAL_STARTS)
             for b in np.linspace(0.25, 0.75, PRINCIPAL_STARTS)]
-    best, best_cost = None, np.inf
-    for pp in grid:
-        cam = opencv_camera(nominal, X, uv, pp)
-        if cam is None:
-            continue
-        p = cv2.projectPoints(np.asarray(X, float), np.asarray(cam.rotation, float),
-                              -cv2.Rodrigues(np.asarray(cam.rotation, float))[0]
-                              @ np.asarray(cam.position, float), cam.K, np.asarray(cam.dist))[0]
-        cost = float(np.nanmean(np.sum((p.reshape(-1, 2) - uv) ** 2, axis=1)))
-        if cost < best_cost:
-            best, best_cost = cam, cost
-    if best is not None:
-        starts.append(best)
-    return starts
+    best = min((_opencv_fit(nominal, X, uv, pp) for pp in grid), key=lambda fit: fit[1])[0]
+    return [c for c in (opencv_camera(nominal, X, uv), best) if c is not None]
 
 
 def as_start(cam: Camera, nominal: Camera, model: str) -> Camera:
