@@ -514,3 +514,63 @@ def test_a_port_nobody_listens_on_is_one_line_at_once(tmp_path):
         assert "cannot connect" in res.stderr and len(res.stderr.strip().splitlines()) == 1
         assert time.monotonic() - t0 < CONNECT_TIMEOUT / 2
         assert not (tmp_path / "out.csv").exists()
+
+
+def test_a_wrong_prefix_is_said_within_seconds_with_the_topics_the_broker_carries(broker,
+                                                                                   tmp_path):
+    """From a new user's run: `locate --spots mqtt://…/Lab` (the cameras publish on `lab`)
+    said nothing for the whole run, then "spots: 0 messages" and exit 0."""
+    import subprocess
+    import sys
+
+    import paho.mqtt.client as mqtt
+
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import write_deployments
+
+    write_deployments(make_scene(get_profile("paper-2024"), 0), tmp_path)
+    cams = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+    cams.connect("127.0.0.1", broker.port)
+    cams.loop_start()
+    stop = threading.Event()
+
+    def publish():
+        while not stop.is_set():
+            for cid in ("C1", "C2", "C3"):
+                cams.publish(f"lab/spots/{cid}", json.dumps({"t": time.time()}))
+            time.sleep(0.05)
+
+    threading.Thread(target=publish, daemon=True).start()
+    try:
+        for command in ("track", "locate"):
+            p = subprocess.Popen([sys.executable, "-m", "vlpcal", command, "-d",
+                                  str(tmp_path / "truth.yaml"), "--spots", broker.url("Lab"),
+                                  "--out", str(tmp_path / f"{command}.csv"), "--duration", "6"],
+                                 stderr=subprocess.PIPE, text=True)
+            lines, heard = [], None
+            for line in p.stderr:
+                lines.append(line)
+                if line.startswith("listening"):
+                    since = time.monotonic()
+                if line.startswith("nothing heard"):
+                    heard = time.monotonic() - since
+            p.wait(timeout=30)
+            said = [x for x in lines if x.startswith("nothing heard")]
+            assert len(said) == 1, lines
+            assert heard < 5.0, heard
+            assert "Lab/spots/{C1, C2, C3}" in said[0] and "lab/spots/{C1, C2, C3}" in said[0]
+    finally:
+        stop.set()
+        cams.loop_stop()
+        cams.disconnect()
+
+
+def test_the_broker_look_says_when_there_is_nothing_and_lists_what_there_is(broker):
+    from vlpcal.mqtt import broker_topics, parse_url, topics_said
+
+    assert broker_topics(parse_url(broker.url("lab"))) == []
+    assert topics_said(["a/spots/C1", "a/spots/C2", "a/status", "b"]) == \
+        "a/spots/{C1, C2}; a/status; b"
+    many = topics_said([f"x/spots/C{k}" for k in range(10)])
+    assert many == "x/spots/{C0, C1, C2, C3, … 6 more}"

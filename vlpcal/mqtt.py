@@ -34,6 +34,10 @@ STATUS_EVERY = 5.0
 #: a spot message's size, at most (bytes): the most spots of one frame (64) at full float
 #: precision and indented (~100 bytes each), with room to spare
 MAX_SPOT_MESSAGE = 16384
+#: s: a subscriber that hears nothing this long looks at what the broker does carry …
+QUIET_SECONDS = 3.0
+#: … for this long, keeping this many topic names at most
+LOOK_SECONDS, LOOK_TOPICS = 1.0, 200
 
 
 class MqttError(Exception):
@@ -380,6 +384,9 @@ class SpotSubscriber:
         self._ever = False
         self.client = _client(target, f"vlpcal-spots-{os.getpid()}-{time.time_ns()}", ca_file)
         self._qos = qos
+        self._ca_file = ca_file
+        self._since = time.monotonic()
+        self._looked = False
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_message = self._on_message
@@ -440,10 +447,87 @@ class SpotSubscriber:
         except queue.Empty:
             return None
 
+    def silence(self, after: float = QUIET_SECONDS) -> str | None:
+        """Once, when nothing came for ``after`` s since the start: a line naming the topics
+        listened to and those the broker does carry (:func:`broker_topics`), so a wrong prefix,
+        its case or wrong camera ids show; else None."""
+        if self._looked or self.received or self.bad or self.stale \
+                or time.monotonic() - self._since < after:
+            return None
+        self._looked = True
+        ids = sorted(self.camera_ids)
+        listened = (f"{self.target.prefix}/spots/{{{', '.join(ids[:6])}"
+                    + (f", … {len(ids) - 6} more" if len(ids) > 6 else "") + "}")
+        topics = broker_topics(self.target, self._ca_file)
+        if topics is None:
+            there = "the broker did not let us look at what it carries (under #)"
+        elif not topics:
+            there = "the broker carries nothing at all (are the cameras publishing?)"
+        else:
+            there = f"the broker carries {topics_said(topics)}: is the prefix, or are the " \
+                    "camera ids, right?"
+        return f"nothing heard on {listened} for {time.monotonic() - self._since:.0f} s; {there}"
+
     def close(self) -> None:
         self._closing = True
         self.client.disconnect()
         self.client.loop_stop()
+
+
+def broker_topics(target: Target, ca_file=None, seconds: float = LOOK_SECONDS,
+                  most: int = LOOK_TOPICS) -> list[str] | None:
+    """The topics the broker carries now: a short look under the wildcard ``#`` (retained
+    messages and what is published within ``seconds``), ``most`` names at most, sorted; None
+    when the broker does not let us look."""
+    names: set = set()
+    connected, refused, allowed = threading.Event(), [], threading.Event()
+
+    def on_connect(client, userdata, flags, reason_code, properties=None):
+        if reason_code.is_failure:
+            refused.append(str(reason_code).lower())
+            return
+        client.subscribe("#", 0)
+        connected.set()
+
+    def on_subscribe(client, userdata, mid, reason_codes, properties=None):
+        if not any(getattr(rc, "is_failure", False) for rc in reason_codes):
+            allowed.set()
+
+    def on_message(client, userdata, msg):
+        if len(names) < most:
+            names.add(msg.topic)
+
+    client = _client(target, f"vlpcal-look-{os.getpid()}-{time.time_ns()}", ca_file)
+    client.on_connect, client.on_subscribe = on_connect, on_subscribe
+    client.on_message = on_message
+    try:
+        _connect(client, target, connected, refused, seconds + CONNECT_TIMEOUT, ca_file)
+    except MqttError:
+        return None
+    try:
+        if not allowed.wait(seconds):
+            return None
+        time.sleep(seconds)
+        return sorted(names)
+    finally:
+        client.disconnect()
+        client.loop_stop()
+
+
+def topics_said(topics: list[str], shown: int = 6, children: int = 4) -> str:
+    """Topic names in a line: those under one parent together, ``lab/spots/{C1, C2, C3}``."""
+    parents: dict = {}
+    for name in topics:
+        parent, _, leaf = name.rpartition("/")
+        parents.setdefault(parent, []).append(leaf)
+    said = []
+    for parent, leaves in list(parents.items())[:shown]:
+        more = f", … {len(leaves) - children} more" if len(leaves) > children else ""
+        inner = ", ".join(leaves[:children]) + more
+        said.append(f"{parent}/{{{inner}}}" if parent and len(leaves) > 1
+                    else f"{parent}/{inner}" if parent else inner)
+    extra = len(parents) - shown
+    return "; ".join(said) + (f"; and topics under {extra} more" if extra > 0 else "")
 
 
 #: s: a capture time (UTC) past this is no clock's

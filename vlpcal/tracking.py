@@ -18,7 +18,12 @@ periods in all); with ``lag`` 0 the window ends at the frame and its row is writ
 - a window where one camera alone saw the LED leans on the track's own motion (its last fit,
   carried forward, within the acceleration it allows): a track survives it for
   :data:`COAST_PERIODS` frame periods (one camera alone cannot tell the LED from a lamp or
-  another LED for longer), and ends after :data:`LOST_PERIODS` frame periods without a spot.
+  another LED for longer), and ends after :data:`LOST_PERIODS` frame periods without a spot;
+- a track that ends is *held* (no rows, no spots taken) for :data:`HOLD_SECONDS`: the camera
+  that saw it last follows its spot through the image (spots no track takes, within the motion
+  possible), and a new track that starts where the held one could have gone — its path in the
+  image leading to the new track's spot, or it alone within reach — takes up its id: one robot
+  keeps one id through the stretches one camera alone sees.
 
 Several LEDs: a frame gives up to ``K`` spots (:func:`~vlpcal.detection.detect_several`); each
 track takes the spot nearest its prediction (in its own sigmas; nearest pairs first, a spot to
@@ -59,6 +64,10 @@ COAST_PERIODS = 8.0
 #: a window's fit whose RMS residual passes this many spot sigmas does not fit the path (a
 #: turn sharper than the window's quadratic): the window is halved, else the motion carries it
 FIT_SIGMAS = 4.0
+#: s: an ended track's id is kept this long for a new track that continues it
+HOLD_SECONDS = 5.0
+#: a track's path in an image is its last this many spots there
+PATH_SPOTS = 5
 #: m/s²: the LED's acceleration, 1 sigma (a robot turning, a cart; a hand waves harder)
 ACCELERATION = 5.0
 #: m/s: the fastest the LED is expected to go (how far it may move between two first spots)
@@ -128,6 +137,8 @@ class _Track:
     #: started from two spots that may be two LEDs: no rows until a third ray fits with them
     tentative: bool = True
     misfits: int = 0  #: a tentative track's windows that did not fit
+    latest: _Ray | None = None  #: its newest ray (kept when older rays are dropped)
+    held_since: float = np.inf  #: when it ended (held: its id waits for a track continuing it)
 
 
 class Tracker:
@@ -168,6 +179,7 @@ class Tracker:
         self._f = np.array([0.5 * (c.fx + c.fy) for c in self.cameras])
         self._axis_c = np.einsum("ij,ij->i", self._R[:, 2], self._C)  #: R₂·C per camera
         self.tracks: list[_Track] = []
+        self.held: list[_Track] = []  #: ended tracks whose ids wait (:data:`HOLD_SECONDS`)
         self._pending: list[_Ray] = []
         self._next = 1
         self.codes = deployment.leds
@@ -223,11 +235,15 @@ class Tracker:
             & (uvs[:, 1] <= cam.height - 0.5)
         uvs = uvs[inside][:self.spots] - self._offset[k]
         rays = self._rays(k, t, uvs)
-        claims = self._claim(k, t, rays)
+        claims, follows = self._claim(k, t, rays)
+        for j, h in follows.items():  # a held track's path goes on
+            h.rays = h.rays[-2 * PATH_SPOTS:] + [rays[j]]
+            h.latest = rays[j]
         for j, ray in enumerate(rays):
             track = claims.get(j)
-            if track is not None:
+            if track is not None or (track := self._reacquire(ray)) is not None:
                 track.rays.append(ray)
+                track.latest = ray
                 track.due.append(t)
                 track.last_ray = t
                 self._refresh(track, t)
@@ -267,7 +283,8 @@ class Tracker:
         """The rows still waiting for the rest of their window (the stream ended)."""
         out = []
         for tr in self.tracks:
-            out += [self._row(tr, t) for t in tr.due]
+            if not tr.tentative:  # (its rows wait until it is confirmed: never)
+                out += [self._row(tr, t) for t in tr.due]
             tr.due = []
         return sorted(out, key=lambda u: u.t)
 
@@ -314,9 +331,93 @@ class Tracker:
                     tr.last_ray - tr.last_two > COAST_PERIODS * self.period:
                 if not tr.tentative:
                     out += [self._row(tr, t) for t in tr.due]
+                    tr.due = []
+                    self._hold(tr)
             else:
                 keep.append(tr)
         self.tracks = keep
+        self.held = [h for h in self.held if now - h.latest.t <= HOLD_SECONDS]
+
+    def _hold(self, tr: _Track) -> None:
+        """An ended track held for one that continues it (followed by its path in the image
+        of the camera that saw it last)."""
+        if tr.latest is None:
+            tr.latest = tr.rays[-1] if tr.rays else None
+        if tr.latest is not None:
+            tr.held_since = tr.latest.t
+            self.held.append(tr)
+
+    def _fresh(self, tr: _Track, t: float) -> bool:
+        """Whether the track's 3D state foresees its spots: not held, and no spot it took for
+        longer than a window failed to place it (one camera alone seeing it: then only its path
+        in an image does; a track that saw no spot at all — a blink code's dark run — keeps
+        its state, whose sigma grows with the time)."""
+        return tr.held_since == np.inf and (tr.tentative
+                                             or tr.last_ray - tr.last_two <= WINDOW * self.period)
+
+    def _path_gap(self, tr: _Track, k: int, xy, t: float):
+        """How far spots at ``xy`` (J×2, time ``t``) are from the track's recent path in camera
+        ``k`` — its last :data:`PATH_SPOTS` spots there, carried on at their velocity — in gate
+        widths (≤ 1: it can be the same LED): the spot noise and the acceleration possible since
+        (:data:`ACCELERATION`). Inf where it has no spot there for a window (:data:`WINDOW`
+        frame periods: the LED left the view, or is hidden; its path is lost)."""
+        seen = [r for r in tr.rays[-3 * PATH_SPOTS:] if r.camera == k][-PATH_SPOTS:]
+        if not seen or not 0 <= t - seen[-1].t <= WINDOW * self.period:
+            return np.full(len(xy), np.inf)
+        last, dt = seen[-1], t - seen[-1].t
+        depth = max(float(self._R[k, 2] @ (tr.fit[:3] - self._C[k])), 1e-9)
+        if len(seen) >= 2 and seen[-1].t > seen[0].t:  # its velocity there: a line's slope
+            v = np.polyfit(np.array([r.t for r in seen]) - last.t, np.array([r.xy for r in seen]),
+                           1)[0]
+            spread = self.acceleration * dt * (dt + self.period)
+        else:  # one spot: anywhere its top speed reaches
+            v, spread = np.zeros(2), TOP_SPEED * dt
+        sigma = np.hypot(np.sqrt(2) * self.pixel_sigma / self._f[k], spread / depth)
+        return np.linalg.norm(np.asarray(xy) - last.xy - v * dt, axis=-1) / (GATE_SIGMAS * sigma)
+
+    def _reacquire(self, ray: _Ray) -> _Track | None:
+        """The track one camera alone still sees whose newest spot meets this ray of another
+        camera as one LED (:meth:`_meet`): the second camera seeing it again."""
+        best, best_score = None, 1.0
+        for tr in self.tracks:
+            last = tr.latest
+            if tr.tentative or self._fresh(tr, ray.t) or last is None \
+                    or last.camera == ray.camera \
+                    or not 0 <= ray.t - last.t <= WINDOW * self.period:
+                continue
+            score, _ = self._meet(last, ray)
+            if score < best_score:
+                best, best_score = tr, score
+        return best
+
+    def _rejoin(self, tr: _Track, t: float) -> None:
+        """A newly confirmed track that continues a held one takes up its id: the held track's
+        path in its camera's image leads to one of this track's spots there, or — its path
+        lost — it alone could have moved to where this one is (:data:`TOP_SPEED`). A held
+        track whose path goes on elsewhere is another LED's."""
+        best, link, within = None, 1.0, []
+        for h in self.held:
+            reach = TOP_SPEED * (t - h.fit_t) + 3 * (h.s_pos + tr.s_pos)
+            if np.linalg.norm(tr.fit[:3] - h.fit[:3]) > reach:
+                continue
+            followed = {id(r) for r in h.rays}
+            score = min((0.0 if id(r) in followed
+                         else float(self._path_gap(h, r.camera, r.xy[None], r.t)[0])
+                         for r in tr.rays if r.camera == h.latest.camera), default=np.inf)
+            if score <= link:
+                best, link = h, score
+            elif t - h.latest.t > WINDOW * self.period:  # its path lost: it may be
+                within.append(h)  # anywhere in reach
+        if best is None:
+            if len(within) != 1:
+                return
+            best = within[0]
+        self.held = [h for h in self.held if h is not best]
+        if tr.led == tr.anonymous:  # not named by its own blink code yet: the held one's
+            taken = best.led != best.anonymous and any(o.led == best.led for o in self.tracks)
+            tr.led, tr.margin = (best.anonymous, 0) if taken else (best.led, best.margin)
+        tr.anonymous = best.anonymous
+        tr.seen = best.seen + tr.seen
 
     def _extrapolated(self, tr: _Track, t: float):
         """The track's latest fit carried to ``t`` at its velocity, with the sigmas of position
@@ -349,12 +450,13 @@ class Tracker:
                     self._pending += [r for r in tr.rays
                                       if r.t >= t - START_WINDOW * self.period]
             return
-        if len(rays) >= 3:
-            tr.tentative = False
         tr.last_two = t
         tr.fit, tr.fit_t = fit, t
         tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
         tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
+        if len(rays) >= 3 and tr.tentative:
+            tr.tentative = False
+            self._confirm(tr, t)
 
     def _plausible(self, fit, cov) -> bool:
         """Whether a window's fit can be the LED: inside the room (the locator's rule,
@@ -374,38 +476,53 @@ class Tracker:
         pred[~front] = np.nan
         return pred
 
-    def _claim(self, k: int, t: float, rays) -> dict:
-        """Which track each ray of camera ``k`` at ``t`` belongs to (ray index → track): the
-        spot within :data:`GATE_SIGMAS` of a track's prediction, nearest pairs first (confirmed
-        tracks before tentative ones), each spot to one track and each track one spot. Judged
-        in undistorted image coordinates (times f: pixels as a pinhole camera has them — the
-        lens's local scale, a few per cent, is lost in a 5-sigma gate), so no prediction goes
-        through the lens model."""
-        if not self.tracks or not rays:
-            return {}
-        ext = [self._extrapolated(tr, t) for tr in self.tracks]
+    def _claim(self, k: int, t: float, rays) -> tuple[dict, dict]:
+        """Which track each ray of camera ``k`` at ``t`` belongs to: (ray index → track, ray
+        index → held track whose path it continues). Each spot goes to one track and each
+        track takes one spot, nearest pairs first within a rank: tracks two cameras placed
+        within a window (the spot within :data:`GATE_SIGMAS` of their extrapolated position);
+        then tracks one camera alone sees and held ones (a spot on their path in this image,
+        :meth:`_path_gap` — a 3D guess is then too loose to tell the LED from another's spot or
+        a lamp); then tracks that saw no spot for a while (a blink code's dark run: their 3D
+        guess); then tentative tracks, which may share a spot with a held track's path (they
+        may be its continuation). Judged in undistorted image coordinates (times f: pixels as
+        a pinhole camera has them — the lens's local scale, a few per cent, is lost in a
+        5-sigma gate), so no prediction goes through the lens model."""
+        owners = self.tracks + self.held
+        if not owners or not rays:
+            return {}, {}
+        xy = np.array([r.xy for r in rays])
+        ext = [self._extrapolated(tr, t) for tr in owners]
         Xc = (np.array([e[0] for e in ext]) - self._C[k]) @ self._R[k].T
         depth = Xc[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             pred = np.where(depth[:, None] > 0, Xc[:, :2] / depth[:, None], np.nan)
             slack = np.hypot(self.pixel_sigma, np.array([e[2] for e in ext]) * self._f[k]
                              / depth) / self._f[k]
-        xy = np.array([r.xy for r in rays])
         d = np.linalg.norm(xy[None, :, :] - pred[:, None, :], axis=2) / slack[:, None]
         d = np.where(np.isfinite(d), d, np.inf)
-        if d.size == 1:  # one track, one spot (the common case): no ranking to do
-            return {0: self.tracks[0]} if d[0, 0] < GATE_SIGMAS else {}
-        # confirmed tracks choose first; a tentative one takes what they leave
-        later = np.array([GATE_SIGMAS if tr.tentative else 0.0 for tr in self.tracks])
+        rank = np.zeros(len(owners))
+        for i, tr in enumerate(owners):
+            if tr.tentative:
+                rank[i] = 3
+            elif tr.held_since < np.inf or tr.last_ray - tr.last_two > WINDOW * self.period:
+                rank[i] = 1  # on its path in this image too
+                d[i] = np.maximum(d[i], GATE_SIGMAS * self._path_gap(tr, k, xy, t))
+            elif t - tr.last_two > WINDOW * self.period:
+                rank[i] = 2
         claims: dict = {}
-        for flat in np.argsort(d + later[:, None], axis=None):
+        follows: dict = {}
+        taken: set = set()
+        for flat in np.argsort(d + GATE_SIGMAS * rank[:, None], axis=None):
             i, j = np.unravel_index(flat, d.shape)
-            if not d[i, j] < GATE_SIGMAS:
+            if not d[i, j] < GATE_SIGMAS or i in taken or j in claims:
                 continue
-            if j in claims or any(tr is self.tracks[i] for tr in claims.values()):
+            held = owners[i].held_since < np.inf
+            if j in follows and not (owners[i].tentative or held):
                 continue
-            claims[int(j)] = self.tracks[i]
-        return claims
+            (follows if held else claims)[int(j)] = owners[i]
+            taken.add(i)
+        return claims, follows
 
     def _meet(self, p: _Ray, ray: _Ray):
         """How well two rays of two cameras meet as one LED: (their residual over what the
@@ -460,6 +577,15 @@ class Tracker:
             holder.led = holder.anonymous
         tr.led, tr.margin = led, e2 - e1
 
+    def _confirm(self, tr: _Track, t: float) -> None:
+        """A track confirmed: the id of the held track it continues, else a new one."""
+        self._rejoin(tr, t)
+        if not tr.anonymous:
+            tr.anonymous = f"T{self._next}"
+            self._next += 1
+            if not tr.led:
+                tr.led = tr.anonymous
+
     def _start(self, ray: _Ray) -> None:
         """A spot no track claims: start a track with the recent spot of another camera whose
         ray meets this one's best (:meth:`_meet`), else keep it for the next."""
@@ -478,11 +604,10 @@ class Tracker:
         p, X = best
         self._pending = [q for q in self._pending if q is not p]
         s_pos = TOP_SPEED * abs(ray.t - p.t) + self._metres_per_px(X, [ray.camera])
-        name = f"T{self._next}"
-        self._next += 1
-        self.tracks.append(_Track(name, [p, ray], ray.t, np.r_[X, np.zeros(6)], [p.t, ray.t],
+        # named once confirmed (:meth:`_confirm`): a pair undone costs no id
+        self.tracks.append(_Track("", [p, ray], ray.t, np.r_[X, np.zeros(6)], [p.t, ray.t],
                                   ray.t, last_two=ray.t, s_pos=s_pos, s_vel=TOP_SPEED,
-                                  anonymous=name))
+                                  latest=ray))
 
     def _row(self, tr: _Track, t: float) -> TrackUpdate:
         fit = cov = None

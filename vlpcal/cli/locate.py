@@ -329,6 +329,8 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
         while not (t_end and time.monotonic() > t_end) and not (max_sets and n >= max_sets):
             got = sub.get(timeout=tolerance)
             if got is None:
+                if (quiet_note := sub.silence()) is not None:
+                    say(quiet_note)
                 if pending and time.time() - first > 2 * tolerance:
                     close()
                 continue

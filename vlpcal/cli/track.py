@@ -316,6 +316,8 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         while not (t_end and time.monotonic() > t_end):
             got = sub.get(timeout=0.2)
             if got is None:
+                if (quiet_note := sub.silence()) is not None:
+                    say(quiet_note)
                 continue
             t, cid, uv = got
             if t > time.time() + tracker.lost_after:
