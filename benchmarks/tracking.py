@@ -132,6 +132,8 @@ def run_speed(scene, speed, seconds, seed, tmp: Path) -> dict:
             "degenerate_rows": sum(u.status == "degenerate" for u in rows),
             "one_camera_mean_mm": float(np.mean(e_one) * 1000) if len(one) else float("nan"),
             "track_updates": len(rows), "tracks": len(leds),
+            "placed_share": tracker.fit.placed / max(tracker.fit.moments, 1),
+            "misfit": tracker.fit.misfit() is not None,
             "cpu_us": cpu * 1e6, "cpu_batch_us": cpu_batch * 1e6, "decode_us": decode * 1e6}
 
 
@@ -191,7 +193,108 @@ def crossing(scene, seconds, seed, tmp: Path, coded: bool) -> dict:
             "matched": float((who >= 0).mean()), "mean_mm": float(d.min(axis=1)[ok & (who >= 0)]
                                                                  .mean() * 1000),
             "swaps": swaps, "wrong_id_rows": wrong, "tracks": len({r.led for r in rows}),
-            "unnamed_share": float(np.mean(unnamed)) if unnamed else float("nan")}
+            "unnamed_share": float(np.mean(unnamed)) if unnamed else float("nan"),
+            "placed_share": tracker.fit.placed / max(tracker.fit.moments, 1),
+            "misfit": tracker.fit.misfit() is not None}
+
+
+def line_of_three(seconds: float, seed: int) -> dict:
+    """One robot at 1.5 m/s under the paper's three cameras in a line (paper-2024), whose end
+    cameras alone see the ends of its loop: its ids, from the spots the cameras would publish."""
+    from vlpcal.sim.publish import spot_schedule
+
+    scene = make_scene(get_profile("paper-2024"), seed)
+    path = robot_path(scene, 1.5, HEIGHT, seed)
+    events = spot_schedule(scene, path, seconds, seed=seed)
+    tracker = Tracker(deployment_of(scene, "true"), period=1 / 30)
+    rows = []
+    for t, cid, u, v in events:
+        rows += tracker.update_spots(cid, t, [] if np.isnan(u) else [[u, v]])
+    rows += tracker.finish()
+    ok = [r for r in rows if r.status == "ok"]
+    e = np.linalg.norm(np.array([r.position for r in ok]) - path(np.array([r.t for r in ok])),
+                       axis=1)
+    return {"seconds": seconds, "rows": len(rows), "ok": len(ok), "ids": len({r.led for r in rows}),
+            "mean_mm": float(e.mean() * 1000), "misfit": tracker.fit.misfit() is not None}
+
+
+def wrong_setups(seed: int) -> list[dict]:
+    """The frames of one install (paper-2024's spots: a robot at 1.5 m/s for 20 s to the
+    tracker, 300 still LED positions to the locator) against deployments that are not theirs:
+    whether the fit watch (:mod:`vlpcal.fit_watch`) says so, and after how many moments."""
+    import copy
+
+    from vlpcal import deployment as deployments
+    from vlpcal.sim.publish import spot_schedule
+    from vlpcal.sim.writers import trajectory
+
+    scene = make_scene(get_profile("paper-2024"), seed)
+    truth = deployment_of(scene, "true")
+    doc = truth.to_dict()
+
+    def variant(change):
+        d = copy.deepcopy(doc)
+        change(d)
+        return deployments.from_dict(d, "variant")
+
+    def swap(d):
+        d["cameras"][0]["id"], d["cameras"][2]["id"] = d["cameras"][2]["id"], d["cameras"][0]["id"]
+
+    def scale(d):
+        room = np.array(d["site"]["room"], float)
+        c = room.mean(axis=0)
+        d["site"]["room"] = ((room - c) * 1.5 + c).tolist()
+        for cam in d["cameras"]:
+            cam["position"] = [*((np.array(cam["position"][:2]) - c) * 1.5 + c),
+                               cam["position"][2]]
+
+    def move(axis):
+        def change(d):
+            p = list(d["cameras"][1]["position"])
+            p[axis] += 0.10
+            d["cameras"][1]["position"] = p
+        return change
+
+    layouts = Path(__file__).resolve().parents[1] / "layouts"
+    cases = {"truth": truth, "nominal": deployment_of(scene, "nominal"),
+             "another install (paper-triangle)": deployments.load(
+                 layouts / "paper-triangle.deployment.yaml"),
+             "C1, C3 swapped": variant(swap), "another scale (1.5 ×)": variant(scale),
+             "C2 moved 10 cm in x": variant(move(0)), "C2 moved 10 cm in y": variant(move(1))}
+    path = robot_path(scene, 1.5, HEIGHT, seed)
+    events = spot_schedule(scene, path, 20.0, seed=seed)
+    still = trajectory(scene, 300, height=0.15, seed=seed)
+    rng = np.random.default_rng([seed, 29])
+    uv = np.full((len(truth.cameras), len(still), 2), np.nan)
+    for k, cam in enumerate(scene.true):
+        p, _, inside = cam.project(still, margin=1.0)
+        uv[k] = np.where(inside[:, None], p + rng.normal(0, 0.05, p.shape), np.nan)
+    out = []
+    from vlpcal.fit_watch import FitWatch
+
+    for name, dep in cases.items():
+        tracker = Tracker(dep, period=1 / 30)
+        said = None
+        for t, cid, u, v in events:
+            tracker.update_spots(cid, t, [] if np.isnan(u) else [[u, v]])
+            if said is None and tracker.fit.misfit() is not None:
+                said = tracker.fit.moments
+        ids = [c.id for c in scene.true]  # each camera's spots under its id
+        fixes = Locator(dep).locate_pixels(np.stack(
+            [uv[ids.index(c.id)] if c.id in ids else np.full(uv.shape[1:], np.nan)
+             for c in dep.cameras]))
+        watch = FitWatch(dep.name, "sets")
+        dropped = (fixes.camera_status == "dropped").any(axis=0)
+        located = None
+        for i in range(len(still)):
+            watch.add_statuses([fixes.status[i]], [dropped[i]])
+            if located is None and watch.misfit() is not None:
+                located = watch.moments
+        out.append({"deployment": name, "track_placed": tracker.fit.placed
+                    / max(tracker.fit.moments, 1), "track_said": said or 0,
+                    "locate_placed": watch.placed / max(watch.moments, 1),
+                    "locate_said": located or 0, "right": name in ("truth", "nominal")})
+    return out
 
 
 def per_frame(scene, seed, tmp: Path) -> dict:
@@ -342,9 +445,31 @@ def main(argv=None) -> int:
           f"{frame['update_us']:.0f}; the three, Tracker.update {frame['whole_us']:.0f} = "
           f"{frame['whole_vs_decode']:.1f} × the decode (target 3 ×: "
           f"{'met' if frame['whole_vs_decode'] <= 3 else 'NOT met'})")
+    line = line_of_three(60.0, args.seed)
+    print(f"\nOne robot at 1.5 m/s under the paper's three cameras in a line for "
+          f"{line['seconds']:g} s: {line['ids']} id(s), {line['ok']} of {line['rows']} rows "
+          f"placed by two cameras or more, mean {line['mean_mm']:.2f} mm")
+    verdicts.append(line["ids"] == 1)
+    wrong = wrong_setups(args.seed)
+    print("\nWrong set-ups: paper-2024's frames against deployments not theirs — share of the "
+          "moments two cameras saw the LED that were placed, and the moment the fit watch "
+          "said so (0: never)")
+    print(table(wrong, [("deployment", "deployment", ""),
+                        ("track_placed", "track: placed", ".0%"),
+                        ("track_said", "said at", "d"),
+                        ("locate_placed", "locate: placed", ".0%"),
+                        ("locate_said", "said at", "d")]))
+    fits = [r["misfit"] for r in rows + ident] + [line["misfit"]]
+    caught = all((r["track_said"] > 0) == (r["locate_said"] > 0) == (not r["right"])
+                 for r in wrong)
+    print(f"no misfit said on any right run above ({sum(fits)} said): "
+          f"{'yes' if not any(fits) else 'NO'}; every wrong set-up said by both, no right one: "
+          f"{'yes' if caught else 'NO'}")
+    verdicts += [not any(fits), caught]
     ok = all(verdicts)
     path = write_json("tracking", {"seed": args.seed, "static_mm": statics, "rows": rows,
-                                   "crossing": ident, "per_frame": frame})
+                                   "crossing": ident, "per_frame": frame, "line": line,
+                                   "wrong_setups": wrong})
     print(f"wrote {path}")
     return 0 if ok else 1
 

@@ -47,6 +47,7 @@ import numpy as np
 from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode
 from .deployment import Deployment
 from .detection import detect_frame
+from .fit_watch import FitWatch
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -180,6 +181,11 @@ class Tracker:
         self._axis_c = np.einsum("ij,ij->i", self._R[:, 2], self._C)  #: R₂·C per camera
         self.tracks: list[_Track] = []
         self.held: list[_Track] = []  #: ended tracks whose ids wait (:data:`HOLD_SECONDS`)
+        self._spotted: dict = {}  #: camera index → the time of its newest frame with a spot
+        self.frames_with_spot = 0
+        #: the moments two cameras saw a spot, placed or not: whether the frames fit
+        self.fit = FitWatch(deployment.name, "camera frames with a spot while another camera "
+                            "saw one")
         self._pending: list[_Ray] = []
         self._next = 1
         self.codes = deployment.leds
@@ -235,6 +241,11 @@ class Tracker:
             & (uvs[:, 1] <= cam.height - 0.5)
         uvs = uvs[inside][:self.spots] - self._offset[k]
         rays = self._rays(k, t, uvs)
+        together = any(c != k and t - u <= START_WINDOW * self.period
+                       for c, u in self._spotted.items())
+        if len(rays):
+            self._spotted[k] = t
+            self.frames_with_spot += 1
         claims, follows = self._claim(k, t, rays)
         for j, h in follows.items():  # a held track's path goes on
             h.rays = h.rays[-2 * PATH_SPOTS:] + [rays[j]]
@@ -247,8 +258,13 @@ class Tracker:
                 track.due.append(t)
                 track.last_ray = t
                 self._refresh(track, t)
+                if together:
+                    placed = not track.tentative and track.last_two == t
+                    self.fit.add(placed, "" if placed else "off their track")
             else:
                 self._start(ray)
+                if together:
+                    self.fit.add(False, "in no track")
         if self.codes:
             self._blink(k, t, {id(tr) for tr in claims.values()})
         if not self._lag:  # rows at once: this frame's too

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections import Counter
+
 import click
 
 from .common import Finite, UserError, _camera_sources, _load_deployment, _output_file, main
@@ -33,6 +35,10 @@ from .mqtt import (
 @click.option("--zone", default=None, metavar="ID",
               help="One zone of the deployment's zones: block: its cameras only, and only the "
                    "fixes inside its polygon (one locator process per zone).")
+@click.option("--keep-going", is_flag=True,
+              help="Go on when the frames do not fit the deployment (most sets two cameras "
+                   "see the LED not placed: another install's deployment, cameras swapped, a "
+                   "stale calibration); said once as a warning.  [default: stop, exit 2]")
 @mqtt_options
 @click.option("--out", "-o", default="-", show_default=True,
               help="Fixes file (.csv or .jsonl), or - for stdout.")
@@ -47,8 +53,8 @@ from .mqtt import (
 @click.option("--max-sets", type=click.IntRange(1), default=None,
               help="Live: stop after this many frame sets.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
-def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, publish, qos,
-           ca_file, out, fmt, batch, tolerance, duration, max_sets, quiet):
+def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, keep_going,
+           publish, qos, ca_file, out, fmt, batch, tolerance, duration, max_sets, quiet):
     """Turn camera frames into 3D fixes (metres, world frame, z up).
 
     One row per frame set: frame_id,x,y,z,status first (the contract), then the cameras used,
@@ -59,7 +65,6 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     """
     import sys
     import time
-    from collections import Counter
 
     from ..locator import FixWriter, Locator
 
@@ -102,7 +107,7 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     # from here on every way out either closes the writer (the fixes so far are kept) or
     # aborts it (nothing replaced)
     t0 = time.perf_counter()
-    statuses: Counter = Counter()
+    statuses = _Tally(loc.deployment.name, keep_going, say)
     notes = []
     try:
         if frames_dir:
@@ -118,6 +123,13 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     except KeyboardInterrupt:
         notes.append("interrupted: the fixes so far are kept")
         n = sum(statuses.values())
+    except _Misfit as e:  # stopped: an offline run writes nothing, a live one keeps its rows
+        if live:
+            writer.close()
+        else:
+            writer.abort()
+        raise UserError(str(e) + (" (the fixes so far are kept)" if live
+                                  else " (nothing was written)")) from None
     except BrokenPipeError:  # the reader of stdout has what it wanted (| head): stop quietly
         import os
 
@@ -149,6 +161,37 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     if not n:
         say("no frame sets located")
     sys.stdout.flush()
+
+
+class _Misfit(Exception):
+    """The frames do not fit the deployment: the run stops."""
+
+
+class _Tally(Counter):
+    """The fix statuses counted, and whether the frames fit the deployment judged as they
+    come (:class:`~vlpcal.fit_watch.FitWatch`): a misfit stops the run, or with --keep-going
+    is said once."""
+
+    def __init__(self, deployment: str, keep_going: bool, say):
+        from ..fit_watch import FitWatch
+
+        super().__init__()
+        self.watch = FitWatch(deployment, "sets two cameras or more saw")
+        self.keep_going, self.say, self.said = keep_going, say, False
+
+    def update(self, counts=(), /, fixes=None, **kw):
+        super().update(counts, **kw)
+        if fixes is None or self.said:
+            return
+        self.watch.add_statuses(fixes.status.tolist(),
+                                (fixes.camera_status == "dropped").any(axis=0).tolist())
+        misfit = self.watch.misfit()
+        if misfit is None:
+            return
+        if not self.keep_going:
+            raise _Misfit(misfit.message())
+        self.said = True
+        self.say(f"warning: {misfit.message()} (going on: --keep-going)")
 
 
 def _check_the_deployment_fits(loc, source, camera_ids, notes, folder=None) -> None:
@@ -214,7 +257,7 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
             sets = [{cid: folder.frame(fid, cid) for cid in loc.camera_ids
                      if (fid, cid) in folder.files} for fid in chunk]
             fixes = loc.locate_batch(sets, chunk)
-            statuses.update(fixes.counts())
+            statuses.update(fixes.counts(), fixes=fixes)
             writer.write(fixes)
             bar.update(len(chunk))
     return len(ids)
@@ -243,7 +286,7 @@ def _locate_observations(loc, path, writer, statuses, notes) -> int:
         notes.append(f"ignored spots of camera(s) {', '.join(sorted(unknown))} that "
                      f"{loc.deployment.name} does not have")
     fixes = loc.locate_pixels(uv, frame_ids=ids)
-    statuses.update(fixes.counts())
+    statuses.update(fixes.counts(), fixes=fixes)
     writer.write(fixes)
     return len(ids)
 
@@ -261,7 +304,7 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
     try:
         for fs in grouper:
             fixes = loc.locate_batch([fs.frames], [f"{fs.index:06d}"])
-            statuses.update(fixes.counts())
+            statuses.update(fixes.counts(), fixes=fixes)
             writer.write(fixes, {"t_s": round(fs.t, 3)})
             n += 1
             if (max_sets and n >= max_sets) or (t_end and time.monotonic() > t_end):
@@ -315,7 +358,7 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
             if spots:
                 uv[index[cid], 0] = spots[0]
         fixes = loc.locate_pixels(uv, frame_ids=[f"{n:06d}"])
-        statuses.update(fixes.counts())
+        statuses.update(fixes.counts(), fixes=fixes)
         # the set's time: its spots' mean capture time, where a fix of spots taken at
         # different moments stands (a camera that saw nothing tells no time)
         seen_at = [times[c] for c, spots in pending.items() if spots]

@@ -40,10 +40,14 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
               help="Tracks file to write (.csv).")
 @click.option("--fps", default=None, type=Finite(0.1, 10000.0),
               help="The cameras' frame rate.  [default: from times.csv, the slowest camera's]")
+@click.option("--keep-going", is_flag=True,
+              help="Go on when the frames do not fit the deployment (most moments two cameras "
+                   "see a spot not placed: another install's deployment, cameras swapped, a "
+                   "stale calibration); said once as a warning.  [default: stop, exit 2]")
 @mqtt_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots, out, fps,
-          publish, qos, ca_file, quiet):
+          keep_going, publish, qos, ca_file, quiet):
     """Track moving LEDs from cameras that are not synchronised.
 
     Each camera frame is a ray at its own capture time; the LED's path over a short window is
@@ -63,18 +67,58 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
+    check = _FitCheck(keep_going, quiet)
     try:
         if spots_url:
             _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"), ca_file,
-                         duration, lag, spots, out, fps, quiet, publisher)
+                         duration, lag, spots, out, fps, quiet, publisher, check)
         else:
             _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out, fps,
-                   quiet, publisher)
+                   quiet, publisher, check)
     finally:
         if publisher:
             publisher.close()
             if not quiet:
                 click.echo(publisher_summary(publisher), err=True)
+
+
+class _FitCheck:
+    """Whether the frames fit the deployment, judged as the tracker goes
+    (:class:`~vlpcal.fit_watch.FitWatch`): a misfit stops the run (exit 2), or with
+    --keep-going is said once."""
+
+    def __init__(self, keep_going: bool, quiet: bool):
+        self.keep_going, self.quiet, self.said = keep_going, quiet, False
+
+    def __call__(self, tracker) -> None:
+        if self.said:
+            return
+        misfit = tracker.fit.misfit()
+        if misfit is None:
+            return
+        if not self.keep_going:
+            raise _Misfit(misfit.message())
+        self.said = True
+        if not self.quiet:
+            click.echo(f"warning: {misfit.message()} (going on: --keep-going)", err=True)
+
+    @staticmethod
+    def no_rows(tracker, source) -> UserError:
+        """Why a run gave no row at all."""
+        fit = tracker.fit
+        if not tracker.frames_with_spot:
+            why = "no frame had a spot (is the LED on and in view, and the exposure right?)"
+        elif not fit.moments:
+            why = (f"{tracker.frames_with_spot} frames had a spot, but never two cameras' at "
+                   "about the same moment (a track needs two cameras)")
+        else:
+            why = (f"of {fit.moments} frames with a spot while another camera saw one, none "
+                   "was placed: the spots do not meet as one LED; is it the right deployment?")
+        return UserError(f"{source}: no rows: {why}")
+
+
+class _Misfit(UserError):
+    """The frames do not fit the deployment: stopped."""
 
 
 def _published(publisher, rows, utc: float = 0.0):
@@ -88,7 +132,7 @@ def _published(publisher, rows, utc: float = 0.0):
 
 
 def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out, fps, quiet,
-           publisher) -> None:
+           publisher, check) -> None:
     import sys
 
     from ..datasets import DatasetError, read_async_frames
@@ -97,7 +141,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
 
     if cameras:
         _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
-                    publisher)
+                    publisher, check)
         return
     if duration is not None:
         raise click.BadParameter("is for live cameras (--camera)", param_hint="--duration")
@@ -149,6 +193,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
                     unreadable[w] += 1
         for t, cid, no, _ in block:
             rows.extend(_published(publisher, tracker.update_spots(cid, t, found_at[(cid, no)])))
+            check(tracker)
 
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
@@ -169,6 +214,8 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += _published(publisher, tracker.finish())
+    if not rows:
+        raise check.no_rows(tracker, frames_dir)
     _write_tracks(out, rows)
     if not quiet:
         words = {"wrong_size": "of another size than their camera's",
@@ -219,7 +266,7 @@ def _summary(rows) -> str:
 
 
 def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
-                publisher=None) -> None:
+                publisher, check) -> None:
     """``vlpcal track --camera …``: frames as they come, each at its capture time on the
     host's clock (X-Timestamp through each camera's clock estimate, else arrival), fed to
     the tracker in that order; rows in UTC seconds."""
@@ -249,6 +296,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             live.write(made)
             rows += made
             n += 1
+            check(tracker)
             if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
                 tracker.period = frames.period()
     except KeyboardInterrupt:
@@ -276,10 +324,13 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
     say(f"{n} camera frames → {_summary(rows)} → {out}" + _lag_said(tracker))
+    if not rows:
+        live.remove()
+        raise check.no_rows(tracker, "the cameras")
 
 
 def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, out, fps, quiet,
-                 publisher) -> None:
+                 publisher, check) -> None:
     """``vlpcal track --spots mqtt://…``: the spots cameras publish, each at its capture time
     (UTC s), fed to the tracker as they come; rows in UTC seconds. Each camera's message of a
     frame without a spot (``{"t": …}``) tells the tracker that camera saw nothing then. A spot
@@ -328,6 +379,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
             live.write(made)
             rows += made
             n += 1
+            check(tracker)
             intervals.add(cid, t)
             if fps is None and n % 50 == 0:  # the slowest camera's, once it shows
                 tracker.period = min(intervals.period(tracker.period), 10.0)
@@ -354,6 +406,9 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     if sub.disconnects:
         said.append(f"the broker went away {sub.disconnects} time(s)")
     say("; ".join(said) + f" → {_summary(rows)} → {out}" + _lag_said(tracker))
+    if not rows:
+        live.remove()
+        raise check.no_rows(tracker, f"{target.shown()}/spots/+")
 
 
 class _LiveTracks:
