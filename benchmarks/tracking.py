@@ -198,6 +198,105 @@ def crossing(scene, seconds, seed, tmp: Path, coded: bool) -> dict:
             "misfit": tracker.fit.misfit() is not None}
 
 
+def tracked_folder(dep, root: Path, spots: int) -> list:
+    """``vlpcal track``'s rows of an asynchronous folder (each camera's frames detected as a
+    batch, then fed in time order)."""
+    from vlpcal.detection import detect_several
+
+    folder = read_async_frames(root)
+    cams = {c.id: c for c in dep.cameras}
+    found = {}
+    for cid in folder.camera_ids:
+        mine = [no for _, c, no in folder.events if c == cid]
+        uv = detect_several([folder.frame(cid, no) for no in mine], spots,
+                            shape=(cams[cid].height, cams[cid].width))
+        found.update({(cid, no): u for no, u in zip(mine, uv)})
+    tracker = Tracker(dep, period=1 / 30, spots=spots)
+    rows = []
+    for t, cid, no in folder.events:
+        rows += tracker.update_spots(cid, t, found[(cid, no)])
+    return rows + tracker.finish()
+
+
+def robot_body(scene, n_leds: int, seconds: float, seed: int, tmp: Path) -> dict:
+    """A robot carrying ``n_leds`` blinking LEDs (:data:`vlpcal.sim.streams.BODY_LAYOUTS`)
+    at 1.5 m/s: its pose from ``vlpcal track`` against the truth — position of its origin,
+    heading, and (three LEDs) tilt — and its LEDs' own rows beside it."""
+    from vlpcal.bodies import rotation
+    from vlpcal.sim.streams import BODY_LAYOUTS, body_blocks, body_leds
+
+    origin = robot_path(scene, 1.5, 0.0, seed)
+    leds, yaw = body_leds(origin, BODY_LAYOUTS[n_leds], seed=seed)
+    root = tmp / f"body-{n_leds}-{scene.profile.name}"
+    simulate_streams(scene, root, leds, seconds, seed=seed)
+    dep = deployment_of(scene, "true")
+    dep.extra.update(body_blocks(leds, BODY_LAYOUTS[n_leds]))
+    rows = tracked_folder(dep, root, n_leds)
+    body = [r for r in rows if r.pose is not None and r.status == "ok"]
+    T = np.array([r.t for r in body])
+    e = np.linalg.norm(np.array([r.position for r in body]) - origin(T), axis=1)
+    Y = np.array([r.pose[0] for r in body])
+    e_yaw = np.degrees(np.abs(np.angle(np.exp(1j * (Y - yaw(T))))))
+    out = {"install": scene.profile.name, "leds": n_leds, "seconds": seconds,
+           "body_rows": len(body), "first_s": float(T.min()) if len(T) else float("nan"),
+           "pos_mean_mm": float(e.mean() * 1000), "pos_p95_mm": float(np.percentile(e, 95)
+                                                                      * 1000),
+           "yaw_mean_deg": float(e_yaw.mean()), "yaw_p95_deg": float(np.percentile(e_yaw, 95)),
+           "sigma_yaw_deg": float(np.degrees(np.median([r.pose[3] for r in body])))}
+    if n_leds >= 3:  # the tilt: the angle between the body's true and fitted up axes, in
+        full = np.array([np.isfinite(r.pose[1]) for r in body])  # rows of its full pose
+        up = rotation(Y[full], [r.pose[1] for r in body if np.isfinite(r.pose[1])],
+                      [r.pose[2] for r in body if np.isfinite(r.pose[1])])[:, :, 2]
+        out["tilt_mean_deg"] = float(np.degrees(np.arccos(np.clip(up[:, 2], -1, 1))).mean())
+        out["full_rows"] = int(full.sum())
+    led_rows = [r for r in rows if r.pose is None and r.status == "ok"
+                and r.led in {m.led for m in leds}]
+    truth = {m.led: m.path for m in leds}
+    out["led_mean_mm"] = float(np.mean([np.linalg.norm(r.position - truth[r.led](r.t))
+                                        for r in led_rows]) * 1000)
+    return out
+
+
+def crossing_bodies(scene, seconds: float, seed: int, tmp: Path) -> dict:
+    """Three two-LED robots on crossing paths at 1.5 m/s, each LED with its own code: body
+    rows nearer another robot's truth than their own (swaps)."""
+    from vlpcal.sim.streams import BODY_LAYOUTS, body_blocks, body_leds
+
+    codes = ("0010111101", "0011001111", "0101010111", "0001101111", "0100110111",
+             "0110001111")
+    paths = crossing_paths(scene.profile.room, 1.5, 3, 0.0, seed)
+    leds, blocks, yaws = [], {"leds": [], "bodies": []}, []
+    for k, p in enumerate(paths):  # each drives to and fro along its line, backing up
+        ends = p(np.linspace(0, 20, 400))
+        span = ends[np.argmax(np.linalg.norm(ends - ends[0], axis=1))] - ends[0]
+        mine, yaw = body_leds(p, BODY_LAYOUTS[2], codes[2 * k:2 * k + 2], seed=seed + k,
+                              prefix=f"R{k + 1}", heading=float(np.arctan2(span[1], span[0])))
+        b = body_blocks(mine, BODY_LAYOUTS[2], f"R{k + 1}")
+        blocks["leds"] += b["leds"]
+        blocks["bodies"] += b["bodies"]
+        leds += mine
+        yaws.append(yaw)
+    root = tmp / "crossing-bodies"
+    simulate_streams(scene, root, leds, seconds, seed=seed)
+    dep = deployment_of(scene, "true")
+    dep.extra.update(blocks)
+    rows = [r for r in tracked_folder(dep, root, len(leds))
+            if r.pose is not None and r.status == "ok"]
+    T = np.array([r.t for r in rows])
+    d = np.linalg.norm(np.stack([p(T) for p in paths], axis=1)
+                       - np.array([r.position for r in rows])[:, None], axis=2)
+    named = np.array([int(r.led[1:]) - 1 for r in rows])
+    own = d[np.arange(len(rows)), named]
+    # on another robot: nearer it than its own, and off its own by more than a robot's LEDs
+    # are apart (where two robots pass close by, a right row may be nearer the other)
+    swapped = int(((d.argmin(axis=1) != named) & (own > 0.15)).sum())
+    Y = np.array([r.pose[0] for r in rows])
+    true_yaw = np.array([yaws[k](t) for k, t in zip(named, T)])
+    e_yaw = np.degrees(np.abs(np.angle(np.exp(1j * (Y - true_yaw)))))
+    return {"seconds": seconds, "body_rows": len(rows), "swapped_rows": swapped,
+            "pos_mean_mm": float(own.mean() * 1000), "yaw_mean_deg": float(e_yaw.mean())}
+
+
 def line_of_three(seconds: float, seed: int) -> dict:
     """One robot at 1.5 m/s under the paper's three cameras in a line (paper-2024), whose end
     cameras alone see the ends of its loop: its ids, from the spots the cameras would publish."""
@@ -445,6 +544,35 @@ def main(argv=None) -> int:
           f"{frame['update_us']:.0f}; the three, Tracker.update {frame['whole_us']:.0f} = "
           f"{frame['whole_vs_decode']:.1f} × the decode (target 3 ×: "
           f"{'met' if frame['whole_vs_decode'] <= 3 else 'NOT met'})")
+    with tempfile.TemporaryDirectory() as tmp:
+        bodies = [robot_body(make_scene(profile, args.seed), n, args.seconds * 2, args.seed,
+                             Path(tmp))
+                  for profile in (paper_square(), get_profile("cheap-wide")) for n in (2, 3)]
+        crossed = crossing_bodies(square, args.crossing_seconds, args.seed, Path(tmp))
+    for b in bodies:
+        b["one_led_mm"] = next(r["track_mean_mm"] for r in rows
+                               if r["install"] == b["install"] and r["speed"] == 1.5)
+    print(f"\nBodies: a robot at 1.5 m/s carrying 2 LEDs (0.3 m apart) or 3 (a triangle), "
+          f"each blinking its code, {args.seconds * 2:g} s; its pose from the tracker against "
+          "the truth; one-LED: the one-LED tracker's mean at 1.5 m/s above")
+    print(table(bodies, [("install", "install", ""), ("leds", "LEDs", "d"),
+                         ("body_rows", "body rows", "d"), ("first_s", "first row s", ".2f"),
+                         ("pos_mean_mm", "origin mean mm", ".2f"),
+                         ("pos_p95_mm", "origin p95 mm", ".2f"),
+                         ("one_led_mm", "one-LED mm", ".2f"),
+                         ("led_mean_mm", "its LEDs mm", ".2f"),
+                         ("yaw_mean_deg", "heading mean °", ".2f"),
+                         ("yaw_p95_deg", "heading p95 °", ".2f"),
+                         ("sigma_yaw_deg", "sigma_yaw °", ".2f"),
+                         ("tilt_mean_deg", "tilt mean °", ".2f"),
+                         ("full_rows", "full-pose rows", "d")]))
+    print(f"three two-LED robots crossing under paper-square, {crossed['seconds']:g} s: "
+          f"{crossed['body_rows']} body rows, {crossed['swapped_rows']} nearer another robot, "
+          f"mean {crossed['pos_mean_mm']:.2f} mm, heading {crossed['yaw_mean_deg']:.2f}°")
+    heading = all(b["yaw_mean_deg"] <= 1.0 for b in bodies if b["leds"] == 2)
+    print(f"two LEDs: mean heading error ≤ 1°: {'yes' if heading else 'NO'}; crossing bodies "
+          f"without a swap: {'yes' if crossed['swapped_rows'] == 0 else 'NO'}")
+    verdicts += [heading, crossed["swapped_rows"] == 0]
     line = line_of_three(60.0, args.seed)
     print(f"\nOne robot at 1.5 m/s under the paper's three cameras in a line for "
           f"{line['seconds']:g} s: {line['ids']} id(s), {line['ok']} of {line['rows']} rows "
@@ -469,6 +597,7 @@ def main(argv=None) -> int:
     ok = all(verdicts)
     path = write_json("tracking", {"seed": args.seed, "static_mm": statics, "rows": rows,
                                    "crossing": ident, "per_frame": frame, "line": line,
+                                   "bodies": bodies, "crossing_bodies": crossed,
                                    "wrong_setups": wrong})
     print(f"wrote {path}")
     return 0 if ok else 1

@@ -194,6 +194,17 @@ Example: `surveys/paper-2024/survey/`.
   whose rays the fit's window held (`C1+C3`); `status` `ok` (two cameras or more), `one_camera`
   (one camera's rays, the track's motion placing the LED along them) or `degenerate` (a
   predicted error past a tenth of the room's size: x, y, z, vx, vy, vz empty).
+- Bodies (`bodies:` in the deployment): per body `id` and `leds` (LED id, each one of
+  `leds:`, on at most one body → `[x, y, z]`, m in the body's frame: x forward, y left, z up).
+  The tracks file then has four more columns, `yaw,pitch,roll,sigma_yaw` (rad; Z-Y-X, body to
+  world: `X_world = position + R · X_body`), empty on an LED's row; a body's row has `led` =
+  the body's id, `x,y,z` its frame's origin, and is fitted to every ray of its LEDs in the
+  window (any camera, any moment). Two LEDs (or LEDs on one line) give the heading of a level
+  body (`pitch`, `roll` empty); three or more not on one line the full pose, when three of
+  them are seen in the window (else the heading, the tilt held). LEDs are told apart by their
+  blink codes, and an LED whose code is not read yet by its place beside its body's named
+  ones. MQTT: `prefix/bodies/<id>` (the row's numbers and `yaw`, `pitch`, `roll`,
+  `sigma_yaw`).
 - Blink codes (`leds:` in the deployment): per LED `id`, `pattern` (a quoted string of `0`
   dark and `1` lit, 2–64 bits, repeated) and `bit_rate` (bits/s); no two patterns the same up
   to a shift at one bit rate. A track is named once its lit and dark frames over a whole repeat

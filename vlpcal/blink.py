@@ -46,6 +46,23 @@ class BlinkCode:
         return bits[np.mod(slot, len(bits))]
 
 
+def _middle_of_best(wrong) -> int:
+    """The phase in the middle of the longest run of phases (circular) that get the fewest
+    slots wrong: the phase that fits is known to that run, best at its middle."""
+    best = wrong == wrong.min()
+    n = len(best)
+    if best.all():
+        return 0
+    start = int(np.argmin(best))  # a phase outside every run: runs do not wrap past it
+    order = np.roll(np.arange(n), -start)
+    run, longest, at = 0, 0, 0
+    for i, k in enumerate(order):
+        run = run + 1 if best[k] else 0
+        if run > longest:
+            longest, at = run, i
+    return int(order[at - (longest - 1) // 2])
+
+
 def check_codes(codes: list[BlinkCode]) -> str | None:
     """What is wrong with a set of codes, in words (None: nothing): each pattern of 0 and 1,
     2–64 bits, lit at least once, and no two LEDs whose patterns are the same up to a shift
@@ -69,16 +86,22 @@ def check_codes(codes: list[BlinkCode]) -> str | None:
 
 
 def decode(t, lit, codes: list[BlinkCode]) -> tuple[str | None, int, int]:
+    """:func:`decode_phase` without the phase."""
+    return decode_phase(t, lit, codes)[:3]
+
+
+def decode_phase(t, lit, codes: list[BlinkCode]) -> tuple[str | None, int, int, float]:
     """Which LED a track is, from its observations: times ``t`` (s) and whether it was ``lit``
     then. Each code is tried at :data:`PHASES_PER_BIT` phases a bit; per code and phase the bit
     slots it gets wrong are counted (a slot: one bit's time, its observations by majority).
     Returns (the LED, the best code's wrong slots, the runner-up's), the LED None unless the
     observations span a whole repeat of the best code and its wrong slots are clearly fewer
-    than the runner-up's (by 3, and by twice its own) — a steady light among the runners."""
+    than the runner-up's (by 3, and by twice its own) — a steady light among the runners;
+    and the phase (s) at which the best code fits (:meth:`BlinkCode.lit`'s)."""
     t = np.asarray(t, float)
     lit = np.asarray(lit, bool)
     if not len(codes) or len(t) < 2:
-        return None, 0, 0
+        return None, 0, 0, 0.0
     order = np.argsort(t, kind="stable")[-MAX_OBSERVATIONS:]  # the latest, in time order
     t, lit = t[order], lit[order]
     scores = []
@@ -98,11 +121,11 @@ def decode(t, lit, codes: list[BlinkCode]) -> tuple[str | None, int, int]:
         before = np.r_[0, total[:-1]]
         before[np.r_[True, rows[1:] != rows[:-1]]] = 0
         wrong = np.bincount(rows, (total - before) < 0, len(phases))
-        best = int(np.argmin(wrong))
+        best = _middle_of_best(wrong)
         span = (t.max() - t.min()) >= code.period
-        scores.append((int(wrong[best]), span, code.led))
+        scores.append((int(wrong[best]), span, code.led, float(phases[best])))
     order = sorted(range(len(scores)), key=lambda i: scores[i][0])
-    (e1, span, led), e2 = scores[order[0]], scores[order[1]][0]
+    (e1, span, led, phase), e2 = scores[order[0]], scores[order[1]][0]
     if led and span and e2 - e1 >= 3 + 2 * e1:
-        return led, e1, e2
-    return None, e1, e2
+        return led, e1, e2, phase
+    return None, e1, e2, 0.0

@@ -14,6 +14,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .blink import BlinkCode, check_codes
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
@@ -25,7 +27,7 @@ CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "positio
 SITE_KEYS = ("name", "ceiling_height", "room", "keep_out")
 #: the optional top-level blocks; a missing block means the defaults
 OPTIONAL_BLOCKS = ("detector", "fusion", "corrections", "uncertainty", "leds", "zones",
-                   "provenance")
+                   "bodies", "provenance")
 DETECTOR_SETTINGS = tuple(DetectorSettings.__dataclass_fields__)
 DEFAULT_FUSION = "robust"
 #: a position further than this many of its predicted errors, plus :data:`ROOM_SLACK` of the
@@ -119,6 +121,12 @@ class Deployment:
                 for d in self.extra.get("leds", [])]
 
     @property
+    def bodies(self) -> list[Body]:
+        """Rigid bodies carrying several LEDs (``bodies:``; none: every LED on its own)."""
+        return [Body(str(b["id"]), {str(k): np.asarray(v, float) for k, v in b["leds"].items()})
+                for b in self.extra.get("bodies", [])]
+
+    @property
     def zones(self) -> dict:
         """Zone id → (floor polygon, camera ids) (``zones:``; none: one zone, the site)."""
         return {str(z["id"]): ([tuple(map(float, p)) for p in z["polygon"]],
@@ -142,8 +150,6 @@ class Deployment:
         """Positions ``X`` (N×3) that cannot be the LED: under the floor, over the ceiling or
         beyond the room's walls by more than :data:`PLAUSIBLE_SIGMAS` of their own predicted
         error ``sigma`` (N) and :data:`ROOM_SLACK` of the ceiling height."""
-        import numpy as np
-
         X = np.atleast_2d(np.asarray(X, float))
         result = np.zeros(len(X), bool)
         if len(X) == 1 and self._point_surely_inside(*X[0].tolist()):
@@ -171,7 +177,6 @@ class Deployment:
         """Which positions (N×3) lie between floor and ceiling and inside the room's outline
         (an even–odd crossing count over its edges; a point on the outline may say no): such a
         point is never :meth:`outside`, whatever its error."""
-        import numpy as np
 
         x, y, z = X[:, 0, None], X[:, 1, None], X[:, 2]
         a = np.asarray(self.room, float)
@@ -480,6 +485,8 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
         _check_leds(extra["leds"])
     if "zones" in extra:
         _check_zones(extra["zones"], camera_ids)
+    if "bodies" in extra:
+        _check_bodies(extra["bodies"], {str(d["id"]) for d in extra.get("leds", [])})
     if "provenance" in extra:
         _mapping(extra["provenance"], "provenance")
 
@@ -531,6 +538,63 @@ def _check_zones(value, camera_ids: set) -> None:
         for cid in ids:
             if str(cid) not in camera_ids:
                 raise DeploymentError(f"{where}.cameras: unknown camera {shown(cid)}")
+
+
+BODY_KEYS = ("id", "leds")
+#: LEDs one body may carry
+MAX_BODY_LEDS = 16
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body (a robot) carrying several LEDs: each LED's position in the body's frame
+    (m; x forward, y left, z up); its pose is the rotation and translation from that frame to
+    the world's."""
+
+    id: str
+    leds: dict  #: LED id → position (3,) in the body's frame
+
+    @property
+    def full_pose(self) -> bool:
+        """Whether its LEDs give the full pose (three or more, not on one line); else its
+        heading only, the body taken as level (two LEDs, or LEDs on one line)."""
+        p = np.array(list(self.leds.values()))
+        if len(p) < 3:
+            return False
+        spread = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)
+        return bool(spread[1] > 1e-3 * spread[0])
+
+
+def _check_bodies(value, led_ids: set) -> None:
+    """``bodies:`` a list of ``{id, leds: {LED id: [x, y, z]}}``: rigid bodies carrying LEDs
+    that ``leds:`` names (issue 29); each LED on one body, at least two apart on each."""
+    carried: dict = {}
+    for where, b in _records(value, "bodies", BODY_KEYS, "body"):
+        if str(b["id"]) in led_ids:
+            raise DeploymentError(f"{where}.id: {b['id']} is also an LED's id in leds: (a "
+                                  "body's rows and an LED's share the led column)")
+        leds = _mapping(b["leds"], f"{where}.leds")
+        if not 2 <= len(leds) <= MAX_BODY_LEDS:
+            raise DeploymentError(f"{where}.leds: expected 2 to {MAX_BODY_LEDS} LEDs "
+                                  f"({{LED id: [x, y, z]}}, m in the body's frame), got "
+                                  f"{shown(b['leds'])}")
+        points = []
+        for led, pos in leds.items():
+            if str(led) not in led_ids:
+                raise DeploymentError(f"{where}.leds.{led}: not an LED of leds: (expected "
+                                      f"{', '.join(sorted(led_ids)) or 'a leds: block'})")
+            if str(led) in carried:
+                raise DeploymentError(f"{where}.leds.{led}: already on body {carried[led]} "
+                                      "(an LED rides one body)")
+            carried[str(led)] = str(b["id"])
+            points.append(_vector(pos, 3, f"{where}.leds.{led}"))
+        p = np.array(points, float)
+        size = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
+        near = min(np.linalg.norm(p[i] - p[j]) for i in range(len(p))
+                   for j in range(i + 1, len(p)))
+        if not near > 1e-3 * max(size, 1e-12) or size == 0:
+            raise DeploymentError(f"{where}.leds: two LEDs at the same place (expected them "
+                                  "apart: their spread gives the body's heading)")
 
 
 LED_KEYS = ("id", "pattern", "bit_rate")

@@ -273,9 +273,10 @@ class Publisher:
                 self._buffer.popleft()
                 self.lost += 1
 
-    def publish(self, led: str, message: dict) -> None:
-        """One fix or track update on ``prefix/fixes/<led>``; every :data:`STATUS_EVERY` s the
-        retained status gains the rate and the cameras that placed the LED since."""
+    def publish(self, led: str, message: dict, kind: str = "fixes") -> None:
+        """One fix or track update on ``prefix/fixes/<led>`` (``kind`` bodies: a body's pose on
+        ``prefix/bodies/<id>``); every :data:`STATUS_EVERY` s the retained status gains the
+        rate and the cameras that placed the LED since."""
         self._count += 1
         self._alive.update(c for c in str(message.get("cameras") or "").split("+") if c)
         now = time.monotonic()
@@ -284,7 +285,7 @@ class Publisher:
                         cameras_alive=sorted(self._alive))
             self._count, self._alive, self._since = 0, set(), now
         payload = json.dumps(message, allow_nan=False, separators=(",", ":"))
-        topic = self.topic("fixes", led)
+        topic = self.topic(kind, led)
         if self._connected.is_set() and not self._buffer:
             self._send(topic, payload)
         else:
@@ -355,8 +356,12 @@ def track_message(t: float, update) -> dict:
         return round(v, 6) if math.isfinite(v) else None
 
     (x, y, z), (vx, vy, vz) = map(num, update.position), map(num, update.velocity)
-    return {"t": t, "led": update.led, "x": x, "y": y, "z": z, "vx": vx, "vy": vy, "vz": vz,
-            "sigma_m": num(update.sigma_m), "cameras": update.cameras, "status": update.status}
+    message = {"t": t, "led": update.led, "x": x, "y": y, "z": z, "vx": vx, "vy": vy, "vz": vz,
+               "sigma_m": num(update.sigma_m), "cameras": update.cameras,
+               "status": update.status}
+    if update.pose is not None:  # a body's: its orientation too
+        message.update(zip(("yaw", "pitch", "roll", "sigma_yaw"), map(num, update.pose)))
+    return message
 
 
 class SpotSubscriber:

@@ -44,8 +44,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode
-from .deployment import Deployment
+from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode_phase
+from .deployment import Body, Deployment
 from .detection import detect_frame
 from .fit_watch import FitWatch
 
@@ -67,8 +67,14 @@ COAST_PERIODS = 8.0
 FIT_SIGMAS = 4.0
 #: s: an ended track's id is kept this long for a new track that continues it
 HOLD_SECONDS = 5.0
-#: a track's path in an image is its last this many spots there
-PATH_SPOTS = 5
+#: placements running that name a track by the body's shape (:meth:`Tracker._by_shape`)
+SHAPE_VOTES = 5
+#: a bit's share, at each of its edges, where a track's blink code cannot say lit or dark
+BIT_EDGE = 0.2
+#: a track's path in an image is its last this many spots there, and is lost when no spot
+#: continues it for this many frame periods (a dropped frame, jitter): a dark LED's path
+#: held longer would take the spot of an LED beside it
+PATH_SPOTS, PATH_GAP = 5, 4.0
 #: m/s²: the LED's acceleration, 1 sigma (a robot turning, a cart; a hand waves harder)
 ACCELERATION = 5.0
 #: m/s: the fastest the LED is expected to go (how far it may move between two first spots)
@@ -84,6 +90,9 @@ VIEW_MARGIN_PX = 4.0
 DEGENERATE_SHARE = 0.1
 
 TRACK_COLUMNS = ("t", "led", "x", "y", "z", "vx", "vy", "vz", "sigma_m", "cameras", "status")
+#: a deployment with ``bodies:`` adds these: a body's orientation (rad, Z-Y-X, body to world;
+#: pitch and roll empty for a body whose LEDs give its heading only) and its heading's sigma
+BODY_COLUMNS = ("yaw", "pitch", "roll", "sigma_yaw")
 
 
 @dataclass
@@ -99,14 +108,21 @@ class TrackUpdate:
     #: ok; one_camera (one camera's rays: the motion carried it); degenerate (no position: its
     #: predicted error passes a tenth of the room's size)
     status: str
+    #: a body's row: its yaw, pitch, roll (rad; pitch and roll NaN when its LEDs give its
+    #: heading only) and the yaw's sigma; None: an LED's row
+    pose: tuple | None = None
 
-    def row(self) -> list:
-        """The CSV row (a number that is not there, as a degenerate row's position: empty)."""
+    def row(self, pose_columns: bool = False) -> list:
+        """The CSV row (a number that is not there, as a degenerate row's position: empty);
+        ``pose_columns``: with :data:`BODY_COLUMNS` (empty for an LED's row)."""
         def num(v):
             return f"{v:.6f}" if np.isfinite(v) else ""
 
-        return [f"{self.t:.6f}", self.led, *map(num, self.position), *map(num, self.velocity),
-                num(self.sigma_m), self.cameras, self.status]
+        row = [f"{self.t:.6f}", self.led, *map(num, self.position), *map(num, self.velocity),
+               num(self.sigma_m), self.cameras, self.status]
+        if pose_columns:
+            row += list(map(num, self.pose)) if self.pose is not None else [""] * 4
+        return row
 
 
 @dataclass(eq=False)
@@ -139,7 +155,22 @@ class _Track:
     tentative: bool = True
     misfits: int = 0  #: a tentative track's windows that did not fit
     latest: _Ray | None = None  #: its newest ray (kept when older rays are dropped)
+    #: the time of the first ray it took since two cameras last placed it (inf: none since)
+    unplaced_since: float = np.inf
+    #: (its blink code, the code's phase) once the code names it: when its LED is dark
+    code: tuple | None = None
+    #: (the body's LED its place beside the body's named LEDs points to, placements running)
+    shape_votes: tuple = (None, 0)
     held_since: float = np.inf  #: when it ended (held: its id waits for a track continuing it)
+
+
+@dataclass(eq=False)
+class _BodyState:
+    body: object  #: :class:`~vlpcal.deployment.Body`
+    due: list = field(default_factory=list)  #: capture times whose rows are not yet written
+    fit: np.ndarray | None = None  #: 13: position, velocity, acceleration, yaw, yaw rate,
+    fit_t: float = -np.inf  #: pitch, roll at this time
+    cov: np.ndarray | None = None  #: the fit's covariance
 
 
 class Tracker:
@@ -181,6 +212,9 @@ class Tracker:
         self._axis_c = np.einsum("ij,ij->i", self._R[:, 2], self._C)  #: R₂·C per camera
         self.tracks: list[_Track] = []
         self.held: list[_Track] = []  #: ended tracks whose ids wait (:data:`HOLD_SECONDS`)
+        #: rigid bodies (``bodies:``): each placed from its LEDs' rays (:mod:`vlpcal.bodies`)
+        self.bodies = [_BodyState(b) for b in deployment.bodies]
+        self._body_of = {led: state for state in self.bodies for led in state.body.leds}
         self._spotted: dict = {}  #: camera index → the time of its newest frame with a spot
         self.frames_with_spot = 0
         #: the moments two cameras saw a spot, placed or not: whether the frames fit
@@ -250,6 +284,7 @@ class Tracker:
         for j, h in follows.items():  # a held track's path goes on
             h.rays = h.rays[-2 * PATH_SPOTS:] + [rays[j]]
             h.latest = rays[j]
+            self._body_due(h, t)
         for j, ray in enumerate(rays):
             track = claims.get(j)
             if track is not None or (track := self._reacquire(ray)) is not None:
@@ -257,7 +292,9 @@ class Tracker:
                 track.latest = ray
                 track.due.append(t)
                 track.last_ray = t
+                track.unplaced_since = min(track.unplaced_since, t)
                 self._refresh(track, t)
+                self._body_due(track, t)
                 if together:
                     placed = not track.tentative and track.last_two == t
                     self.fit.add(placed, "" if placed else "off their track")
@@ -298,6 +335,9 @@ class Tracker:
     def finish(self) -> list[TrackUpdate]:
         """The rows still waiting for the rest of their window (the stream ended)."""
         out = []
+        for state in self.bodies:
+            out += [u for u in (self._body_row(state, t) for t in state.due) if u is not None]
+            state.due = []
         for tr in self.tracks:
             if not tr.tentative:  # (its rows wait until it is confirmed: never)
                 out += [self._row(tr, t) for t in tr.due]
@@ -338,13 +378,18 @@ class Tracker:
                 tr.due = [t for t in tr.due if t > cut]
                 out += [self._row(tr, t) for t in ready]
             tr.rays = [r for r in tr.rays if r.t >= kept]
+        for state in self.bodies:
+            if state.due and state.due[0] <= cut:
+                ready = [t for t in state.due if t <= cut]
+                state.due = [t for t in state.due if t > cut]
+                out += [u for u in (self._body_row(state, t) for t in ready) if u is not None]
         return sorted(out, key=lambda u: u.t) if len(out) > 1 else out
 
     def _drop_lost(self, now: float, out: list) -> None:
         keep = []
         for tr in self.tracks:
             if now - tr.last_ray > self.lost_after or \
-                    tr.last_ray - tr.last_two > COAST_PERIODS * self.period:
+                    tr.last_ray - tr.unplaced_since > COAST_PERIODS * self.period:
                 if not tr.tentative:
                     out += [self._row(tr, t) for t in tr.due]
                     tr.due = []
@@ -368,17 +413,21 @@ class Tracker:
         longer than a window failed to place it (one camera alone seeing it: then only its path
         in an image does; a track that saw no spot at all — a blink code's dark run — keeps
         its state, whose sigma grows with the time)."""
-        return tr.held_since == np.inf and (tr.tentative
-                                             or tr.last_ray - tr.last_two <= WINDOW * self.period)
+        return tr.held_since == np.inf and (tr.tentative or not self._coasting(tr))
+
+    def _coasting(self, tr: _Track) -> bool:
+        """Whether the spots the track took for longer than a window did not place it (one
+        camera alone seeing it; a track that saw no spot — a blink code's dark run — is not)."""
+        return tr.last_ray - tr.unplaced_since > WINDOW * self.period
 
     def _path_gap(self, tr: _Track, k: int, xy, t: float):
         """How far spots at ``xy`` (J×2, time ``t``) are from the track's recent path in camera
         ``k`` — its last :data:`PATH_SPOTS` spots there, carried on at their velocity — in gate
         widths (≤ 1: it can be the same LED): the spot noise and the acceleration possible since
-        (:data:`ACCELERATION`). Inf where it has no spot there for a window (:data:`WINDOW`
-        frame periods: the LED left the view, or is hidden; its path is lost)."""
+        (:data:`ACCELERATION`). Inf where it has no spot there for :data:`PATH_GAP` frame
+        periods (the LED left the view, is hidden or dark: its path is lost)."""
         seen = [r for r in tr.rays[-3 * PATH_SPOTS:] if r.camera == k][-PATH_SPOTS:]
-        if not seen or not 0 <= t - seen[-1].t <= WINDOW * self.period:
+        if not seen or not 0 <= t - seen[-1].t <= PATH_GAP * self.period:
             return np.full(len(xy), np.inf)
         last, dt = seen[-1], t - seen[-1].t
         depth = max(float(self._R[k, 2] @ (tr.fit[:3] - self._C[k])), 1e-9)
@@ -390,6 +439,16 @@ class Tracker:
             v, spread = np.zeros(2), TOP_SPEED * dt
         sigma = np.hypot(np.sqrt(2) * self.pixel_sigma / self._f[k], spread / depth)
         return np.linalg.norm(np.asarray(xy) - last.xy - v * dt, axis=-1) / (GATE_SIGMAS * sigma)
+
+    def _dark_now(self, tr: _Track, t: float) -> bool:
+        """Whether the track's blink code, at the phase that named it, has its LED dark at
+        ``t`` — surely: not within :data:`BIT_EDGE` of a bit's edge (the code's phase is
+        known to an eighth of a bit, and a frame's exposure takes time)."""
+        code, phase = tr.code
+        slot = (t + phase) * code.bit_rate
+        if min(slot % 1.0, 1.0 - slot % 1.0) < BIT_EDGE:
+            return False
+        return not bool(code.lit(t, phase))
 
     def _reacquire(self, ray: _Ray) -> _Track | None:
         """The track one camera alone still sees whose newest spot meets this ray of another
@@ -422,17 +481,23 @@ class Tracker:
                          for r in tr.rays if r.camera == h.latest.camera), default=np.inf)
             if score <= link:
                 best, link = h, score
-            elif t - h.latest.t > WINDOW * self.period:  # its path lost: it may be
+            elif t - h.latest.t > PATH_GAP * self.period:  # its path lost: it may be
                 within.append(h)  # anywhere in reach
-        if best is None:
+        linked = best is not None
+        if not linked:
             if len(within) != 1:
                 return
             best = within[0]
         self.held = [h for h in self.held if h is not best]
-        if tr.led == tr.anonymous:  # not named by its own blink code yet: the held one's
+        tr.anonymous = best.anonymous
+        if not linked:  # its motion alone: its id, not its blink code's name (a code says
+            if tr.led == "":  # which LED it is better than a guess of where it went)
+                tr.led = best.anonymous
+            return
+        if tr.led == tr.anonymous or tr.led == "":  # not named by its own code yet: the held
             taken = best.led != best.anonymous and any(o.led == best.led for o in self.tracks)
             tr.led, tr.margin = (best.anonymous, 0) if taken else (best.led, best.margin)
-        tr.anonymous = best.anonymous
+            tr.code = None if taken else best.code
         tr.seen = best.seen + tr.seen
 
     def _extrapolated(self, tr: _Track, t: float):
@@ -466,13 +531,64 @@ class Tracker:
                     self._pending += [r for r in tr.rays
                                       if r.t >= t - START_WINDOW * self.period]
             return
-        tr.last_two = t
+        tr.last_two, tr.unplaced_since = t, np.inf
         tr.fit, tr.fit_t = fit, t
         tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
         tr.s_vel = float(np.sqrt(max(np.trace(cov[3:6, 3:6]), 0.0) / 3))
         if len(rays) >= 3 and tr.tentative:
             tr.tentative = False
             self._confirm(tr, t)
+        if self.bodies and not tr.tentative and tr.led not in self._body_of:
+            self._by_shape(tr, t)
+
+    def _shaped(self, body, seen: dict, t: float) -> bool:
+        """Whether the body's LED tracks placed now lie as far apart as its LEDs do (within
+        their sigmas): a track named by a misread code is not its LED."""
+        now = [(led, tr) for led, tr in seen.items() if t - tr.last_two <= WINDOW * self.period]
+        for i, (a, ta) in enumerate(now):
+            pa, _, sa, _ = self._extrapolated(ta, t)
+            for b, tb in now[i + 1:]:
+                pb, _, sb, _ = self._extrapolated(tb, t)
+                want = float(np.linalg.norm(body.leds[a] - body.leds[b]))
+                slack = 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) + 0.02 * want
+                if abs(float(np.linalg.norm(pa - pb)) - want) > slack:
+                    return False
+        return True
+
+    def _by_shape(self, tr: _Track, t: float) -> None:
+        """A track no code names yet, on a body one of whose other LEDs a track already
+        names (placed now): the body's LED that lies at the right distance from every named
+        one — within their sigmas, which must be a quarter of it or less — alone, and for
+        :data:`SHAPE_VOTES` placements running, names it (the body's shape tells which LED it
+        is)."""
+        X = tr.fit[:3]
+        fits = []
+        for state in self.bodies:
+            named = {o.led: o for o in self.tracks if o.led in state.body.leds and o is not tr
+                     and t - o.last_two <= WINDOW * self.period}  # placed now
+            if not named:
+                continue
+            for led, b in state.body.leds.items():
+                if led in named:
+                    continue
+                good = True
+                for other, o in named.items():
+                    want = float(np.linalg.norm(b - state.body.leds[other]))
+                    pos, _, s_o, _ = self._extrapolated(o, t)
+                    slack = 3 * np.sqrt(3 * (tr.s_pos ** 2 + s_o ** 2)) + 0.02 * want
+                    if slack > 0.25 * want or abs(float(np.linalg.norm(X - pos)) - want) > slack:
+                        good = False
+                        break
+                if good:
+                    fits.append(led)
+        if len(fits) != 1:
+            tr.shape_votes = (None, 0)
+            return
+        led = fits[0]
+        votes = tr.shape_votes[1] + 1 if tr.shape_votes[0] == led else 1
+        tr.shape_votes = (led, votes)
+        if votes >= SHAPE_VOTES:
+            tr.led, tr.margin, tr.code = led, 0, None
 
     def _plausible(self, fit, cov) -> bool:
         """Whether a window's fit can be the LED: inside the room (the locator's rule,
@@ -519,9 +635,12 @@ class Tracker:
         d = np.where(np.isfinite(d), d, np.inf)
         rank = np.zeros(len(owners))
         for i, tr in enumerate(owners):
+            if tr.code is not None and self._dark_now(tr, t):
+                d[i] = np.inf  # its code says its LED is dark now: the spot is another's
+                continue
             if tr.tentative:
                 rank[i] = 3
-            elif tr.held_since < np.inf or tr.last_ray - tr.last_two > WINDOW * self.period:
+            elif tr.held_since < np.inf or self._coasting(tr):
                 rank[i] = 1  # on its path in this image too
                 d[i] = np.maximum(d[i], GATE_SIGMAS * self._path_gap(tr, k, xy, t))
             elif t - tr.last_two > WINDOW * self.period:
@@ -529,7 +648,12 @@ class Tracker:
         claims: dict = {}
         follows: dict = {}
         taken: set = set()
-        for flat in np.argsort(d + GATE_SIGMAS * rank[:, None], axis=None):
+        # within a rank, the likeliest pairs first: a track whose guess is loose (a dark run)
+        # does not outbid one that foresees the spot closely (2D Gaussian: d²/2 + 2 ln σ)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cost = 0.5 * d * d + 2 * np.log(slack * self._f[k])[:, None]
+        cost = np.where(np.isfinite(cost), cost, np.inf)
+        for flat in np.argsort(cost + 1e6 * rank[:, None], axis=None):
             i, j = np.unravel_index(flat, d.shape)
             if not d[i, j] < GATE_SIGMAS or i in taken or j in claims:
                 continue
@@ -581,17 +705,18 @@ class Tracker:
         if len(tr.seen) < 2:
             return
         t, lit = np.array(tr.seen).T
-        led, e1, e2 = decode(t, lit.astype(bool), self.codes)
+        led, e1, e2, phase = decode_phase(t, lit.astype(bool), self.codes)
         if led is None:
             if tr.led != tr.anonymous and e2 - e1 < 0:  # its code no longer fits it
-                tr.led = tr.anonymous
+                tr.led, tr.code = tr.anonymous, None
             return
         holder = next((o for o in self.tracks if o is not tr and o.led == led), None)
         if holder is not None:
             if holder.margin >= e2 - e1:
                 return
-            holder.led = holder.anonymous
+            holder.led, holder.code = holder.anonymous, None
         tr.led, tr.margin = led, e2 - e1
+        tr.code = (next(c for c in self.codes if c.led == led), phase)
 
     def _confirm(self, tr: _Track, t: float) -> None:
         """A track confirmed: the id of the held track it continues, else a new one."""
@@ -624,6 +749,111 @@ class Tracker:
         self.tracks.append(_Track("", [p, ray], ray.t, np.r_[X, np.zeros(6)], [p.t, ray.t],
                                   ray.t, last_two=ray.t, s_pos=s_pos, s_vel=TOP_SPEED,
                                   latest=ray))
+
+    def _body_due(self, tr: _Track, t: float) -> None:
+        """A ray of a body's LED at ``t``: the body's row of that time is due."""
+        state = self._body_of.get(tr.led)
+        if state is not None and not (state.due and state.due[-1] == t):
+            state.due.append(t)
+
+    def _body_row(self, state: _BodyState, t: float) -> TrackUpdate | None:
+        """The body's pose at ``t`` (:func:`vlpcal.bodies.fit_pose`) from every ray of its
+        LEDs — live tracks and held ones alike, named by their codes — in the window about
+        ``t``; None when fewer than two of its LEDs were seen in it, or they do not fit."""
+        from .bodies import angles, fit_pose, pose_from_points, rotation
+
+        body = state.body
+        reach = self.half
+        ahead = min(self._lag, reach)
+        lo, hi = t - 2 * reach + ahead, t + ahead
+        rays, points, seen = [], [], {}
+        for tr in self.tracks:  # per LED one track (a held one's path may be a sibling's)
+            b = body.leds.get(tr.led)
+            if b is None or tr.tentative or tr.led in seen:
+                continue
+            mine = [r for r in tr.rays if lo <= r.t <= hi]
+            rays += mine
+            points += [b] * len(mine)
+            if mine:
+                seen[tr.led] = tr
+        if len(seen) < 2 or not self._shaped(body, seen, t):
+            return None
+        prior = None
+        if state.fit is not None and abs(t - state.fit_t) <= 0.5:  # carried to t
+            dt = t - state.fit_t
+            f = state.fit
+            guess = np.r_[f[:3] + f[3:6] * dt, f[3:6], np.zeros(3), f[9] + f[10] * dt, f[10],
+                          f[11:]]
+            # … and its state there joins the fit, loosened threefold (the rays it held are
+            # among these), widened by the motion it cannot foresee (as a track's)
+            var = np.diag(state.cov)
+            spin = self.acceleration / max(float(np.max(np.linalg.norm(
+                np.array(list(body.leds.values())), axis=1))), 1e-9)
+            s2 = np.zeros(13)
+            s2[:3] = var[:3] + var[3:6] * dt * dt + (0.5 * self.acceleration * dt * dt) ** 2
+            s2[3:6] = var[3:6] + (self.acceleration * dt) ** 2
+            s2[9] = var[9] + var[10] * dt * dt + (0.5 * spin * dt * dt) ** 2
+            s2[10] = var[10] + (spin * dt) ** 2
+            info = np.zeros(13)
+            on = s2 > 0
+            info[on] = 1.0 / (9.0 * s2[on])
+            prior = (guess, info)
+        else:  # where its LEDs' tracks are
+            led_ids = list(seen)
+            pos, ang = pose_from_points([body.leds[k] for k in led_ids],
+                                        [self._extrapolated(seen[k], t)[0] for k in led_ids])
+            guess = np.r_[pos, np.zeros(6), ang[0], 0.0, ang[1:]]
+        points = np.array(points)
+        # the full pose from three LEDs or more not on one line, seen now; else the heading,
+        # the tilt held (a level body's, or the last full fit's)
+        full = body.full_pose and Body("", {k: body.leds[k] for k in seen}).full_pose
+        if not full:
+            guess[11:] = (state.fit[11:] if body.full_pose and state.fit is not None
+                          else 0.0)
+        keep = np.ones(len(rays), bool)
+        for _ in range(3):  # a ray far off the others' pose (a lamp a track took): left out
+            eq = np.concatenate([r.eq for r, k in zip(rays, keep) if k])
+            fit, resid, cov, res = fit_pose(eq[:, :3], eq[:, 3], eq[:, 4] - t, eq[:, 5:8],
+                                          eq[:, 8], eq[:, 9], np.repeat(points[keep], 2, axis=0),
+                                          guess, full, self.acceleration,
+                                          self.pixel_sigma, prior)
+            if fit is None or resid <= FIT_SIGMAS * self.pixel_sigma:
+                break
+            off = np.hypot(res[0::2], res[1::2]) > GATE_SIGMAS
+            if not off.any():
+                break
+            keep[np.flatnonzero(keep)[off]] = False
+            guess = fit
+            if len({tuple(b) for b in points[keep]}) < 2:
+                return None
+        if fit is None or not resid <= FIT_SIGMAS * self.pixel_sigma:
+            return None
+        # its LEDs where their own tracks, placed now, put them: else a ray was another's
+        R = rotation(fit[9], fit[11], fit[12])
+        s_body = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
+        for led, tr in seen.items():
+            if t - tr.last_two > WINDOW * self.period:
+                continue
+            pos, _, s_led, _ = self._extrapolated(tr, t)
+            off = float(np.linalg.norm(fit[:3] + R @ body.leds[led] - pos))
+            if off > GATE_SIGMAS * np.sqrt(3 * (s_led ** 2 + s_body ** 2)):
+                return None
+        rays = [r for r, k in zip(rays, keep) if k]
+        sigma = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0)))
+        if not (sigma < DEGENERATE_SHARE * self._size
+                and not self.deployment.outside(fit[:3], sigma)[0]):
+            return None
+        if t >= state.fit_t:
+            state.fit, state.fit_t, state.cov = fit, t, cov
+        cams = sorted({r.camera for r in rays})
+        if full:  # one rotation has two sets of Z-Y-X angles: |pitch| ≤ π/2
+            fit[9], fit[11], fit[12] = angles(rotation(fit[9], fit[11], fit[12]))
+        pitch, roll = (fit[11], fit[12]) if full else (np.nan, np.nan)
+        return TrackUpdate(t, body.id, fit[:3].copy(), fit[3:6].copy(), sigma,
+                           "+".join(self.cameras[k].id for k in cams),
+                           "ok" if len(cams) >= 2 else "one_camera",
+                           (float(fit[9]), float(pitch), float(roll),
+                            float(np.sqrt(max(cov[9, 9], 0.0)))))
 
     def _row(self, tr: _Track, t: float) -> TrackUpdate:
         fit = cov = None

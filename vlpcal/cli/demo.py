@@ -43,6 +43,10 @@ from .common import Finite, UserError, _floats, _floor_diagonal, _load_deploymen
               help="Also a robot's LED driving at this speed, m/s, seen by unsynchronised "
                    "cameras (OUT/streams/: <camera_id>/<frame_no>.jpg and times.csv, 30 fps "
                    "each from a random phase, 2 ms jitter, 5 % dropped) for vlpcal track.")
+@click.option("--body", type=click.IntRange(2, 3), default=None, metavar="N",
+              help="With --robot-speed: the robot carries N LEDs (2: 0.3 m apart along its "
+                   "heading; 3: a triangle, the full pose), each with its blink code; the "
+                   "deployments gain their leds: and bodies: blocks (body R1).")
 @click.option("--seconds", default=10.0, show_default=True, type=Finite(0.1, 600.0),
               help="With --robot-speed: how long the robot drives.")
 @click.option("--publish", default=None, metavar="mqtt://…/PREFIX",
@@ -53,7 +57,7 @@ from .common import Finite, UserError, _floats, _floor_diagonal, _load_deploymen
 @click.option("--describe", is_flag=True, help="Print the profile's parameters and sources.")
 def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heights,
              test_points, trajectory, free_sets, free_height, references, wand, robot_speed,
-             seconds, publish, overwrite, describe):
+             body, seconds, publish, overwrite, describe):
     """Simulate an install: nominal and true deployments, a survey bundle, a frames folder.
 
     The install is a named profile (--profile) or your own deployment (-d): its cameras as
@@ -143,6 +147,9 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
             raise click.BadParameter("is for a free survey (--free-sets N)", param_hint=name)
     if wand is not None:
         _check_wand(profile, wand, free_height)
+    if body is not None and not robot_speed:
+        raise click.BadParameter("is for a robot's streams (--robot-speed M/S)",
+                                 param_hint="--body")
     given = click.get_current_context().get_parameter_source("seconds")
     if given == click.core.ParameterSource.COMMANDLINE and not robot_speed:
         raise click.BadParameter("is for a robot's streams (--robot-speed M/S) or --publish",
@@ -182,12 +189,33 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
         if robot_speed:
             from ..sim.streams import robot_path, simulate_streams
 
-            simulate_streams(scene, stage / "streams", robot_path(scene, robot_speed, seed=seed),
-                             seconds, seed=seed)
+            path = robot_path(scene, robot_speed, height=0.0 if body else 0.15, seed=seed)
+            leds = path
+            if body:
+                leds = _body_into(stage, path, body, seed)
+            simulate_streams(scene, stage / "streams", leds, seconds, seed=seed)
             click.echo(f"streams: a robot at up to {robot_speed:g} m/s (slower in its turns) "
-                       f"for {seconds:g} s, cameras "
+                       + (f"carrying {body} blinking LEDs (body R1) " if body else "")
+                       + f"for {seconds:g} s, cameras "
                        f"not synchronised → {out / 'streams'} (truth in "
                        f"{out / 'streams.truth.csv'})")
+
+
+def _body_into(stage, path, n: int, seed: int) -> list:
+    """``--body N``: the robot's LEDs (:func:`vlpcal.sim.streams.body_leds`), and the
+    deployments in ``stage`` given their leds: and bodies: blocks."""
+    from ..deployment import load, save
+    from ..sim.streams import BODY_LAYOUTS, body_blocks, body_leds
+
+    leds, _ = body_leds(path, BODY_LAYOUTS[n], seed=seed)
+    blocks = body_blocks(leds, BODY_LAYOUTS[n])
+    for name in ("nominal.yaml", "truth.yaml"):
+        header = "\n".join(line[2:] for line in (stage / name).read_text().splitlines()
+                           if line.startswith("# "))
+        dep = load(stage / name)
+        dep.extra.update(blocks)
+        save(dep, stage / name, header=header)
+    return leds
 
 
 #: what vlpcal simulate writes in its --out folder

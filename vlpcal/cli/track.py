@@ -127,7 +127,8 @@ def _published(publisher, rows, utc: float = 0.0):
         from ..mqtt import track_message
 
         for r in rows:
-            publisher.publish(r.led, track_message(r.t + utc, r))
+            publisher.publish(r.led, track_message(r.t + utc, r),
+                              "bodies" if r.pose is not None else "fixes")
     return rows
 
 
@@ -216,7 +217,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
     rows += _published(publisher, tracker.finish())
     if not rows:
         raise check.no_rows(tracker, frames_dir)
-    _write_tracks(out, rows)
+    _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
     if not quiet:
         words = {"wrong_size": "of another size than their camera's",
                  "corrupt_frame": "not whole JPEGs"}
@@ -227,24 +228,30 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
                    + (f"; {bad} (not used)" if bad else ""), err=True)
 
 
-def _write_tracks(out, rows, utc: float = 0.0) -> None:
-    """The tracks file, staged and renamed (``utc``: added to each row's time)."""
+def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False) -> None:
+    """The tracks file, staged and renamed (``utc``: added to each row's time;
+    ``pose_columns``: the bodies' columns too)."""
     import csv
 
-    from ..tracking import TRACK_COLUMNS
     from ..writing import OutputSet
 
     with OutputSet(out) as (tmp,):
         with open(tmp, "w", newline="") as f:
             w = csv.writer(f)
-            w.writerow(TRACK_COLUMNS)
-            w.writerows(_utc_row(r, utc) for r in rows)
+            w.writerow(_columns(pose_columns))
+            w.writerows(_utc_row(r, utc, pose_columns) for r in rows)
 
 
-def _utc_row(update, utc: float) -> list:
+def _columns(pose_columns: bool) -> tuple:
+    from ..tracking import BODY_COLUMNS, TRACK_COLUMNS
+
+    return TRACK_COLUMNS + (BODY_COLUMNS if pose_columns else ())
+
+
+def _utc_row(update, utc: float, pose_columns: bool = False) -> list:
     """A track update's CSV row, its time moved by ``utc`` s (live: the host's monotonic clock
     to UTC)."""
-    row = update.row()
+    row = update.row(pose_columns)
     if utc:
         row[0] = f"{update.t + utc:.6f}"
     return row
@@ -260,9 +267,11 @@ def _lag_said(tracker) -> str:
 
 def _summary(rows) -> str:
     ok = sum(r.status == "ok" for r in rows)
-    leds = sorted({r.led for r in rows})
+    leds = sorted({r.led for r in rows if r.pose is None})
+    bodies = sorted({r.led for r in rows if r.pose is not None})
     shown = ", ".join(leds[:12]) + (f" and {len(leds) - 12} more" if len(leds) > 12 else "")
-    return (f"{len(rows)} rows, {ok} placed by two cameras or more, tracks {shown or '–'}")
+    return (f"{len(rows)} rows, {ok} placed by two cameras or more, tracks {shown or '–'}"
+            + (f", bodies {', '.join(bodies)}" if bodies else ""))
 
 
 def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
@@ -287,7 +296,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     frames = TimedFrames(sources, deadline=t_end, on_event=say)
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
     utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
-    live = _LiveTracks(out, utc)  # row by row, flushed: a reader can follow it
+    live = _LiveTracks(out, utc, bool(dep.bodies))  # row by row, flushed: a reader follows
     rows: list = []
     n = 0
     try:
@@ -349,7 +358,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         if not quiet:
             click.echo(msg, err=True)
 
-    live = _LiveTracks(out, 0.0)  # refused at once if the file is there
+    live = _LiveTracks(out, 0.0, bool(dep.bodies))  # refused at once if the file is there
     try:
         sub = SpotSubscriber(target, [c.id for c in dep.cameras], ca_file,
                              sizes={c.id: (c.width, c.height) for c in dep.cameras})
@@ -415,14 +424,13 @@ class _LiveTracks:
     """A live run's tracks file: new, its header at once, each row flushed as it is made
     (:func:`vlpcal.locator.open_live`)."""
 
-    def __init__(self, out, utc: float):
+    def __init__(self, out, utc: float, pose_columns: bool = False):
         import csv
 
         from ..locator import open_live
-        from ..tracking import TRACK_COLUMNS
         from ..writing import OutputError
 
-        self.path, self.utc = out, utc
+        self.path, self.utc, self.pose_columns = out, utc, pose_columns
         try:
             self.f = open_live(out)
         except OutputError as e:
@@ -430,14 +438,14 @@ class _LiveTracks:
         self.w = csv.writer(self.f)
         self.failed, self._whole = False, 0
         try:
-            self._put([TRACK_COLUMNS])
+            self._put([_columns(pose_columns)])
         except UserError:  # not even the header: no file of ours is left
             self.close()
             self.remove()
             raise
 
     def write(self, rows) -> None:
-        self._put(_utc_row(r, self.utc) for r in rows)
+        self._put(_utc_row(r, self.utc, self.pose_columns) for r in rows)
 
     def _put(self, lines) -> None:
         """CSV lines, flushed; a disk that fails (full, gone) is one line naming the file, the

@@ -116,6 +116,52 @@ def robot_path(scene: Scene, speed: float, height: float = 0.15, seed: int = 0,
     return at
 
 
+#: the simulated robots' LEDs: in the body's frame (m; x forward, z up), two 0.3 m apart
+#: along its heading, or three (a triangle with sides of 27, 32 and 35 cm — told apart by
+#: its shape, as motion capture's markers are — one LED higher: the full pose); their codes
+BODY_LAYOUTS = {2: {"L1": (0.15, 0.0, 0.15), "L2": (-0.15, 0.0, 0.15)},
+                3: {"L1": (0.2, 0.0, 0.15), "L2": (-0.1, 0.1, 0.15),
+                    "L3": (-0.1, -0.15, 0.25)}}
+BODY_CODES = ("0010111101", "0011001111", "0101010111")
+BODY_BIT_RATE = 10.0
+
+
+def body_leds(path, layout: dict, codes=BODY_CODES, bit_rate: float = BODY_BIT_RATE,
+              seed: int = 0, prefix: str = "", heading: float | None = None
+              ) -> tuple[list[MovingLed], Callable]:
+    """A robot's LEDs (``layout``: LED id → position in its frame) riding ``path`` (its
+    origin, on the floor: time → N×3) facing where it drives — or, ``heading`` (rad), facing
+    one way throughout (a robot that drives to and fro, backing up) — each blinking its code
+    from its own phase. Returns (the LEDs, the robot's yaw: time → rad)."""
+    from ..bodies import rotation
+
+    def yaw(t):
+        t = np.asarray(t, float)
+        if heading is not None:
+            return np.full(t.shape, float(heading))
+        v = path(t + 1e-3) - path(t - 1e-3)
+        return np.arctan2(v[..., 1], v[..., 0])
+
+    def riding(b):
+        b = np.asarray(b, float)
+        return lambda t: path(t) + np.einsum("...ij,j->...i", rotation(yaw(t)), b)
+
+    rng = np.random.default_rng([seed, 29])
+    leds = []
+    for (led, b), pattern in zip(layout.items(), codes):
+        code = BlinkCode(prefix + led, pattern, bit_rate)
+        leds.append(MovingLed(prefix + led, riding(b), code, float(rng.uniform(0, code.period))))
+    return leds, yaw
+
+
+def body_blocks(leds: list[MovingLed], layout: dict, body: str = "R1") -> dict:
+    """The deployment's ``leds:`` and ``bodies:`` blocks of :func:`body_leds`' robot."""
+    return {"leds": [{"id": m.led, "pattern": m.code.pattern, "bit_rate": m.code.bit_rate}
+                     for m in leds],
+            "bodies": [{"id": body, "leds": {m.led: list(map(float, b))
+                                             for m, b in zip(leds, layout.values())}}]}
+
+
 def capture_times(timing: Timing, duration: float, rng) -> np.ndarray:
     """One camera's capture times (s, the true clock) over ``duration``: its schedule at
     ``fps`` from a random phase, jittered, with ``drop`` of the frames lost."""

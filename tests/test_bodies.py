@@ -1,0 +1,193 @@
+"""Robots, not dots (issue 29): a deployment's bodies: block, the pose of a body from its LEDs'
+rays at their own times, `vlpcal track` rows and MQTT topics of bodies, and `vlpcal simulate
+--body`."""
+
+import csv
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from test_several_leds import crossing_events, square_rig
+
+from vlpcal import deployment
+from vlpcal.blink import BlinkCode
+from vlpcal.bodies import angles, pose_from_points, rotation
+from vlpcal.sim.streams import BODY_LAYOUTS, body_blocks, body_leds
+from vlpcal.tracking import Tracker
+
+CODES = [BlinkCode("L1", "0010111101", 10), BlinkCode("L2", "0011001111", 10),
+         BlinkCode("L3", "0101010111", 10)]
+
+
+def body_rig(n=2):
+    doc = square_rig(CODES[:n]).to_dict()
+    doc["bodies"] = [{"id": "R1", "leds": {k: list(v) for k, v in BODY_LAYOUTS[n].items()}}]
+    return deployment.from_dict(doc, "rig.yaml")
+
+
+@pytest.mark.parametrize("bodies, expected", [
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0]}}], "bodies[0].leds: expected 2 to 16"),
+    ([{"id": "L1", "leds": {"L1": [0, 0, 0], "L2": [1, 0, 0]}}], "also an LED's id"),
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0], "L9": [1, 0, 0]}}], "bodies[0].leds.L9: not an LED"),
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0], "L2": [0, 0, 0]}}], "two LEDs at the same place"),
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0], "L2": [1, 0]}}], "bodies[0].leds.L2: expected a list"),
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0], "L2": [1, 0, 0]}},
+      {"id": "R2", "leds": {"L1": [0, 0, 0], "L3": [1, 0, 0]}}], "already on body R1"),
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0], "L2": [float("nan"), 0, 0]}}], "leds.L2[0]"),
+    ({"R1": 1}, "bodies: expected a list"),
+])
+def test_the_bodies_block_is_checked(bodies, expected):
+    doc = square_rig(CODES).to_dict()
+    doc["bodies"] = bodies
+    with pytest.raises(deployment.DeploymentError) as e:
+        deployment.from_dict(doc, "site.yaml")
+    assert str(e.value).startswith("site.yaml: ") and expected in str(e.value), str(e.value)
+
+
+def test_the_bodies_block_round_trips_and_meets_the_schema(tmp_path):
+    import json
+
+    import jsonschema
+
+    dep = body_rig(3)
+    deployment.save(dep, tmp_path / "d.yaml")
+    back = deployment.load(tmp_path / "d.yaml").bodies
+    assert [b.id for b in back] == ["R1"] and back[0].full_pose
+    assert not body_rig(2).bodies[0].full_pose  # two LEDs: the heading only
+    schema = json.loads(deployment.SCHEMA_PATH.read_text())
+    jsonschema.validate(dep.to_dict(), schema)
+    bad = dep.to_dict()
+    bad["bodies"][0]["leds"]["L1"] = [0, 0]
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(bad, schema)
+
+
+def test_angles_and_points_give_back_the_rotation():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        a = rng.uniform([-np.pi, -1.4, -np.pi], [np.pi, 1.4, np.pi])
+        assert np.allclose(angles(rotation(*a)), a)
+        body = rng.normal(size=(4, 3))
+        pos = rng.normal(size=3)
+        got_pos, got = pose_from_points(body, pos + body @ rotation(*a).T)
+        assert np.allclose(got_pos, pos) and np.allclose(rotation(*got), rotation(*a))
+    # two points: the heading of a level body
+    pos, ang = pose_from_points([[0.15, 0, 0.2], [-0.15, 0, 0.2]],
+                                [[1.0, 1.15, 0.2], [1.0, 0.85, 0.2]])
+    assert np.allclose(ang, [np.pi / 2, 0, 0]) and np.allclose(pos, [1, 1, 0])
+
+
+def _robot(n, seconds, seed=0, heading=None):
+    """A robot carrying n blinking LEDs on a circle under the square rig: its spots, truth."""
+    def origin(t):
+        a = 1.5 * np.asarray(t, float) / 0.5
+        return np.stack([1.3 + 0.5 * np.cos(a), 1.2 + 0.5 * np.sin(a),
+                         np.zeros(np.shape(a))], -1)
+
+    leds, yaw = body_leds(origin, BODY_LAYOUTS[n], seed=seed, heading=heading)
+    return leds, origin, yaw
+
+
+def _body_rows(dep, leds, seconds, keep=lambda t, cid, spots: spots):
+    tr = Tracker(dep, period=1 / 30, spots=len(leds))
+    rows = []
+    for t, cid, spots in crossing_events(dep, leds, seconds):
+        rows += tr.update_spots(cid, t, keep(t, cid, spots))
+    rows += tr.finish()
+    return rows
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_a_robot_carrying_blinking_leds_gets_its_position_and_heading(n):
+    leds, origin, yaw = _robot(n, 20.0)
+    dep = body_rig(n)
+    rows = _body_rows(dep, leds, 20.0)
+    body = [r for r in rows if r.led == "R1" and r.status == "ok"]
+    assert len(body) > 0.5 * len([r for r in rows if r.led == "L1"])
+    T = np.array([r.t for r in body])
+    e = np.linalg.norm(np.array([r.position for r in body]) - origin(T), axis=1)
+    e_yaw = np.abs(np.angle(np.exp(1j * (np.array([r.pose[0] for r in body]) - yaw(T)))))
+    assert np.mean(e) < 0.005 and np.degrees(np.mean(e_yaw)) < 1.0, (np.mean(e), e_yaw.mean())
+    sigma_yaw = np.array([r.pose[3] for r in body])
+    assert np.median(e_yaw / sigma_yaw) < 2  # an honest sigma_yaw
+    pitch = np.array([r.pose[1] for r in body])
+    if n == 2:
+        assert np.isnan(pitch).all()  # two LEDs: the heading only, the tilt not claimed
+    else:  # level: the fitted tilt is small where three LEDs gave it
+        full = np.isfinite(pitch)
+        assert full.sum() > 0.5 * len(body)
+        assert np.degrees(np.mean(np.abs(pitch[full]))) < 1.0
+    led_rows = [r for r in rows if r.led in ("L1", "L2", "L3") and r.status == "ok"]
+    assert all(r.pose is None for r in led_rows)
+
+
+def test_a_body_whose_leds_no_two_cameras_share_is_still_placed():
+    """Two cameras, each seeing one of the robot's two LEDs only, for 0.2 s at a time: no
+    LED is placed by two cameras then, the body is (its rays at their own times, its shape)."""
+    leds, origin, yaw = _robot(2, 12.0)
+    dep = body_rig(2)
+    names = [m.led for m in leds]
+
+    def split(t, cid, spots):
+        if int(t / 0.4) % 2 == 0 or t < 4.0:
+            return spots
+        spots = spots.copy()
+        # C1 and C2 see L1 only, C3 and C4 L2 only (spots in no LED's order: by nearness)
+        cam = dep.camera(cid)
+        want = names.index("L1") if cid in ("C1", "C2") else names.index("L2")
+        uv, _, _ = cam.project(leds[want].path(np.array([t])))
+        near = np.linalg.norm(spots - uv, axis=1)
+        return np.where((near == np.nanmin(near))[:, None] if np.isfinite(near).any()
+                        else False, spots, np.nan)
+
+    rows = _body_rows(dep, leds, 12.0, split)
+    body = [r for r in rows if r.led == "R1" and r.t >= 4.0 and int(r.t / 0.4) % 2 == 1]
+    assert len(body) > 50
+    T = np.array([r.t for r in body])
+    e = np.linalg.norm(np.array([r.position for r in body]) - origin(T), axis=1)
+    assert np.median(e) < 0.01
+
+
+def test_track_writes_and_publishes_a_simulated_bodys_rows(broker, tmp_path):
+    """simulate --robot-speed --body 2, then track: the body's rows in the file with their
+    pose columns (empty on LED rows), and on prefix/bodies/R1."""
+    from test_mqtt import Listener
+
+    out = tmp_path / "sim"
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "simulate", "--profile",
+                          "paper-2024", "--robot-speed", "1.2", "--body", "2", "--seconds",
+                          "8", "--test-points", "0", "--out", str(out)], capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert deployment.load(out / "truth.yaml").bodies[0].id == "R1"
+    listen = Listener(broker.url("out"))
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "track", "-d", str(out / "truth.yaml"),
+                          "--frames", str(out / "streams"), "--out", str(tmp_path / "t.csv"),
+                          "--publish", broker.url("out")], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "bodies R1" in res.stderr
+    rows = list(csv.DictReader(open(tmp_path / "t.csv")))
+    assert list(rows[0])[-4:] == ["yaw", "pitch", "roll", "sigma_yaw"]
+    body = [r for r in rows if r["led"] == "R1"]
+    assert len(body) > 50 and all(r["yaw"] and not r["pitch"] for r in body)
+    assert all(not r["yaw"] for r in rows if r["led"] != "R1")
+    import time
+
+    time.sleep(0.5)
+    got = listen.on("/bodies/R1")
+    listen.close()
+    assert len(got) == len(body) and {"yaw", "sigma_yaw"} <= set(got[0])
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "simulate", "--body", "2", "--out",
+                          str(tmp_path / "x")], capture_output=True, text=True)
+    assert res.returncode == 2 and "--robot-speed" in res.stderr
+
+
+def test_body_blocks_describe_the_simulated_robot():
+    leds, _ = body_leds(lambda t: np.zeros(np.shape(t) + (3,)), BODY_LAYOUTS[3])
+    blocks = body_blocks(leds, BODY_LAYOUTS[3], "R7")
+    doc = square_rig().to_dict()
+    doc.update(blocks)
+    dep = deployment.from_dict(doc, "x")
+    assert dep.bodies[0].id == "R7" and len(dep.leds) == 3
