@@ -36,6 +36,8 @@ def body_rig(n=2):
       {"id": "R2", "leds": {"L1": [0, 0, 0], "L3": [1, 0, 0]}}], "already on body R1"),
     ([{"id": "R1", "leds": {"L1": [0, 0, 0], "L2": [float("nan"), 0, 0]}}], "leds.L2[0]"),
     ({"R1": 1}, "bodies: expected a list"),
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0.1], "L2": [0, 0, 0.3]}}], "one vertical line"),
+    ([{"id": "R1", "leds": {"L1": [0, 0, 0], "L2": [2e5, 0, 0]}}], "leds.L2[0]"),
 ])
 def test_the_bodies_block_is_checked(bodies, expected):
     doc = square_rig(CODES).to_dict()

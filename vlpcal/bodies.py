@@ -118,7 +118,9 @@ def fit_pose(rows, y, tau, axis, along, ff, led_points, guess, full: bool,
         J *= w[:, None]
         N = J.T @ J
         N.flat[::n_free + 1] += D
-        g = J.T @ r + D * (q[:n_free] - centre[:n_free])
+        dq = q[:n_free] - centre[:n_free]
+        dq[9] = math.remainder(dq[9], 2 * math.pi)  # the yaw's, the short way round
+        g = J.T @ r + D * dq
         try:
             cov = np.linalg.inv(N)
         except np.linalg.LinAlgError:

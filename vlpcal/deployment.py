@@ -584,10 +584,10 @@ def _check_bodies(value, led_ids: set) -> None:
                 raise DeploymentError(f"{where}.leds.{led}: not an LED of leds: (expected "
                                       f"{', '.join(sorted(led_ids)) or 'a leds: block'})")
             if str(led) in carried:
-                raise DeploymentError(f"{where}.leds.{led}: already on body {carried[led]} "
-                                      "(an LED rides one body)")
+                raise DeploymentError(f"{where}.leds.{led}: already on body "
+                                      f"{carried[str(led)]} (an LED rides one body)")
             carried[str(led)] = str(b["id"])
-            points.append(_vector(pos, 3, f"{where}.leds.{led}"))
+            points.append(_vector(pos, 3, f"{where}.leds.{led}", *METRES))
         p = np.array(points, float)
         size = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
         near = min(np.linalg.norm(p[i] - p[j]) for i in range(len(p))
@@ -595,6 +595,10 @@ def _check_bodies(value, led_ids: set) -> None:
         if not near > 1e-3 * max(size, 1e-12) or size == 0:
             raise DeploymentError(f"{where}.leds: two LEDs at the same place (expected them "
                                   "apart: their spread gives the body's heading)")
+        flat = np.linalg.norm(p[:, :2] - p[:, :2].mean(axis=0), axis=1).max()
+        if not flat > 1e-3 * size and not Body("", dict(enumerate(p))).full_pose:
+            raise DeploymentError(f"{where}.leds: all on one vertical line (expected LEDs "
+                                  "apart across the body: a vertical line has no heading)")
 
 
 LED_KEYS = ("id", "pattern", "bit_rate")

@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 
 from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode_phase
+from .bodies import rotation
 from .deployment import Body, Deployment
 from .detection import detect_frame
 from .fit_watch import FitWatch
@@ -284,10 +285,12 @@ class Tracker:
         for j, h in follows.items():  # a held track's path goes on
             h.rays = h.rays[-2 * PATH_SPOTS:] + [rays[j]]
             h.latest = rays[j]
-            self._body_due(h, t)
+        given: set = {id(tr) for tr in claims.values()}  # tracks given a spot of this frame
         for j, ray in enumerate(rays):
             track = claims.get(j)
-            if track is not None or (track := self._reacquire(ray)) is not None:
+            if track is None and (track := self._reacquire(ray, given)) is not None:
+                given.add(id(track))
+            if track is not None:
                 track.rays.append(ray)
                 track.latest = ray
                 track.due.append(t)
@@ -303,7 +306,7 @@ class Tracker:
                 if together:
                     self.fit.add(False, "in no track")
         if self.codes:
-            self._blink(k, t, {id(tr) for tr in claims.values()})
+            self._blink(k, t, given)
         if not self._lag:  # rows at once: this frame's too
             out += self._due(t)
         return out
@@ -370,6 +373,11 @@ class Tracker:
         """Rows whose window has passed by ``now``."""
         out = []
         cut, kept = now - self._lag, now - 4 * self.half
+        for state in self.bodies:  # (before the tracks' old rays are dropped)
+            if state.due and state.due[0] <= cut:
+                ready = [t for t in state.due if t <= cut]
+                state.due = [t for t in state.due if t > cut]
+                out += [u for u in (self._body_row(state, t) for t in ready) if u is not None]
         for tr in self.tracks:
             if tr.tentative:  # its rows wait until it is confirmed
                 continue
@@ -378,11 +386,6 @@ class Tracker:
                 tr.due = [t for t in tr.due if t > cut]
                 out += [self._row(tr, t) for t in ready]
             tr.rays = [r for r in tr.rays if r.t >= kept]
-        for state in self.bodies:
-            if state.due and state.due[0] <= cut:
-                ready = [t for t in state.due if t <= cut]
-                state.due = [t for t in state.due if t > cut]
-                out += [u for u in (self._body_row(state, t) for t in ready) if u is not None]
         return sorted(out, key=lambda u: u.t) if len(out) > 1 else out
 
     def _drop_lost(self, now: float, out: list) -> None:
@@ -440,6 +443,29 @@ class Tracker:
         sigma = np.hypot(np.sqrt(2) * self.pixel_sigma / self._f[k], spread / depth)
         return np.linalg.norm(np.asarray(xy) - last.xy - v * dt, axis=-1) / (GATE_SIGMAS * sigma)
 
+    def _on_body(self, tr: _Track, t: float):
+        """A body's LED, named, where the body's latest pose carried to ``t`` puts it — its
+        position, velocity and their sigmas as :meth:`_extrapolated` gives them — when that
+        pose is of the last window: the body's other LEDs place it even while its own track
+        is stale (dark, or one camera alone sees it). None otherwise."""
+        state = self._body_of.get(tr.led)
+        if state is None or state.fit is None or tr.tentative \
+                or abs(t - state.fit_t) > 2 * WINDOW * self.period:
+            return None
+        f, var = state.fit, np.diag(state.cov)
+        dt = t - state.fit_t
+        yaw = f[9] + f[10] * dt
+        b = state.body.leds[tr.led]
+        R = rotation(yaw, f[11], f[12])
+        lever = float(np.linalg.norm(b[:2]))
+        spin = self.acceleration / max(lever, 1e-9)
+        s_yaw = np.sqrt(var[9] + var[10] * dt * dt + (0.5 * spin * dt * dt) ** 2)
+        s_pos = float(np.sqrt(var[:3].mean() + var[3:6].mean() * dt * dt
+                              + (0.5 * self.acceleration * dt * dt) ** 2 + (lever * s_yaw) ** 2))
+        s_vel = float(np.sqrt(var[3:6].mean() + (self.acceleration * abs(dt)) ** 2))
+        vel = f[3:6] + f[10] * np.cross([0.0, 0.0, 1.0], R @ b)
+        return f[:3] + f[3:6] * dt + R @ b, vel, s_pos, s_vel
+
     def _dark_now(self, tr: _Track, t: float) -> bool:
         """Whether the track's blink code, at the phase that named it, has its LED dark at
         ``t`` — surely: not within :data:`BIT_EDGE` of a bit's edge (the code's phase is
@@ -450,13 +476,14 @@ class Tracker:
             return False
         return not bool(code.lit(t, phase))
 
-    def _reacquire(self, ray: _Ray) -> _Track | None:
+    def _reacquire(self, ray: _Ray, given: set) -> _Track | None:
         """The track one camera alone still sees whose newest spot meets this ray of another
-        camera as one LED (:meth:`_meet`): the second camera seeing it again."""
+        camera as one LED (:meth:`_meet`): the second camera seeing it again (not a track
+        ``given`` a spot of this frame already)."""
         best, best_score = None, 1.0
         for tr in self.tracks:
             last = tr.latest
-            if tr.tentative or self._fresh(tr, ray.t) or last is None \
+            if tr.tentative or id(tr) in given or self._fresh(tr, ray.t) or last is None \
                     or last.camera == ray.camera \
                     or not 0 <= ray.t - last.t <= WINDOW * self.period:
                 continue
@@ -469,12 +496,15 @@ class Tracker:
         """A newly confirmed track that continues a held one takes up its id: the held track's
         path in its camera's image leads to one of this track's spots there, or — its path
         lost — it alone could have moved to where this one is (:data:`TOP_SPEED`). A held
-        track whose path goes on elsewhere is another LED's."""
+        track whose path goes on elsewhere, or whose blink code has its LED dark when this
+        one was lit, is another LED's."""
         best, link, within = None, 1.0, []
         for h in self.held:
             reach = TOP_SPEED * (t - h.fit_t) + 3 * (h.s_pos + tr.s_pos)
             if np.linalg.norm(tr.fit[:3] - h.fit[:3]) > reach:
                 continue
+            if h.code is not None and any(self._dark_now(h, r.t) for r in tr.rays):
+                continue  # lit when the held one's code has its LED dark: another LED
             followed = {id(r) for r in h.rays}
             score = min((0.0 if id(r) in followed
                          else float(self._path_gap(h, r.camera, r.xy[None], r.t)[0])
@@ -538,7 +568,7 @@ class Tracker:
         if len(rays) >= 3 and tr.tentative:
             tr.tentative = False
             self._confirm(tr, t)
-        if self.bodies and not tr.tentative and tr.led not in self._body_of:
+        if self.bodies and not tr.tentative and tr.led == tr.anonymous:
             self._by_shape(tr, t)
 
     def _shaped(self, body, seen: dict, t: float) -> bool:
@@ -568,8 +598,9 @@ class Tracker:
                      and t - o.last_two <= WINDOW * self.period}  # placed now
             if not named:
                 continue
+            held_by = {o.led for o in self.tracks if o is not tr}
             for led, b in state.body.leds.items():
-                if led in named:
+                if led in held_by:
                     continue
                 good = True
                 for other, o in named.items():
@@ -624,7 +655,8 @@ class Tracker:
         if not owners or not rays:
             return {}, {}
         xy = np.array([r.xy for r in rays])
-        ext = [self._extrapolated(tr, t) for tr in owners]
+        by_body = [self._on_body(tr, t) for tr in owners]
+        ext = [b if b is not None else self._extrapolated(tr, t) for tr, b in zip(owners, by_body)]
         Xc = (np.array([e[0] for e in ext]) - self._C[k]) @ self._R[k].T
         depth = Xc[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -637,9 +669,10 @@ class Tracker:
         for i, tr in enumerate(owners):
             if tr.code is not None and self._dark_now(tr, t):
                 d[i] = np.inf  # its code says its LED is dark now: the spot is another's
-                continue
             if tr.tentative:
                 rank[i] = 3
+            elif by_body[i] is not None:  # where its body's pose puts it: as close as any
+                continue
             elif tr.held_since < np.inf or self._coasting(tr):
                 rank[i] = 1  # on its path in this image too
                 d[i] = np.maximum(d[i], GATE_SIGMAS * self._path_gap(tr, k, xy, t))
@@ -658,8 +691,8 @@ class Tracker:
             if not d[i, j] < GATE_SIGMAS or i in taken or j in claims:
                 continue
             held = owners[i].held_since < np.inf
-            if j in follows and not (owners[i].tentative or held):
-                continue
+            if j in follows and (held or not owners[i].tentative):
+                continue  # a followed spot: a tentative track (its continuation) may share it
             (follows if held else claims)[int(j)] = owners[i]
             taken.add(i)
         return claims, follows
@@ -706,15 +739,18 @@ class Tracker:
             return
         t, lit = np.array(tr.seen).T
         led, e1, e2, phase = decode_phase(t, lit.astype(bool), self.codes)
-        if led is None:
-            if tr.led != tr.anonymous and e2 - e1 < 0:  # its code no longer fits it
-                tr.led, tr.code = tr.anonymous, None
+        if led is None:  # no code reads clearly now: its LED's dark times are not known
+            tr.code = None
             return
         holder = next((o for o in self.tracks if o is not tr and o.led == led), None)
         if holder is not None:
             if holder.margin >= e2 - e1:
                 return
             holder.led, holder.code = holder.anonymous, None
+        if tr.led != led:  # a body's LED renamed: its pose is found afresh, not carried
+            for name in (tr.led, led):
+                if name in self._body_of:
+                    self._body_of[name].fit = None
         tr.led, tr.margin = led, e2 - e1
         tr.code = (next(c for c in self.codes if c.led == led), phase)
 
@@ -758,9 +794,9 @@ class Tracker:
 
     def _body_row(self, state: _BodyState, t: float) -> TrackUpdate | None:
         """The body's pose at ``t`` (:func:`vlpcal.bodies.fit_pose`) from every ray of its
-        LEDs — live tracks and held ones alike, named by their codes — in the window about
+        LEDs' live tracks (named by their codes or the body's shape) in the window about
         ``t``; None when fewer than two of its LEDs were seen in it, or they do not fit."""
-        from .bodies import angles, fit_pose, pose_from_points, rotation
+        from .bodies import angles, fit_pose, pose_from_points
 
         body = state.body
         reach = self.half

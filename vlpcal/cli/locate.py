@@ -128,7 +128,8 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
             writer.close()
         else:
             writer.abort()
-        raise UserError(str(e) + (" (the fixes so far are kept)" if live
+        kept = live or out == "-" or publisher  # sent already: not to be taken back
+        raise UserError(str(e) + (" (the fixes so far are kept)" if kept
                                   else " (nothing was written)")) from None
     except BrokenPipeError:  # the reader of stdout has what it wanted (| head): stop quietly
         import os
