@@ -198,8 +198,9 @@ Example: `surveys/paper-2024/survey/`.
   `leds:`, on at most one body → `[x, y, z]`, m in the body's frame: x forward, y left, z up).
   The tracks file then has four more columns, `yaw,pitch,roll,sigma_yaw` (rad; Z-Y-X, body to
   world: `X_world = position + R · X_body`), empty on an LED's row; a body's row has `led` =
-  the body's id, `x,y,z` its frame's origin, and is fitted to every ray of its LEDs in the
-  window (any camera, any moment). Two LEDs (or LEDs on one line) give the heading of a level
+  the body's id, `x,y,z` its frame's origin and `vx,vy,vz` the origin's velocity, `status`
+  `ok` (its LEDs' rays from two cameras or more) or `one_camera` (from one), and is fitted to
+  every ray of its LEDs in the window (any camera, any moment). Two LEDs (or LEDs on one line) give the heading of a level
   body (`pitch`, `roll` empty); three or more not on one line the full pose, when three of
   them are seen in the window (else the heading, the tilt held). LEDs are told apart by their
   blink codes, and an LED whose code is not read yet by its place beside its body's named

@@ -68,6 +68,8 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
     check = _FitCheck(keep_going, quiet)
+    if publisher or spots_url or cameras:
+        check.kept = " (the rows so far are kept)"
     try:
         if spots_url:
             _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"), ca_file,
@@ -89,6 +91,8 @@ class _FitCheck:
 
     def __init__(self, keep_going: bool, quiet: bool):
         self.keep_going, self.quiet, self.said = keep_going, quiet, False
+        #: what a stop leaves (live runs and publishers say so: their rows are out)
+        self.kept = " (nothing was written)"
 
     def __call__(self, tracker) -> None:
         if self.said:
@@ -97,7 +101,7 @@ class _FitCheck:
         if misfit is None:
             return
         if not self.keep_going:
-            raise _Misfit(misfit.message())
+            raise _Misfit(misfit.message() + self.kept)
         self.said = True
         if not self.quiet:
             click.echo(f"warning: {misfit.message()} (going on: --keep-going)", err=True)
@@ -118,7 +122,8 @@ class _FitCheck:
 
 
 class _Misfit(UserError):
-    """The frames do not fit the deployment: stopped."""
+    """The frames do not fit the deployment: stopped (an offline run writes nothing, a live
+    one keeps its rows)."""
 
 
 def _published(publisher, rows, utc: float = 0.0):
