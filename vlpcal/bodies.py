@@ -42,14 +42,23 @@ def angles(R) -> np.ndarray:
     return np.array([math.atan2(R[1, 0], R[0, 0]), pitch, math.atan2(R[2, 1], R[2, 2])])
 
 
+def gives_full_pose(points) -> bool:
+    """Whether LEDs at ``points`` (K×3, a body's frame) give its full pose: three or more, not
+    on one line (judged against their own spread); else its heading only, taken as level."""
+    p = np.asarray(points, float)
+    if len(p) < 3:
+        return False
+    spread = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)
+    return bool(spread[1] > 1e-3 * spread[0])
+
+
 def pose_from_points(body_points, world_points) -> tuple[np.ndarray, np.ndarray]:
     """The rigid motion taking a body's LEDs (K×3, body frame) to where they were seen (K×3,
     world): (position, angles). Two points (or points on one line): the heading alone, the
     body level (Kabsch's fit of the turn about z); more: the full rotation (Kabsch)."""
     B, W = np.asarray(body_points, float), np.asarray(world_points, float)
     bc, wc = B.mean(axis=0), W.mean(axis=0)
-    spread = np.linalg.svd(B - bc, compute_uv=False)
-    if len(B) >= 3 and spread[1] > 1e-3 * spread[0]:
+    if gives_full_pose(B):
         U, _, Vt = np.linalg.svd((W - wc).T @ (B - bc))
         D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
         R = U @ D @ Vt

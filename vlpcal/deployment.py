@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .blink import BlinkCode, check_codes
+from .bodies import gives_full_pose
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
 from .geometry import Camera, max_radius2
@@ -556,13 +557,8 @@ class Body:
 
     @property
     def full_pose(self) -> bool:
-        """Whether its LEDs give the full pose (three or more, not on one line); else its
-        heading only, the body taken as level (two LEDs, or LEDs on one line)."""
-        p = np.array(list(self.leds.values()))
-        if len(p) < 3:
-            return False
-        spread = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)
-        return bool(spread[1] > 1e-3 * spread[0])
+        """Whether its LEDs give the full pose (:func:`~vlpcal.bodies.gives_full_pose`)."""
+        return gives_full_pose(list(self.leds.values()))
 
 
 def _check_bodies(value, led_ids: set) -> None:
@@ -596,7 +592,7 @@ def _check_bodies(value, led_ids: set) -> None:
             raise DeploymentError(f"{where}.leds: two LEDs at the same place (expected them "
                                   "apart: their spread gives the body's heading)")
         flat = np.linalg.norm(p[:, :2] - p[:, :2].mean(axis=0), axis=1).max()
-        if not flat > 1e-3 * size and not Body("", dict(enumerate(p))).full_pose:
+        if not flat > 1e-3 * size and not gives_full_pose(p):
             raise DeploymentError(f"{where}.leds: all on one vertical line (expected LEDs "
                                   "apart across the body: a vertical line has no heading)")
 

@@ -45,8 +45,8 @@ import cv2
 import numpy as np
 
 from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode_phase
-from .bodies import rotation
-from .deployment import Body, Deployment
+from .bodies import angles, fit_pose, gives_full_pose, pose_from_points, rotation
+from .deployment import Deployment
 from .detection import detect_frame
 from .fit_watch import FitWatch
 
@@ -796,8 +796,6 @@ class Tracker:
         """The body's pose at ``t`` (:func:`vlpcal.bodies.fit_pose`) from every ray of its
         LEDs' live tracks (named by their codes or the body's shape) in the window about
         ``t``; None when fewer than two of its LEDs were seen in it, or they do not fit."""
-        from .bodies import angles, fit_pose, pose_from_points
-
         body = state.body
         reach = self.half
         ahead = min(self._lag, reach)
@@ -842,7 +840,7 @@ class Tracker:
         points = np.array(points)
         # the full pose from three LEDs or more not on one line, seen now; else the heading,
         # the tilt held (a level body's, or the last full fit's)
-        full = body.full_pose and Body("", {k: body.leds[k] for k in seen}).full_pose
+        full = body.full_pose and gives_full_pose([body.leds[k] for k in seen])
         if not full:
             guess[11:] = (state.fit[11:] if body.full_pose and state.fit is not None
                           else 0.0)
