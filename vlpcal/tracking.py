@@ -435,8 +435,7 @@ class Tracker:
         last, dt = seen[-1], t - seen[-1].t
         depth = max(float(self._R[k, 2] @ (tr.fit[:3] - self._C[k])), 1e-9)
         if len(seen) >= 2 and seen[-1].t > seen[0].t:  # its velocity there: a line's slope
-            v = np.polyfit(np.array([r.t for r in seen]) - last.t, np.array([r.xy for r in seen]),
-                           1)[0]
+            v = _slope(np.array([r.t for r in seen]), np.array([r.xy for r in seen]))
             spread = self.acceleration * dt * (dt + self.period)
         else:  # one spot: anywhere its top speed reaches
             v, spread = np.zeros(2), TOP_SPEED * dt
@@ -459,10 +458,10 @@ class Tracker:
         R = rotation(yaw, f[11], f[12])
         lever = float(np.linalg.norm(b[:2]))
         spin = self.acceleration / max(lever, 1e-9)
-        s_yaw = np.sqrt(var[9] + var[10] * dt * dt + (0.5 * spin * dt * dt) ** 2)
-        s_pos = float(np.sqrt(var[:3].mean() + var[3:6].mean() * dt * dt
-                              + (0.5 * self.acceleration * dt * dt) ** 2 + (lever * s_yaw) ** 2))
-        s_vel = float(np.sqrt(var[3:6].mean() + (self.acceleration * abs(dt)) ** 2))
+        s_yaw = _carried(np.sqrt(var[9]), np.sqrt(var[10]), dt, spin)
+        s_pos = float(np.hypot(_carried(np.sqrt(var[:3].mean()), np.sqrt(var[3:6].mean()), dt,
+                                        self.acceleration), lever * s_yaw))
+        s_vel = float(np.hypot(np.sqrt(var[3:6].mean()), self.acceleration * dt))
         vel = f[3:6] + f[10] * np.cross([0.0, 0.0, 1.0], R @ b)
         return f[:3] + f[3:6] * dt + R @ b, vel, s_pos, s_vel
 
@@ -536,9 +535,8 @@ class Tracker:
         dt = t - tr.fit_t  # at constant velocity: a short window's acceleration is noisy
         pos = tr.fit[:3] + tr.fit[3:6] * dt
         vel = tr.fit[3:6].copy()
-        s_pos = np.sqrt(tr.s_pos ** 2 + (tr.s_vel * dt) ** 2
-                        + (0.5 * self.acceleration * dt * dt) ** 2)
-        s_vel = np.sqrt(tr.s_vel ** 2 + (self.acceleration * abs(dt)) ** 2)
+        s_pos = _carried(tr.s_pos, tr.s_vel, dt, self.acceleration)
+        s_vel = np.hypot(tr.s_vel, self.acceleration * dt)
         return pos, vel, s_pos, s_vel
 
     def _refresh(self, tr: _Track, t: float) -> None:
@@ -579,9 +577,8 @@ class Tracker:
             pa, _, sa, _ = self._extrapolated(ta, t)
             for b, tb in now[i + 1:]:
                 pb, _, sb, _ = self._extrapolated(tb, t)
-                want = float(np.linalg.norm(body.leds[a] - body.leds[b]))
-                slack = 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) + 0.02 * want
-                if abs(float(np.linalg.norm(pa - pb)) - want) > slack:
+                if not _apart(pa, sa, pb, sb, float(np.linalg.norm(body.leds[a]
+                                                                   - body.leds[b])))[0]:
                     return False
         return True
 
@@ -606,8 +603,8 @@ class Tracker:
                 for other, o in named.items():
                     want = float(np.linalg.norm(b - state.body.leds[other]))
                     pos, _, s_o, _ = self._extrapolated(o, t)
-                    slack = 3 * np.sqrt(3 * (tr.s_pos ** 2 + s_o ** 2)) + 0.02 * want
-                    if slack > 0.25 * want or abs(float(np.linalg.norm(X - pos)) - want) > slack:
+                    fits_here, slack = _apart(X, tr.s_pos, pos, s_o, want)
+                    if slack > 0.25 * want or not fits_here:
                         good = False
                         break
                 if good:
@@ -813,8 +810,8 @@ class Tracker:
         if len(seen) < 2 or not self._shaped(body, seen, t):
             return None
         prior = None
-        if state.fit is not None and abs(t - state.fit_t) <= 0.5:  # carried to t
-            dt = t - state.fit_t
+        if state.fit is not None and abs(t - state.fit_t) <= LOST_PERIODS * self.period:
+            dt = t - state.fit_t  # the last pose, carried to t
             f = state.fit
             guess = np.r_[f[:3] + f[3:6] * dt, f[3:6], np.zeros(3), f[9] + f[10] * dt, f[10],
                           f[11:]]
@@ -824,9 +821,9 @@ class Tracker:
             spin = self.acceleration / max(float(np.max(np.linalg.norm(
                 np.array(list(body.leds.values())), axis=1))), 1e-9)
             s2 = np.zeros(13)
-            s2[:3] = var[:3] + var[3:6] * dt * dt + (0.5 * self.acceleration * dt * dt) ** 2
+            s2[:3] = _carried(np.sqrt(var[:3]), np.sqrt(var[3:6]), dt, self.acceleration) ** 2
             s2[3:6] = var[3:6] + (self.acceleration * dt) ** 2
-            s2[9] = var[9] + var[10] * dt * dt + (0.5 * spin * dt * dt) ** 2
+            s2[9] = _carried(np.sqrt(var[9]), np.sqrt(var[10]), dt, spin) ** 2
             s2[10] = var[10] + (spin * dt) ** 2
             info = np.zeros(13)
             on = s2 > 0
@@ -987,6 +984,26 @@ class Tracker:
                 w = ff / depth
         resid = (A @ fit - y) * w
         return fit, float(self.pixel_sigma * np.sqrt(resid @ resid / len(resid))), cov
+
+
+def _carried(s0, s_rate, dt: float, acceleration: float):
+    """The sigma of a state (a position, a heading) carried ``dt`` at its rate: its own, its
+    rate's over ``dt``, and the acceleration it cannot foresee (1 sigma) over ``dt``."""
+    return np.sqrt(s0 ** 2 + (s_rate * dt) ** 2 + (0.5 * acceleration * dt * dt) ** 2)
+
+
+def _apart(pa, sa: float, pb, sb: float, want: float) -> tuple[bool, float]:
+    """Whether two placed LEDs (positions, sigmas per axis) lie ``want`` apart, as their body
+    has them, within their sigmas (3 of them in 3D, and 2 % of the distance for the body's
+    own measure); and that slack."""
+    slack = 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) + 0.02 * want
+    return bool(abs(float(np.linalg.norm(pa - pb)) - want) <= slack), float(slack)
+
+
+def _slope(t, xy) -> np.ndarray:
+    """The least-squares line's slope of points ``xy`` (N×2) over times ``t`` (N)."""
+    dt = t - t.mean()
+    return dt @ (xy - xy.mean(axis=0)) / (dt @ dt)
 
 
 #: a ray's time τ → the factors (1, τ, τ²/2) of position, velocity and acceleration
