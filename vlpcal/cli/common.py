@@ -19,6 +19,30 @@ class UserError(click.ClickException):
         super().__init__(one_line(message))
 
 
+class Misfit(UserError):
+    """The frames do not fit the deployment: the run stopped (exit 2)."""
+
+
+class FitCheck:
+    """Whether the frames fit the deployment, judged as a run goes
+    (:class:`~vlpcal.fit_watch.FitWatch`): a misfit stops the run (:class:`Misfit`, its message
+    ending with ``kept``, what the stop leaves), or with --keep-going is said once."""
+
+    def __init__(self, keep_going: bool, say, kept: str):
+        self.keep_going, self.say, self.kept, self.said = keep_going, say, kept, False
+
+    def __call__(self, watch) -> None:
+        if self.said:
+            return
+        misfit = watch.misfit()
+        if misfit is None:
+            return
+        if not self.keep_going:
+            raise Misfit(f"{misfit.message()} ({self.kept})")
+        self.said = True
+        self.say(f"warning: {misfit.message()} (going on: --keep-going)")
+
+
 def _stop_on_signals() -> None:
     """SIGTERM and SIGHUP (a service manager, a closed terminal) stop a command the way Ctrl-C
     does, through Python, so staged outputs are cleaned (or a locate's fixes so far kept)."""

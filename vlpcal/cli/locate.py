@@ -6,7 +6,16 @@ from collections import Counter
 
 import click
 
-from .common import Finite, UserError, _camera_sources, _load_deployment, _output_file, main
+from .common import (
+    Finite,
+    FitCheck,
+    Misfit,
+    UserError,
+    _camera_sources,
+    _load_deployment,
+    _output_file,
+    main,
+)
 from .mqtt import (
     PublishingWriter,
     ZoneWriter,
@@ -107,7 +116,9 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     # from here on every way out either closes the writer (the fixes so far are kept) or
     # aborts it (nothing replaced)
     t0 = time.perf_counter()
-    statuses = _Tally(loc.deployment.name, keep_going, say)
+    sent = live or out == "-" or publisher  # what a stop cannot take back
+    statuses = _Tally(loc.deployment.name, FitCheck(
+        keep_going, say, "the fixes so far are kept" if sent else "nothing was written"))
     notes = []
     try:
         if frames_dir:
@@ -123,14 +134,12 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     except KeyboardInterrupt:
         notes.append("interrupted: the fixes so far are kept")
         n = sum(statuses.values())
-    except _Misfit as e:  # stopped: an offline run writes nothing, a live one keeps its rows
+    except Misfit:  # stopped: an offline run writes nothing, a live one keeps its rows
         if live:
             writer.close()
         else:
             writer.abort()
-        kept = live or out == "-" or publisher  # sent already: not to be taken back
-        raise UserError(str(e) + (" (the fixes so far are kept)" if kept
-                                  else " (nothing was written)")) from None
+        raise
     except BrokenPipeError:  # the reader of stdout has what it wanted (| head): stop quietly
         import os
 
@@ -164,35 +173,24 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     sys.stdout.flush()
 
 
-class _Misfit(Exception):
-    """The frames do not fit the deployment: the run stops."""
-
-
 class _Tally(Counter):
-    """The fix statuses counted, and whether the frames fit the deployment judged as they
-    come (:class:`~vlpcal.fit_watch.FitWatch`): a misfit stops the run, or with --keep-going
-    is said once."""
+    """The fix statuses counted (:meth:`add`), and whether the frames fit the deployment
+    judged as they come (:class:`~vlpcal.fit_watch.FitWatch`, by ``check``)."""
 
-    def __init__(self, deployment: str, keep_going: bool, say):
+    def __init__(self, deployment: str, check: FitCheck):
         from ..fit_watch import FitWatch
 
         super().__init__()
         self.watch = FitWatch(deployment, "sets two cameras or more saw")
-        self.keep_going, self.say, self.said = keep_going, say, False
+        self.check = check
 
-    def update(self, counts=(), /, fixes=None, **kw):
-        super().update(counts, **kw)
-        if fixes is None or self.said:
-            return
-        self.watch.add_statuses(fixes.status.tolist(),
-                                (fixes.camera_status == "dropped").any(axis=0).tolist())
-        misfit = self.watch.misfit()
-        if misfit is None:
-            return
-        if not self.keep_going:
-            raise _Misfit(misfit.message())
-        self.said = True
-        self.say(f"warning: {misfit.message()} (going on: --keep-going)")
+    def add(self, fixes) -> None:
+        """A batch of fixes (:class:`~vlpcal.locator.FixBatch`): counted and judged."""
+        self.update(fixes.counts())
+        if not self.check.said:
+            self.watch.add_statuses(fixes.status.tolist(),
+                                    (fixes.camera_status == "dropped").any(axis=0).tolist())
+            self.check(self.watch)
 
 
 def _check_the_deployment_fits(loc, source, camera_ids, notes, folder=None) -> None:
@@ -258,7 +256,7 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
             sets = [{cid: folder.frame(fid, cid) for cid in loc.camera_ids
                      if (fid, cid) in folder.files} for fid in chunk]
             fixes = loc.locate_batch(sets, chunk)
-            statuses.update(fixes.counts(), fixes=fixes)
+            statuses.add(fixes)
             writer.write(fixes)
             bar.update(len(chunk))
     return len(ids)
@@ -287,7 +285,7 @@ def _locate_observations(loc, path, writer, statuses, notes) -> int:
         notes.append(f"ignored spots of camera(s) {', '.join(sorted(unknown))} that "
                      f"{loc.deployment.name} does not have")
     fixes = loc.locate_pixels(uv, frame_ids=ids)
-    statuses.update(fixes.counts(), fixes=fixes)
+    statuses.add(fixes)
     writer.write(fixes)
     return len(ids)
 
@@ -305,7 +303,7 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
     try:
         for fs in grouper:
             fixes = loc.locate_batch([fs.frames], [f"{fs.index:06d}"])
-            statuses.update(fixes.counts(), fixes=fixes)
+            statuses.add(fixes)
             writer.write(fixes, {"t_s": round(fs.t, 3)})
             n += 1
             if (max_sets and n >= max_sets) or (t_end and time.monotonic() > t_end):
@@ -359,7 +357,7 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
             if spots:
                 uv[index[cid], 0] = spots[0]
         fixes = loc.locate_pixels(uv, frame_ids=[f"{n:06d}"])
-        statuses.update(fixes.counts(), fixes=fixes)
+        statuses.add(fixes)
         # the set's time: its spots' mean capture time, where a fix of spots taken at
         # different moments stands (a camera that saw nothing tells no time)
         seen_at = [times[c] for c, spots in pending.items() if spots]

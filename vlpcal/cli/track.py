@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .common import Finite, UserError, _load_deployment, _output_file, main
+from .common import Finite, FitCheck, UserError, _load_deployment, _output_file, main
 from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary, subscriber_notes
 
 #: camera frames read and detected at once, at most — and at most this many bytes of them
@@ -67,9 +67,10 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
-    check = _FitCheck(keep_going, quiet)
-    if publisher or spots_url or cameras:
-        check.kept = " (the rows so far are kept)"
+    check = FitCheck(keep_going, (lambda msg: None) if quiet else
+                     (lambda msg: click.echo(msg, err=True)),
+                     "the rows so far are kept" if publisher or spots_url or cameras
+                     else "nothing was written")
     try:
         if spots_url:
             _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"), ca_file,
@@ -84,46 +85,18 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
                 click.echo(publisher_summary(publisher), err=True)
 
 
-class _FitCheck:
-    """Whether the frames fit the deployment, judged as the tracker goes
-    (:class:`~vlpcal.fit_watch.FitWatch`): a misfit stops the run (exit 2), or with
-    --keep-going is said once."""
-
-    def __init__(self, keep_going: bool, quiet: bool):
-        self.keep_going, self.quiet, self.said = keep_going, quiet, False
-        #: what a stop leaves (live runs and publishers say so: their rows are out)
-        self.kept = " (nothing was written)"
-
-    def __call__(self, tracker) -> None:
-        if self.said:
-            return
-        misfit = tracker.fit.misfit()
-        if misfit is None:
-            return
-        if not self.keep_going:
-            raise _Misfit(misfit.message() + self.kept)
-        self.said = True
-        if not self.quiet:
-            click.echo(f"warning: {misfit.message()} (going on: --keep-going)", err=True)
-
-    @staticmethod
-    def no_rows(tracker, source) -> UserError:
-        """Why a run gave no row at all."""
-        fit = tracker.fit
-        if not tracker.frames_with_spot:
-            why = "no frame had a spot (is the LED on and in view, and the exposure right?)"
-        elif not fit.moments:
-            why = (f"{tracker.frames_with_spot} frames had a spot, but never two cameras' at "
-                   "about the same moment (a track needs two cameras)")
-        else:
-            why = (f"of {fit.moments} frames with a spot while another camera saw one, none "
-                   "was placed: the spots do not meet as one LED; is it the right deployment?")
-        return UserError(f"{source}: no rows: {why}")
-
-
-class _Misfit(UserError):
-    """The frames do not fit the deployment: stopped (an offline run writes nothing, a live
-    one keeps its rows)."""
+def _no_rows(tracker, source) -> UserError:
+    """Why a run gave no row at all."""
+    fit = tracker.fit
+    if not tracker.frames_with_spot:
+        why = "no frame had a spot (is the LED on and in view, and the exposure right?)"
+    elif not fit.moments:
+        why = (f"{tracker.frames_with_spot} frames had a spot, but never two cameras' at "
+               "about the same moment (a track needs two cameras)")
+    else:
+        why = (f"of {fit.moments} frames with a spot while another camera saw one, none "
+               "was placed: the spots do not meet as one LED; is it the right deployment?")
+    return UserError(f"{source}: no rows: {why}")
 
 
 def _published(publisher, rows, utc: float = 0.0):
@@ -199,7 +172,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
                     unreadable[w] += 1
         for t, cid, no, _ in block:
             rows.extend(_published(publisher, tracker.update_spots(cid, t, found_at[(cid, no)])))
-            check(tracker)
+            check(tracker.fit)
 
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
@@ -221,7 +194,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += _published(publisher, tracker.finish())
     if not rows:
-        raise check.no_rows(tracker, frames_dir)
+        raise _no_rows(tracker, frames_dir)
     _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
     if not quiet:
         words = {"wrong_size": "of another size than their camera's",
@@ -310,7 +283,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             live.write(made)
             rows += made
             n += 1
-            check(tracker)
+            check(tracker.fit)
             if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
                 tracker.period = frames.period()
     except KeyboardInterrupt:
@@ -340,7 +313,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     say(f"{n} camera frames → {_summary(rows)} → {out}" + _lag_said(tracker))
     if not rows:
         live.remove()
-        raise check.no_rows(tracker, "the cameras")
+        raise _no_rows(tracker, "the cameras")
 
 
 def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, out, fps, quiet,
@@ -393,7 +366,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
             live.write(made)
             rows += made
             n += 1
-            check(tracker)
+            check(tracker.fit)
             intervals.add(cid, t)
             if fps is None and n % 50 == 0:  # the slowest camera's, once it shows
                 tracker.period = min(intervals.period(tracker.period), 10.0)
@@ -422,7 +395,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     say("; ".join(said) + f" → {_summary(rows)} → {out}" + _lag_said(tracker))
     if not rows:
         live.remove()
-        raise check.no_rows(tracker, f"{target.shown()}/spots/+")
+        raise _no_rows(tracker, f"{target.shown()}/spots/+")
 
 
 class _LiveTracks:
