@@ -184,38 +184,26 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
     out.parent.mkdir(parents=True, exist_ok=True)
     with OutputSet(out, folders=True) as (stage,):
         stage.chmod(0o755)
-        _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
-                       refs, wand, trajectory, test_points, deployment_path is not None, route)
-        if robot_speed:
-            from ..sim.streams import robot_path, simulate_streams
+        leds = blocks = None
+        if robot_speed:  # a robot's LED, or the LEDs it carries (and the deployments' blocks)
+            from ..sim.streams import BODY_LAYOUTS, body_blocks, body_leds, robot_path
 
-            path = robot_path(scene, robot_speed, height=0.0 if body else 0.15, seed=seed)
-            leds = path
+            leds = robot_path(scene, robot_speed, height=0.0 if body else 0.15, seed=seed)
             if body:
-                leds = _body_into(stage, path, body, seed)
+                leds, _ = body_leds(leds, BODY_LAYOUTS[body], seed=seed)
+                blocks = body_blocks(leds, BODY_LAYOUTS[body])
+        _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
+                       refs, wand, trajectory, test_points, deployment_path is not None, route,
+                       blocks)
+        if robot_speed:
+            from ..sim.streams import simulate_streams
+
             simulate_streams(scene, stage / "streams", leds, seconds, seed=seed)
             click.echo(f"streams: a robot at up to {robot_speed:g} m/s (slower in its turns) "
                        + (f"carrying {body} blinking LEDs (body R1) " if body else "")
                        + f"for {seconds:g} s, cameras "
                        f"not synchronised → {out / 'streams'} (truth in "
                        f"{out / 'streams.truth.csv'})")
-
-
-def _body_into(stage, path, n: int, seed: int) -> list:
-    """``--body N``: the robot's LEDs (:func:`vlpcal.sim.streams.body_leds`), and the
-    deployments in ``stage`` given their leds: and bodies: blocks."""
-    from ..deployment import load, save
-    from ..sim.streams import BODY_LAYOUTS, body_blocks, body_leds
-
-    leds, _ = body_leds(path, BODY_LAYOUTS[n], seed=seed)
-    blocks = body_blocks(leds, BODY_LAYOUTS[n])
-    for name in ("nominal.yaml", "truth.yaml"):
-        header = "\n".join(line[2:] for line in (stage / name).read_text().splitlines()
-                           if line.startswith("# "))
-        dep = load(stage / name)
-        dep.extra.update(blocks)
-        save(dep, stage / name, header=header)
-    return leds
 
 
 #: what vlpcal simulate writes in its --out folder
@@ -282,11 +270,13 @@ def _into_frame(points, o, x):
 
 
 def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
-                   refs, wand, trajectory, test_points, own: bool, route=None) -> None:
+                   refs, wand, trajectory, test_points, own: bool, route=None,
+                   blocks=None) -> None:
     """Write the simulated install into ``stage`` (``out`` once renamed), saying what goes
     where (``refs``: the free survey's planned references; ``own``: a user's deployment,
     whose install and look are said too; ``route``: the free survey's planned route, as
-    planned, or None: the LED wanders the room)."""
+    planned, or None: the LED wanders the room; ``blocks``: the deployments' ``leds:`` and
+    ``bodies:``, of a robot's LEDs)."""
     import os
 
     import numpy as np
@@ -302,7 +292,7 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
         trajectory as path_of,
     )
 
-    write_deployments(scene, stage)
+    write_deployments(scene, stage, blocks)
     marks = None
     if free_sets and wand is not None:
         # the marks define the room's frame: O its origin, X on its +x axis, the floor z = 0;
@@ -316,7 +306,7 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
         scene = in_frame(scene, o[:2], math.atan2(x[1] - o[1], x[0] - o[0]))
         from ..deployment import save
 
-        save(deployment_of(scene, "true"), stage / "truth.yaml",
+        save(deployment_of(scene, "true", blocks), stage / "truth.yaml",
              header=f"Simulated {scene.profile.name} install (seed {scene.seed}): the cameras "
                     "as they really are, in the frame the wand survey's marks define (for "
                     "evaluation only).")

@@ -322,24 +322,28 @@ def write_led_truth(path, set_ids, positions) -> None:
                     for sid, xs in zip(set_ids, pos) for led, x in zip(names, xs))
 
 
-def deployment_of(scene: Scene, which: str = "nominal") -> Deployment:
-    """The scene's ``nominal`` (what the installer believes) or ``true`` cameras as a file."""
+def deployment_of(scene: Scene, which: str = "nominal", blocks: dict | None = None
+                  ) -> Deployment:
+    """The scene's ``nominal`` (what the installer believes) or ``true`` cameras as a file,
+    with optional ``blocks`` (the ``leds:`` and ``bodies:`` of the LEDs it carries)."""
     p = scene.profile
     cams = list(scene.nominal if which == "nominal" else scene.true)
     prov = provenance("vlpcal simulate", profile=p.name, seed=scene.seed, cameras=which)
     return Deployment(f"{p.name}-sim", p.ceiling_height, [list(xy) for xy in p.room], cams,
-                      [[list(xy) for xy in k] for k in p.keep_out], extra={"provenance": prov})
+                      [[list(xy) for xy in k] for k in p.keep_out],
+                      extra={**(blocks or {}), "provenance": prov})
 
 
-def write_deployments(scene: Scene, out) -> tuple[Path, Path]:
-    """``nominal.yaml`` (to calibrate) and ``truth.yaml`` (to evaluate against) in ``out``."""
+def write_deployments(scene: Scene, out, blocks: dict | None = None) -> tuple[Path, Path]:
+    """``nominal.yaml`` (to calibrate) and ``truth.yaml`` (to evaluate against) in ``out``
+    (``blocks``: as :func:`deployment_of` takes them)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = out / "nominal.yaml", out / "truth.yaml"
-    save(deployment_of(scene, "nominal"), paths[0],
+    save(deployment_of(scene, "nominal", blocks), paths[0],
          header=f"Simulated {scene.profile.name} install (seed {scene.seed}): the cameras as "
                 "the installer believes them.")
-    save(deployment_of(scene, "true"), paths[1],
+    save(deployment_of(scene, "true", blocks), paths[1],
          header=f"Simulated {scene.profile.name} install (seed {scene.seed}): the cameras as "
                 "they really are (for evaluation only).")
     return paths
