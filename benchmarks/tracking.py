@@ -157,20 +157,7 @@ def crossing(scene, seconds, seed, tmp: Path, coded: bool) -> dict:
     if coded:
         dep.extra["leds"] = [{"id": c.led, "pattern": c.pattern, "bit_rate": c.bit_rate}
                              for c in codes]
-    from vlpcal.detection import detect_several
-
-    tracker = Tracker(dep, period=1 / 30, spots=3)
-    cams = {c.id: c for c in dep.cameras}
-    found = {}
-    for cid in folder.camera_ids:
-        mine = [no for _, c, no in folder.events if c == cid]
-        uv = detect_several([folder.frame(cid, no) for no in mine], 3,
-                            shape=(cams[cid].height, cams[cid].width))
-        found.update({(cid, no): u for no, u in zip(mine, uv)})
-    rows = []
-    for t, cid, no in folder.events:
-        rows += tracker.update_spots(cid, t, found[(cid, no)])
-    rows += tracker.finish()
+    rows, tracker = tracked_folder(dep, root, 3)
     T = np.array([r.t for r in rows])
     P = np.array([r.position for r in rows])
     d = np.linalg.norm(np.stack([p(T) for p in paths], axis=1) - P[:, None], axis=2)
@@ -198,9 +185,9 @@ def crossing(scene, seconds, seed, tmp: Path, coded: bool) -> dict:
             "misfit": tracker.fit.misfit() is not None}
 
 
-def tracked_folder(dep, root: Path, spots: int) -> list:
+def tracked_folder(dep, root: Path, spots: int) -> tuple[list, Tracker]:
     """``vlpcal track``'s rows of an asynchronous folder (each camera's frames detected as a
-    batch, then fed in time order)."""
+    batch, then fed in time order), and the tracker."""
     from vlpcal.detection import detect_several
 
     folder = read_async_frames(root)
@@ -215,7 +202,7 @@ def tracked_folder(dep, root: Path, spots: int) -> list:
     rows = []
     for t, cid, no in folder.events:
         rows += tracker.update_spots(cid, t, found[(cid, no)])
-    return rows + tracker.finish()
+    return rows + tracker.finish(), tracker
 
 
 def robot_body(scene, n_leds: int, seconds: float, seed: int, tmp: Path) -> dict:
@@ -229,9 +216,8 @@ def robot_body(scene, n_leds: int, seconds: float, seed: int, tmp: Path) -> dict
     leds, yaw = body_leds(origin, BODY_LAYOUTS[n_leds], seed=seed)
     root = tmp / f"body-{n_leds}-{scene.profile.name}"
     simulate_streams(scene, root, leds, seconds, seed=seed)
-    dep = deployment_of(scene, "true")
-    dep.extra.update(body_blocks(leds, BODY_LAYOUTS[n_leds]))
-    rows = tracked_folder(dep, root, n_leds)
+    dep = deployment_of(scene, "true", body_blocks(leds, BODY_LAYOUTS[n_leds]))
+    rows, _ = tracked_folder(dep, root, n_leds)
     body = [r for r in rows if r.pose is not None and r.status == "ok"]
     T = np.array([r.t for r in body])
     e = np.linalg.norm(np.array([r.position for r in body]) - origin(T), axis=1)
@@ -278,9 +264,8 @@ def crossing_bodies(scene, seconds: float, seed: int, tmp: Path) -> dict:
         yaws.append(yaw)
     root = tmp / "crossing-bodies"
     simulate_streams(scene, root, leds, seconds, seed=seed)
-    dep = deployment_of(scene, "true")
-    dep.extra.update(blocks)
-    rows = [r for r in tracked_folder(dep, root, len(leds))
+    dep = deployment_of(scene, "true", blocks)
+    rows = [r for r in tracked_folder(dep, root, len(leds))[0]
             if r.pose is not None and r.status == "ok"]
     T = np.array([r.t for r in rows])
     d = np.linalg.norm(np.stack([p(T) for p in paths], axis=1)
