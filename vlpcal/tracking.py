@@ -46,7 +46,7 @@ import numpy as np
 
 from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode_phase
 from .bodies import angles, fit_pose, gives_full_pose, pose_from_points, rotation
-from .deployment import Deployment
+from .deployment import Body, Deployment
 from .detection import detect_frame
 from .fit_watch import FitWatch
 
@@ -167,7 +167,7 @@ class _Track:
 
 @dataclass(eq=False)
 class _BodyState:
-    body: object  #: :class:`~vlpcal.deployment.Body`
+    body: Body
     due: list = field(default_factory=list)  #: capture times whose rows are not yet written
     fit: np.ndarray | None = None  #: 13: position, velocity, acceleration, yaw, yaw rate,
     fit_t: float = -np.inf  #: pitch, roll at this time
