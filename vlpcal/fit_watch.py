@@ -3,12 +3,12 @@
 A deployment of another install with the same camera ids, cameras swapped, a deployment of
 another scale or a calibration gone stale give fixes that each look plausible — small
 residuals, `ok` — while most moments fail to be placed at all. A right deployment places nearly
-every moment two cameras see the LED (≥ 98 % on every simulated install, with its reflections
-and lamps); so the share placed, over the latest :data:`RECENT` such moments, tells a set-up
-that does not fit. The verdict waits until the share is below :data:`FIT_SHARE` beyond doubt:
-the upper end of its Wilson interval (:data:`CONFIDENCE_Z`), so a few failures in a short run
-raise nothing (nor do fewer than :data:`LEAST` moments) and a wrong set-up is named within a
-few dozen moments.
+every moment two cameras see an LED, reflections and lamps included; so the share placed, over
+the latest :data:`RECENT` such moments, tells a set-up that does not fit. (What a moment is,
+each caller says: a locator's set of frames, or a tracker's spot.) The verdict waits until the
+share is below :data:`FIT_SHARE` beyond doubt: the upper end of its Wilson interval
+(:data:`CONFIDENCE_Z`), so a few failures in a short run raise nothing (nor do fewer than
+:data:`LEAST` moments) and a wrong set-up is named within a few dozen moments.
 """
 
 from __future__ import annotations

@@ -218,9 +218,10 @@ class Tracker:
         self._body_of = {led: state for state in self.bodies for led in state.body.leds}
         self._spotted: dict = {}  #: camera index → the time of its newest frame with a spot
         self.frames_with_spot = 0
-        #: the moments two cameras saw a spot, placed or not: whether the frames fit
-        self.fit = FitWatch(deployment.name, "camera frames with a spot while another camera "
-                            "saw one")
+        #: whether the frames fit: each spot a track's window of two cameras' rays took (the
+        #: window placed, or its rays miss each other or fall outside the room), and each spot
+        #: that met no other camera's recent one while another camera saw a spot
+        self.fit = FitWatch(deployment.name, "spots seen while another camera saw one")
         self._pending: list[_Ray] = []
         self._next = 1
         self.codes = deployment.leds
@@ -298,13 +299,8 @@ class Tracker:
                 track.unplaced_since = min(track.unplaced_since, t)
                 self._refresh(track, t)
                 self._body_due(track, t)
-                if together:
-                    placed = not track.tentative and track.last_two == t
-                    self.fit.add(placed, "" if placed else "off their track")
-            else:
-                self._start(ray)
-                if together:
-                    self.fit.add(False, "in no track")
+            elif not self._start(ray) and together:
+                self.fit.add(False, "meeting no other camera's spot")
         if self.codes:
             self._blink(k, t, given)
         if not self._lag:  # rows at once: this frame's too
@@ -550,8 +546,11 @@ class Tracker:
         # holds these rays already, and counted twice they would make the track overconfident)
         pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
         fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=pos)
-        if not (fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma
-                and self._plausible(fit, cov)):
+        meet = fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma
+        inside = meet and self._plausible(fit, cov)
+        self.fit.add(inside, "" if inside else "outside the room" if meet
+                     else "rays that miss each other")
+        if not inside:
             if tr.tentative:  # two LEDs' spots paired by chance: undone, its rays set free
                 tr.misfits += 1
                 if tr.misfits >= 2:
@@ -760,7 +759,7 @@ class Tracker:
             if not tr.led:
                 tr.led = tr.anonymous
 
-    def _start(self, ray: _Ray) -> None:
+    def _start(self, ray: _Ray) -> bool:
         """A spot no track claims: start a track with the recent spot of another camera whose
         ray meets this one's best (:meth:`_meet`), else keep it for the next."""
         window = START_WINDOW * self.period
@@ -774,7 +773,7 @@ class Tracker:
                 best, best_score = (p, X), score
         if best is None:
             self._pending.append(ray)
-            return
+            return False
         p, X = best
         self._pending = [q for q in self._pending if q is not p]
         s_pos = TOP_SPEED * abs(ray.t - p.t) + self._metres_per_px(X, [ray.camera])
@@ -782,6 +781,7 @@ class Tracker:
         self.tracks.append(_Track("", [p, ray], ray.t, np.r_[X, np.zeros(6)], [p.t, ray.t],
                                   ray.t, last_two=ray.t, s_pos=s_pos, s_vel=TOP_SPEED,
                                   latest=ray))
+        return True
 
     def _body_due(self, tr: _Track, t: float) -> None:
         """A ray of a body's LED at ``t``: the body's row of that time is due."""
