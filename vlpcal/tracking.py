@@ -735,8 +735,11 @@ class Tracker:
             return
         t, lit = np.array(tr.seen).T
         led, e1, e2, phase = decode_phase(t, lit.astype(bool), self.codes)
-        if led is None:  # no code reads clearly now: its LED's dark times are not known
-            tr.code = None
+        if led is None:  # no code reads clearly among all: its own LED's (a body's shape
+            # named it) may still read against a steady light, for its dark times
+            own = [c for c in self.codes if c.led == tr.led]
+            mine = decode_phase(t, lit.astype(bool), own)[::3] if own else (None, 0.0)
+            tr.code = (own[0], mine[1]) if mine[0] is not None else None
             return
         holder = next((o for o in self.tracks if o is not tr and o.led == led), None)
         if holder is not None:
@@ -829,6 +832,7 @@ class Tracker:
             on = s2 > 0
             info[on] = 1.0 / (9.0 * s2[on])
             prior = (guess, info)
+            guess_before = guess.copy()
         else:  # where its LEDs' tracks are
             led_ids = list(seen)
             pos, ang = pose_from_points([body.leds[k] for k in led_ids],
@@ -859,6 +863,8 @@ class Tracker:
                 return None
         if fit is None or not resid <= FIT_SIGMAS * self.pixel_sigma:
             return None
+        if prior is not None and not self._follows(guess_before, s2, fit, cov):
+            return None  # a pose its last one could not have moved to: a swapped LED
         # its LEDs where their own tracks, placed now, put them: else a ray was another's
         R = rotation(fit[9], fit[11], fit[12])
         s_body = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
@@ -885,6 +891,19 @@ class Tracker:
                            "ok" if len(cams) >= 2 else "one_camera",
                            (float(fit[9]), float(pitch), float(roll),
                             float(np.sqrt(max(cov[9, 9], 0.0)))))
+
+    @staticmethod
+    def _follows(before, s2, fit, cov) -> bool:
+        """Whether a body's pose fitted now is one its last pose, carried here (``before``,
+        its variances ``s2``), could have moved to: position and heading each within
+        :data:`GATE_SIGMAS` of the two's sigmas. Two LEDs' names swapped fit a pose turned
+        half round, each ray well — only the motion tells it is not the body."""
+        var = np.diag(cov)
+        d_pos = float(np.linalg.norm(fit[:3] - before[:3]))
+        s_pos = float(np.sqrt(s2[:3].sum() + var[:3].sum()))
+        d_yaw = abs(float(np.angle(np.exp(1j * (fit[9] - before[9])))))
+        s_yaw = float(np.sqrt(s2[9] + var[9]))
+        return d_pos <= GATE_SIGMAS * s_pos and d_yaw <= GATE_SIGMAS * s_yaw
 
     def _row(self, tr: _Track, t: float) -> TrackUpdate:
         fit = cov = None
