@@ -674,6 +674,9 @@ class Tracker:
                 d[i] = np.maximum(d[i], GATE_SIGMAS * self._path_gap(tr, k, xy, t))
             elif t - tr.last_two > WINDOW * self.period:
                 rank[i] = 2
+        # dark by its code but near a bit's edge: a track whose LED is lit takes a spot first
+        rank += [0.5 if tr.code is not None and not tr.code[0].lit(t, tr.code[1]) else 0.0
+                 for tr in owners]
         claims: dict = {}
         follows: dict = {}
         taken: set = set()
