@@ -519,6 +519,10 @@ class Tracker:
             if tr.led == "":  # which LED it is better than a guess of where it went)
                 tr.led = best.anonymous
             return
+        if best.led in self._body_of:  # a body's LED: its path may go on in a sibling's
+            if tr.led == "":  # spot — its id, but its name from its own code or the body's
+                tr.led = best.anonymous  # shape
+            return
         if tr.led == tr.anonymous or tr.led == "":  # not named by its own code yet: the held
             taken = best.led != best.anonymous and any(o.led == best.led for o in self.tracks)
             tr.led, tr.margin = (best.anonymous, 0) if taken else (best.led, best.margin)
