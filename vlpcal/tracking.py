@@ -233,6 +233,8 @@ class Tracker:
         dark = max((max(map(len, (c.pattern * 2).split("1"))) / c.bit_rate
                     for c in self.codes), default=0.0)
         self._dark = dark
+        self._duty = (float(np.mean([c.pattern.count("1") / len(c.pattern) for c in self.codes]))
+                      if self.codes else 1.0)
         # the geometry library judges the fits not surely inside the room: imported now, as
         # its first use mid-stream would hold a live frame ~30 ms
         import shapely  # noqa: F401
@@ -471,6 +473,14 @@ class Tracker:
             return False
         return not bool(code.lit(t, phase))
 
+    def _lit_odds(self, tr: _Track, t: float) -> float:
+        """How likely the track's LED is lit at ``t`` (not surely dark, :meth:`_dark_now`):
+        by its code, 1 on a lit bit and even on a dark one near its edge; without a code,
+        the share of lit bits among the deployment's codes (1 when it has none)."""
+        if tr.code is not None:
+            return 1.0 if tr.code[0].lit(t, tr.code[1]) else 0.5
+        return self._duty
+
     def _reacquire(self, ray: _Ray, given: set) -> _Track | None:
         """The track one camera alone still sees whose newest spot meets this ray of another
         camera as one LED (:meth:`_meet`): the second camera seeing it again (not a track
@@ -678,16 +688,16 @@ class Tracker:
                 d[i] = np.maximum(d[i], GATE_SIGMAS * self._path_gap(tr, k, xy, t))
             elif t - tr.last_two > WINDOW * self.period:
                 rank[i] = 2
-        # dark by its code but near a bit's edge: a track whose LED is lit takes a spot first
-        rank += [0.5 if tr.code is not None and not tr.code[0].lit(t, tr.code[1]) else 0.0
-                 for tr in owners]
         claims: dict = {}
         follows: dict = {}
         taken: set = set()
         # within a rank, the likeliest pairs first: a track whose guess is loose (a dark run)
         # does not outbid one that foresees the spot closely (2D Gaussian: d²/2 + 2 ln σ)
+        # … and the odds its LED is lit now: a code's dark bit near its edge, even; a track no
+        # code names yet, the codes' share of lit bits (1 without codes)
+        lit = np.array([self._lit_odds(tr, t) for tr in owners])
         with np.errstate(divide="ignore", invalid="ignore"):
-            cost = 0.5 * d * d + 2 * np.log(slack * self._f[k])[:, None]
+            cost = 0.5 * d * d + 2 * np.log(slack * self._f[k] / lit)[:, None]
         cost = np.where(np.isfinite(cost), cost, np.inf)
         for flat in np.argsort(cost + 1e6 * rank[:, None], axis=None):
             i, j = np.unravel_index(flat, d.shape)
