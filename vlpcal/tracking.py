@@ -608,9 +608,8 @@ class Tracker:
                      and t - o.last_two <= WINDOW * self.period}  # placed now
             if not named:
                 continue
-            held_by = {o.led for o in self.tracks if o is not tr}
             for led, b in state.body.leds.items():
-                if led in held_by:
+                if led in named:
                     continue
                 good = True
                 for other, o in named.items():
@@ -622,7 +621,9 @@ class Tracker:
                         break
                 if good:
                     fits.append(led)
-        if len(fits) != 1:
+        # one LED alone fits, among all of its body's not placed now (one another track holds,
+        # not placed now, may be this one's; it keeps its name, and this track waits)
+        if len(fits) != 1 or any(o.led == fits[0] for o in self.tracks if o is not tr):
             tr.shape_votes = (None, 0)
             return
         led = fits[0]
