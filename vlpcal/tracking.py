@@ -529,9 +529,12 @@ class Tracker:
             if tr.led == "":  # which LED it is better than a guess of where it went)
                 tr.led = best.anonymous
             return
-        if best.led in self._body_of:  # a body's LED: its path may go on in a sibling's
-            if tr.led == "":  # spot — its id, but its name from its own code or the body's
-                tr.led = best.anonymous  # shape
+        if best.led in self._body_of or (self.bodies and best.led == best.anonymous):
+            # a body's LED (or, among bodies, one not named yet): its path may go on in a
+            # sibling's spot — its id, but not its name or blink history: those come from its
+            # own code or the body's shape
+            if tr.led == "":
+                tr.led = best.anonymous
             return
         if tr.led == tr.anonymous or tr.led == "":  # not named by its own code yet: the held
             taken = best.led != best.anonymous and any(o.led == best.led for o in self.tracks)
@@ -601,26 +604,13 @@ class Tracker:
         one — within their sigmas, which must be a quarter of it or less — alone, and for
         :data:`SHAPE_VOTES` placements running, names it (the body's shape tells which LED it
         is)."""
-        X = tr.fit[:3]
         fits = []
         for state in self.bodies:
             named = {o.led: o for o in self.tracks if o.led in state.body.leds and o is not tr
                      and t - o.last_two <= WINDOW * self.period}  # placed now
-            if not named:
-                continue
-            for led, b in state.body.leds.items():
-                if led in named:
-                    continue
-                good = True
-                for other, o in named.items():
-                    want = float(np.linalg.norm(b - state.body.leds[other]))
-                    pos, _, s_o, _ = self._extrapolated(o, t)
-                    fits_here, slack = _apart(X, tr.s_pos, pos, s_o, want)
-                    if slack > 0.25 * want or not fits_here:
-                        good = False
-                        break
-                if good:
-                    fits.append(led)
+            if named:
+                fits += [led for led in state.body.leds
+                         if led not in named and self._beside(tr, led, named)]
         # one LED alone fits, among all of its body's not placed now (one another track holds,
         # not placed now, may be this one's; it keeps its name, and this track waits)
         if len(fits) != 1 or any(o.led == fits[0] for o in self.tracks if o is not tr):
@@ -631,6 +621,19 @@ class Tracker:
         tr.shape_votes = (led, votes)
         if votes >= SHAPE_VOTES:
             tr.led, tr.margin, tr.code = led, 0, None
+
+    def _beside(self, tr: _Track, led: str, named: dict) -> bool:
+        """Whether the track's latest fit lies where its body's LED ``led`` does beside the
+        ``named`` tracks then: as far from each as on the body, within their sigmas
+        (:func:`_apart`) — which must be a quarter of it or less."""
+        body = self._body_of[led].body
+        for other, o in named.items():
+            want = float(np.linalg.norm(body.leds[led] - body.leds[other]))
+            pos, _, s_o, _ = self._extrapolated(o, tr.fit_t)
+            fits, slack = _apart(tr.fit[:3], tr.s_pos, pos, s_o, want)
+            if slack > 0.25 * want or not fits:
+                return False
+        return True
 
     def _plausible(self, fit, cov) -> bool:
         """Whether a window's fit can be the LED: inside the room (the locator's rule,
