@@ -294,13 +294,20 @@ class Tracker:
             if track is None and (track := self._reacquire(ray, given)) is not None:
                 given.add(id(track))
             if track is not None:
+                before = track.latest, track.last_ray, track.unplaced_since
                 track.rays.append(ray)
                 track.latest = ray
                 track.due.append(t)
                 track.last_ray = t
                 track.unplaced_since = min(track.unplaced_since, t)
-                self._refresh(track, t)
-                self._body_due(track, t)
+                if self._refresh(track, t):
+                    self._body_due(track, t)
+                else:  # not its LED's spot after all: taken back, and free
+                    track.rays.pop()
+                    track.due.pop()
+                    track.latest, track.last_ray, track.unplaced_since = before
+                    given.discard(id(track))
+                    self._start(ray)
             elif not self._start(ray) and together:
                 self.fit.add(False, "meeting no other camera's spot")
         if self.codes:
@@ -552,17 +559,20 @@ class Tracker:
         s_vel = np.hypot(tr.s_vel, self.acceleration * dt)
         return pos, vel, s_pos, s_vel
 
-    def _refresh(self, tr: _Track, t: float) -> None:
+    def _refresh(self, tr: _Track, t: float) -> bool:
         """The track's state now, from its rays of the last window and its state before:
-        what the next spot is judged against."""
+        what the next spot is judged against. False when its newest ray is not its LED's: the
+        window fits without it, not with it (a lamp's or another LED's spot it took) — the
+        caller takes it back, so one wrong spot does not spoil the windows after it."""
         since = t - WINDOW * self.period
         rays = [r for r in tr.rays if r.t >= since]
         if len({r.camera for r in rays}) < 2:
-            return  # one camera cannot place it: the state from two carries on (coasting)
+            return True  # one camera cannot place it: the state from two carries on (coasting)
         # the state before anchors a window whose rays barely cross (loosened threefold: it
         # holds these rays already, and counted twice they would make the track overconfident)
         pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
-        fit, resid, cov = self._solve(rays, t, (pos, vel, 3 * s_pos, 3 * s_vel), guess=pos)
+        prior = (pos, vel, 3 * s_pos, 3 * s_vel)
+        fit, resid, cov = self._solve(rays, t, prior, guess=pos)
         meet = fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma
         inside = meet and self._plausible(fit, cov)
         self.fit.add(inside, "" if inside else "outside the room" if meet
@@ -574,7 +584,14 @@ class Tracker:
                     self.tracks = [o for o in self.tracks if o is not tr]
                     self._pending += [r for r in tr.rays
                                       if r.t >= t - START_WINDOW * self.period]
-            return
+                return True
+            rest = rays[:-1]
+            if len({r.camera for r in rest}) >= 2:
+                fit, resid, cov = self._solve(rest, t, prior, guess=pos)
+                if fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma \
+                        and self._plausible(fit, cov):
+                    return False
+            return True
         tr.last_two, tr.unplaced_since = t, np.inf
         tr.fit, tr.fit_t = fit, t
         tr.s_pos = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
@@ -584,6 +601,7 @@ class Tracker:
             self._confirm(tr, t)
         if self.bodies and not tr.tentative and tr.led == tr.anonymous:
             self._by_shape(tr, t)
+        return True
 
     def _shaped(self, body, seen: dict, t: float) -> bool:
         """Whether the body's LED tracks placed now lie as far apart as its LEDs do (within
