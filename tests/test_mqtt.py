@@ -566,6 +566,47 @@ def test_a_wrong_prefix_is_said_within_seconds_with_the_topics_the_broker_carrie
         cams.disconnect()
 
 
+def test_one_camera_id_the_broker_does_not_carry_is_named_among_those_heard(broker):
+    """From a hostile probe: one camera publishing as `c2` (the deployment says `C2`) was
+    never named while the others were heard."""
+    import paho.mqtt.client as mqtt
+
+    from vlpcal.mqtt import SpotSubscriber, parse_url
+
+    cams = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+    cams.connect("127.0.0.1", broker.port)
+    cams.loop_start()
+    for k in range(40):  # unrelated topics, sorted before the spots, must not hide them
+        cams.publish(f"aaa/other/{k}", "x", retain=True)
+    stop = threading.Event()
+
+    def publish():
+        while not stop.is_set():
+            for cid in ("C1", "c2", "C3"):
+                cams.publish(f"lab/spots/{cid}", json.dumps({"t": time.time()}))
+            time.sleep(0.05)
+
+    threading.Thread(target=publish, daemon=True).start()
+    sub = SpotSubscriber(parse_url(broker.url("lab")), ["C1", "C2", "C3"])
+    try:
+        t0 = time.monotonic()
+        said = None
+        while said is None and time.monotonic() - t0 < 8:
+            said = sub.silence(after=1.0)
+            time.sleep(0.05)
+        assert said is not None and time.monotonic() - t0 < 5
+        assert said.startswith("nothing heard on lab/spots/{C2}"), said
+        assert "2 other cameras were heard" in said and "lab/spots/{C1, C3, c2}" in said, said
+        assert sub.silence(after=1.0) is None  # said once
+    finally:
+        stop.set()
+        sub.close()
+        for k in range(40):
+            cams.publish(f"aaa/other/{k}", "", retain=True)
+        cams.loop_stop()
+        cams.disconnect()
+
+
 def test_the_broker_look_says_when_there_is_nothing_and_lists_what_there_is(broker):
     from vlpcal.mqtt import broker_topics, parse_url, topics_said
 

@@ -392,6 +392,7 @@ class SpotSubscriber:
         self._ca_file = ca_file
         self._since = time.monotonic()
         self._looked = False
+        self._heard: set = set()  #: the cameras whose topic carried a message
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_message = self._on_message
@@ -419,6 +420,7 @@ class SpotSubscriber:
         if cid not in self.camera_ids:
             self.unknown += 1
             return
+        self._heard.add(cid)
         if msg.retain:  # kept by the broker from before: not a frame of now
             self.stale += 1
             return
@@ -453,25 +455,31 @@ class SpotSubscriber:
             return None
 
     def silence(self, after: float = QUIET_SECONDS) -> str | None:
-        """Once, when nothing came for ``after`` s since the start: a line naming the topics
-        listened to and those the broker does carry (:func:`broker_topics`), so a wrong prefix,
-        its case or wrong camera ids show; else None."""
-        if self._looked or self.received or self.bad or self.stale \
-                or time.monotonic() - self._since < after:
+        """Once, when ``after`` s since the start some of the cameras' topics (or all) carried
+        nothing: a line naming them and the topics the broker does carry
+        (:func:`broker_topics`), so a wrong prefix, its case or a wrong camera id shows; else
+        None."""
+        if self._looked or time.monotonic() - self._since < after:
+            return None
+        quiet = sorted(set(self.camera_ids) - self._heard)
+        if not quiet:
             return None
         self._looked = True
-        ids = sorted(self.camera_ids)
-        listened = (f"{self.target.prefix}/spots/{{{', '.join(ids[:6])}"
-                    + (f", … {len(ids) - 6} more" if len(ids) > 6 else "") + "}")
+        listened = (f"{self.target.prefix}/spots/{{{', '.join(quiet[:6])}"
+                    + (f", … {len(quiet) - 6} more" if len(quiet) > 6 else "") + "}")
         topics = broker_topics(self.target, self._ca_file)
         if topics is None:
             there = "the broker did not let us look at what it carries (under #)"
         elif not topics:
-            there = "the broker carries nothing at all (are the cameras publishing?)"
+            there = ("the broker showed no topic under # in a short look (nothing published, "
+                     "or nothing we may read)")
         else:
-            there = f"the broker carries {topics_said(topics)}: is the prefix, or are the " \
-                    "camera ids, right?"
-        return f"nothing heard on {listened} for {time.monotonic() - self._since:.0f} s; {there}"
+            there = f"the broker carries {topics_said(_spots_first(topics))}: is the prefix, " \
+                    "or are the camera ids, right?"
+        n = len(self._heard)
+        heard = f" (while {n} other camera{'s were' if n > 1 else ' was'} heard)" if n else ""
+        return (f"nothing heard on {listened} for {time.monotonic() - self._since:.0f} s"
+                f"{heard}; {there}")
 
     def close(self) -> None:
         self._closing = True
@@ -517,6 +525,12 @@ def broker_topics(target: Target, ca_file=None, seconds: float = LOOK_SECONDS,
     finally:
         client.disconnect()
         client.loop_stop()
+
+
+def _spots_first(topics: list[str]) -> list[str]:
+    """Topics with the spot topics (``…/spots/…``, any case) first: a wrong prefix's or
+    camera id's likely right one is among them."""
+    return sorted(topics, key=lambda name: "/spots/" not in name.lower())
 
 
 def topics_said(topics: list[str], shown: int = 6, children: int = 4) -> str:
