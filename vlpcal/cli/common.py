@@ -26,10 +26,12 @@ class Misfit(UserError):
 class FitCheck:
     """Whether the frames fit the deployment, judged as a run goes
     (:class:`~vlpcal.fit_watch.FitWatch`): a misfit stops the run (:class:`Misfit`, its message
-    ending with ``kept``, what the stop leaves), or with --keep-going is said once."""
+    ending with ``kept``, what the stop leaves), or with --keep-going is said once — a warning,
+    on stderr even under --quiet (which hides progress and summaries, not warnings)."""
 
-    def __init__(self, keep_going: bool, say, kept: str):
-        self.keep_going, self.say, self.kept, self.said = keep_going, say, kept, False
+    def __init__(self, keep_going: bool, kept: str):
+        self.keep_going, self.kept, self.said = keep_going, kept, False
+        self.say = lambda msg: click.echo(msg, err=True)
 
     def __call__(self, watch) -> None:
         if self.said:

@@ -118,7 +118,7 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     t0 = time.perf_counter()
     sent = live or out == "-" or publisher  # what a stop cannot take back
     statuses = _Tally(loc.deployment.name, FitCheck(
-        keep_going, say, "the fixes so far are kept" if sent else "nothing was written"))
+        keep_going, "the fixes so far are kept" if sent else "nothing was written"))
     notes = []
     try:
         if frames_dir:

@@ -67,9 +67,7 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
-    check = FitCheck(keep_going, (lambda msg: None) if quiet else
-                     (lambda msg: click.echo(msg, err=True)),
-                     "the rows so far are kept" if publisher or spots_url or cameras
+    check = FitCheck(keep_going, "the rows so far are kept" if publisher or spots_url or cameras
                      else "nothing was written")
     try:
         if spots_url:
