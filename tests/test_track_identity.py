@@ -112,3 +112,17 @@ def test_one_robot_keeps_one_id_over_mqtt(broker, tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "t.csv")))
     assert len(rows) > 1500, err
     assert {r["led"] for r in rows} == {"T1"}, err
+
+
+def test_no_track_takes_an_id_the_deployment_gives_an_led():
+    """From a hostile probe: a deployment naming a blinking LED `T1` had a steady LED's track
+    called T1 too, so two LEDs' rows shared one name."""
+    from vlpcal import deployment as deployments
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    doc = deployment_of(scene, "true").to_dict()
+    doc["leds"] = [{"id": "T1", "pattern": "0010111101", "bit_rate": 10.0}]
+    dep = deployments.from_dict(doc, "named")
+    events = spot_schedule(scene, robot_path(scene, 1.5), 5.0)  # a steady LED: no code
+    names = {r.led for r in _tracked(dep, events)}
+    assert names and "T1" not in names, names

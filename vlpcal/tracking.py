@@ -225,6 +225,9 @@ class Tracker:
         self._pending: list[_Ray] = []
         self._next = 1
         self.codes = deployment.leds
+        #: the names the deployment gives (LEDs, bodies, bodies' LEDs): no track's id
+        self._named = {c.led for c in self.codes} | {b.id for b in deployment.bodies} \
+            | set(self._body_of)
         if spots is not None and not (isinstance(spots, (int, np.integer)) and spots >= 1):
             raise ValueError(f"spots: expected a whole number ≥ 1 (or None), got {spots!r}")
         self.spots = int(spots) if spots else max(1, len(self.codes))
@@ -796,6 +799,8 @@ class Tracker:
         """A track confirmed: the id of the held track it continues, else a new one."""
         self._rejoin(tr, t)
         if not tr.anonymous:
+            while f"T{self._next}" in self._named:  # an id the deployment gives an LED
+                self._next += 1
             tr.anonymous = f"T{self._next}"
             self._next += 1
             if not tr.led:
