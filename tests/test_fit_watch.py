@@ -119,6 +119,27 @@ def test_a_robot_with_three_blinking_leds_on_a_right_deployment_raises_nothing(p
     assert "R1," in (tmp_path / "tracks.csv").read_text()  # the body was placed
 
 
+def test_a_camera_on_a_clock_of_its_own_is_said(sim, tmp_path):
+    # from a hostile probe: C2's times 1000 s on in times.csv — its frames were never with
+    # another camera's, and the run said nothing of it
+    import csv
+    import shutil
+
+    streams = tmp_path / "streams"
+    shutil.copytree(sim / "streams", streams)
+    rows = list(csv.reader(open(streams / "times.csv")))
+    rows[1:] = [[c, n, f"{float(t) + 1000:.6f}" if c == "C2" else t] for c, n, t in rows[1:]]
+    csv.writer(open(streams / "times.csv", "w", newline="")).writerows(rows)
+    res = _run("track", "-d", sim / "truth.yaml", "--frames", streams, "--out",
+               tmp_path / "t.csv", "-q")
+    said = [x for x in res.stderr.splitlines() if x.startswith("warning:")]
+    assert len(said) == 1 and "C2's capture times" in said[0] and "one clock" in said[0], \
+        res.stderr
+    res = _run("track", "-d", sim / "truth.yaml", "--frames", sim / "streams", "--out",
+               tmp_path / "right.csv", "-q")
+    assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
+
+
 def test_a_track_with_no_rows_says_why(sim, tmp_path):
     """From a new user's run: track with a deployment of 12 cameras on a 3-camera folder
     exited 0 with no rows. Now the reason; and with --keep-going, no rows is still not 0."""

@@ -528,6 +528,26 @@ class AsyncFrames:
         cannot be read."""
         return read_frame(self.root / camera_id / f"{frame_no}.jpg", missing=None)
 
+    def alone(self) -> list[tuple[str, float, float, float, float]]:
+        """The cameras whose capture times never overlap the other cameras' (a clock of its
+        own, or a recording of another time): ``(camera id, its first and last time, the
+        others' first and last)``. Its frames are never seen with another camera's."""
+        if len(self.camera_ids) < 2:
+            return []
+        span: dict = {}
+        for t, cid, _ in self.events:
+            lo, hi = span.get(cid, (t, t))
+            span[cid] = (min(lo, t), max(hi, t))
+        out = []
+        for cid, (lo, hi) in sorted(span.items()):
+            others = [v for k, v in span.items() if k != cid]
+            if not others:
+                continue
+            o_lo, o_hi = min(v[0] for v in others), max(v[1] for v in others)
+            if hi < o_lo or lo > o_hi:
+                out.append((cid, lo, hi, o_lo, o_hi))
+        return out
+
 
 def read_async_frames(root) -> AsyncFrames:
     """Read an asynchronous frames folder's ``times.csv`` (files are read on demand; a listed
