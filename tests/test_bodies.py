@@ -124,6 +124,24 @@ def test_a_robot_carrying_blinking_leds_gets_its_position_and_heading(n):
     assert all(r.pose is None for r in led_rows)
 
 
+@pytest.mark.parametrize("x, said", [(0.15, False), (0.16, True), (15.0, True)])
+def test_a_layout_in_other_units_or_measured_wrong_is_said(x, said):
+    """From a hostile probe: a bodies: block in centimetres gave no body row and no word; one
+    measured 1 cm off gave rows skewed by it, without a word."""
+    leds, _, _ = _robot(2, 8.0)
+    doc = body_rig(2).to_dict()
+    doc["bodies"][0]["leds"]["L1"] = [x, 0.0, 0.15]  # the robot's: ±0.15 m
+    tr = Tracker(deployment.from_dict(doc, "rig.yaml"), period=1 / 30, spots=2)
+    for t, cid, spots in crossing_events(body_rig(2), leds, 8.0):
+        tr.update_spots(cid, t, spots)
+    tr.finish()
+    misfits = tr.layout_misfits()
+    assert bool(misfits) == said, [m.message() for m in misfits]
+    if said:
+        assert misfits[0].leds == ("L1", "L2") and abs(misfits[0].measured - 0.30) < 0.005
+        assert f"{x + 0.15:.3f} m apart" in misfits[0].message()
+
+
 def test_a_body_whose_leds_no_two_cameras_share_is_still_placed():
     """Two cameras, each seeing one of the robot's two LEDs only, for 0.2 s at a time: no
     LED is placed by two cameras then, the body is (its rays at their own times, its shape)."""

@@ -39,6 +39,7 @@ are ``T1``, ``T2``… for as long as they last.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import cv2
@@ -48,7 +49,7 @@ from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode_phase
 from .bodies import angles, fit_pose, gives_full_pose, pose_from_points, rotation
 from .deployment import Body, Deployment
 from .detection import detect_frame
-from .fit_watch import FitWatch
+from .fit_watch import LEAST, FitWatch
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -70,6 +71,8 @@ FIT_SIGMAS = 4.0
 HOLD_SECONDS = 5.0
 #: placements running that name a track by the body's shape (:meth:`Tracker._by_shape`)
 SHAPE_VOTES = 5
+#: moments kept per pair of a body's LEDs to judge its layout by (:meth:`Tracker.layout_misfits`)
+LAYOUT_MOMENTS = 1000
 #: a bit's share, at each of its edges, where a track's blink code cannot say lit or dark
 BIT_EDGE = 0.2
 #: a track's path in an image is its last this many spots there, and is lost when no spot
@@ -165,10 +168,32 @@ class _Track:
     held_since: float = np.inf  #: when it ended (held: its id waits for a track continuing it)
 
 
+@dataclass(frozen=True)
+class LayoutMisfit:
+    """A body whose LEDs ``leds`` lay ``measured`` m apart (the median of ``moments`` their
+    tracks were both placed), where its ``bodies:`` block has them ``wanted`` m apart."""
+
+    body: str
+    leds: tuple[str, str]
+    measured: float
+    wanted: float
+    moments: int
+
+    def message(self) -> str:
+        a, b = self.leds
+        return (f"body {self.body}: its LEDs {a} and {b} lay {self.measured:.3f} m apart (the "
+                f"median of {self.moments} moments both were placed), where its layout has "
+                f"them {self.wanted:.3f} m apart: are the bodies' LED positions in metres, "
+                "and measured on the robot? (its rows are refused, or skewed)")
+
+
 @dataclass(eq=False)
 class _BodyState:
     body: Body
     due: list = field(default_factory=list)  #: capture times whose rows are not yet written
+    #: (LED, LED) → how far apart their tracks lay, each moment both were placed (m; the
+    #: latest :data:`LAYOUT_MOMENTS`): whether the ``bodies:`` block's layout is the robot's
+    apart: dict = field(default_factory=dict)
     fit: np.ndarray | None = None  #: 13: position, velocity, acceleration, yaw, yaw rate,
     fit_t: float = -np.inf  #: pitch, roll at this time
     cov: np.ndarray | None = None  #: the fit's covariance
@@ -606,18 +631,39 @@ class Tracker:
             self._by_shape(tr, t)
         return True
 
-    def _shaped(self, body, seen: dict, t: float) -> bool:
+    def _shaped(self, state: _BodyState, seen: dict, t: float) -> bool:
         """Whether the body's LED tracks placed now lie as far apart as its LEDs do (within
-        their sigmas): a track named by a misread code is not its LED."""
+        their sigmas): a track named by a misread code is not its LED. How far apart they lay
+        is kept (:meth:`layout_misfits`)."""
+        body, good = state.body, True
         now = [(led, tr) for led, tr in seen.items() if t - tr.last_two <= WINDOW * self.period]
         for i, (a, ta) in enumerate(now):
             pa, _, sa, _ = self._extrapolated(ta, t)
             for b, tb in now[i + 1:]:
                 pb, _, sb, _ = self._extrapolated(tb, t)
-                if not _apart(pa, sa, pb, sb, float(np.linalg.norm(body.leds[a]
-                                                                   - body.leds[b])))[0]:
-                    return False
-        return True
+                want = float(np.linalg.norm(body.leds[a] - body.leds[b]))
+                fits = _apart(pa, sa, pb, sb, want)[0]
+                lay = float(np.linalg.norm(pa - pb))
+                if 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) <= 0.25 * lay:  # placed well enough
+                    # to measure the layout by
+                    state.apart.setdefault(tuple(sorted((a, b))), deque(
+                        maxlen=LAYOUT_MOMENTS)).append(lay)
+                good = good and fits
+        return good
+
+    def layout_misfits(self) -> list[LayoutMisfit]:
+        """The bodies whose LEDs' tracks, placed, lay apart otherwise than the deployment's
+        ``bodies:`` block has them: the median over :data:`LEAST` moments or more off by more
+        than the 2 % a body's own measure is allowed (:func:`_apart`) — a layout in other
+        units, or measured wrong. Such a body's rows are refused, or skewed."""
+        out = []
+        for state in self.bodies:
+            for (a, b), seen in sorted(state.apart.items()):
+                want = float(np.linalg.norm(state.body.leds[a] - state.body.leds[b]))
+                lay = float(np.median(seen))
+                if len(seen) >= LEAST and abs(lay - want) > 0.02 * want:
+                    out.append(LayoutMisfit(state.body.id, (a, b), lay, want, len(seen)))
+        return out
 
     def _by_shape(self, tr: _Track, t: float) -> None:
         """A track no code names yet, on a body one of whose other LEDs a track already
@@ -854,7 +900,7 @@ class Tracker:
             points += [b] * len(mine)
             if mine:
                 seen[tr.led] = tr
-        if len(seen) < 2 or not self._shaped(body, seen, t):
+        if len(seen) < 2 or not self._shaped(state, seen, t):
             return None
         prior = None
         if state.fit is not None and abs(t - state.fit_t) <= LOST_PERIODS * self.period:

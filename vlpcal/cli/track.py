@@ -83,6 +83,13 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
                 click.echo(publisher_summary(publisher), err=True)
 
 
+def _say_layouts(tracker) -> None:
+    """A warning per pair of a body's LEDs that lay apart otherwise than its layout (-q hides
+    none)."""
+    for misfit in tracker.layout_misfits():
+        click.echo(f"warning: {misfit.message()}", err=True)
+
+
 def _no_rows(tracker, source) -> UserError:
     """Why a run gave no row at all."""
     fit = tracker.fit
@@ -196,6 +203,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += _published(publisher, tracker.finish())
+    _say_layouts(tracker)
     if not rows:
         raise _no_rows(tracker, frames_dir)
     _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
@@ -314,6 +322,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
     say(f"{n} camera frames → {_summary(rows)} → {out}" + _lag_said(tracker))
+    _say_layouts(tracker)
     if not rows:
         live.remove()
         raise _no_rows(tracker, "the cameras")
@@ -396,6 +405,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     if sub.disconnects:
         said.append(f"the broker went away {sub.disconnects} time(s)")
     say("; ".join(said) + f" → {_summary(rows)} → {out}" + _lag_said(tracker))
+    _say_layouts(tracker)
     if not rows:
         live.remove()
         raise _no_rows(tracker, f"{target.shown()}/spots/+")
