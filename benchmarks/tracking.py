@@ -240,6 +240,19 @@ def robot_body(scene, n_leds: int, seconds: float, seed: int, tmp: Path) -> dict
     truth = {m.led: m.path for m in leds}
     out["led_mean_mm"] = float(np.mean([np.linalg.norm(r.position - truth[r.led](r.t))
                                         for r in led_rows]) * 1000)
+    # the rows at moments two of its LEDs were placed (each its own row within a frame
+    # period and a half): where a blink code's dark run leaves one, the heading carries it
+    placed = [np.sort([r.t for r in led_rows if r.led == m.led]) for m in leds]
+
+    def near(ts, t):
+        i = np.searchsorted(ts, t)
+        return len(ts) > 0 and min(abs(ts[j] - t) for j in (i - 1, i) if 0 <= j < len(ts)) \
+            <= 1.5 / 30
+
+    two = np.array([sum(near(ts, t) for ts in placed) >= 2 for t in T], bool)
+    out["two_seen_share"] = float(two.mean()) if len(two) else float("nan")
+    out["pos_two_seen_mm"] = float(e[two].mean() * 1000) if two.any() else float("nan")
+    out["pos_one_seen_mm"] = float(e[~two].mean() * 1000) if (~two).any() else float("nan")
     return out
 
 
@@ -544,6 +557,9 @@ def main(argv=None) -> int:
                          ("body_rows", "body rows", "d"), ("first_s", "first row s", ".2f"),
                          ("pos_mean_mm", "origin mean mm", ".2f"),
                          ("pos_p95_mm", "origin p95 mm", ".2f"),
+                         ("pos_two_seen_mm", "two LEDs seen mm", ".2f"),
+                         ("pos_one_seen_mm", "one LED seen mm", ".2f"),
+                         ("two_seen_share", "share two seen", ".2f"),
                          ("one_led_mm", "one-LED mm", ".2f"),
                          ("led_mean_mm", "its LEDs mm", ".2f"),
                          ("yaw_mean_deg", "heading mean °", ".2f"),
