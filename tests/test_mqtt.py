@@ -566,6 +566,57 @@ def test_a_wrong_prefix_is_said_within_seconds_with_the_topics_the_broker_carrie
         cams.disconnect()
 
 
+def test_track_and_locate_name_one_silent_camera_while_the_others_stream(broker, tmp_path):
+    """The silence line must show in a run, not only when no spot at all comes: one camera
+    publishing as `c2` among cameras streaming at 20 fps."""
+    import subprocess
+    import sys
+
+    import paho.mqtt.client as mqtt
+
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import write_deployments
+
+    write_deployments(make_scene(get_profile("paper-2024"), 0), tmp_path)
+    cams = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+    cams.connect("127.0.0.1", broker.port)
+    cams.loop_start()
+    cams.publish("lab/spots/C2", json.dumps({"t": 1.0}), retain=True)  # stale: not heard now
+    stop = threading.Event()
+
+    def publish():
+        while not stop.is_set():
+            for cid in ("C1", "c2", "C3"):
+                cams.publish(f"lab/spots/{cid}", json.dumps({"t": time.time()}))
+            time.sleep(0.05)
+
+    threading.Thread(target=publish, daemon=True).start()
+    try:
+        for command in ("track", "locate"):
+            p = subprocess.Popen([sys.executable, "-m", "vlpcal", command, "-d",
+                                  str(tmp_path / "truth.yaml"), "--spots", broker.url("lab"),
+                                  "--out", str(tmp_path / f"{command}.csv"), "--duration", "6",
+                                  "-q"], stderr=subprocess.PIPE, text=True)
+            t0 = time.monotonic()
+            said, at = [], None
+            for line in p.stderr:
+                if line.startswith("nothing heard"):
+                    said.append(line)
+                    at = time.monotonic() - t0
+            p.wait(timeout=30)
+            assert len(said) == 1, (command, said)
+            assert said[0].startswith("nothing heard on lab/spots/{C2} ") and \
+                "2 other cameras were heard" in said[0] and "lab/spots/{C1, C2, C3, c2}" in \
+                said[0], said
+            assert at < 6.0, at
+    finally:
+        stop.set()
+        cams.publish("lab/spots/C2", "", retain=True)
+        cams.loop_stop()
+        cams.disconnect()
+
+
 def test_one_camera_id_the_broker_does_not_carry_is_named_among_those_heard(broker):
     """From a hostile probe: one camera publishing as `c2` (the deployment says `C2`) was
     never named while the others were heard."""

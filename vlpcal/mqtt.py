@@ -420,10 +420,10 @@ class SpotSubscriber:
         if cid not in self.camera_ids:
             self.unknown += 1
             return
-        self._heard.add(cid)
         if msg.retain:  # kept by the broker from before: not a frame of now
             self.stale += 1
             return
+        self._heard.add(cid)
         spots = _spots_of(msg.payload)
         w, h = self.sizes.get(cid, (math.inf, math.inf))
         if spots is None or not all(-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5
@@ -461,10 +461,11 @@ class SpotSubscriber:
         None."""
         if self._looked or time.monotonic() - self._since < after:
             return None
+        self._looked = True  # judged once, at the start: cheap on every call after
         quiet = sorted(set(self.camera_ids) - self._heard)
         if not quiet:
             return None
-        self._looked = True
+        n = len(self.camera_ids) - len(quiet)  # heard, before the look takes its second
         listened = (f"{self.target.prefix}/spots/{{{', '.join(quiet[:6])}"
                     + (f", … {len(quiet) - 6} more" if len(quiet) > 6 else "") + "}")
         topics = broker_topics(self.target, self._ca_file)
@@ -476,7 +477,6 @@ class SpotSubscriber:
         else:
             there = f"the broker carries {topics_said(_spots_first(topics))}: is the prefix, " \
                     "or are the camera ids, right?"
-        n = len(self._heard)
         heard = f" (while {n} other camera{'s were' if n > 1 else ' was'} heard)" if n else ""
         return (f"nothing heard on {listened} for {time.monotonic() - self._since:.0f} s"
                 f"{heard}; {there}")
@@ -490,8 +490,8 @@ class SpotSubscriber:
 def broker_topics(target: Target, ca_file=None, seconds: float = LOOK_SECONDS,
                   most: int = LOOK_TOPICS) -> list[str] | None:
     """The topics the broker carries now: a short look under the wildcard ``#`` (retained
-    messages and what is published within ``seconds``), ``most`` names at most, sorted; None
-    when the broker does not let us look."""
+    messages and what is published within ``seconds``), ``most`` names at most besides the
+    spot topics (``…/spots/…``, all kept), sorted; None when the broker does not let us look."""
     names: set = set()
     connected, refused, allowed = threading.Event(), [], threading.Event()
 
@@ -506,8 +506,8 @@ def broker_topics(target: Target, ca_file=None, seconds: float = LOOK_SECONDS,
         if not any(getattr(rc, "is_failure", False) for rc in reason_codes):
             allowed.set()
 
-    def on_message(client, userdata, msg):
-        if len(names) < most:
+    def on_message(client, userdata, msg):  # spot topics always: retained ones come first
+        if len(names) < most or "/spots/" in msg.topic.lower():
             names.add(msg.topic)
 
     client = _client(target, f"vlpcal-look-{os.getpid()}-{time.time_ns()}", ca_file)

@@ -369,10 +369,10 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
 
     try:
         while not (t_end and time.monotonic() > t_end) and not (max_sets and n >= max_sets):
+            if (quiet_note := sub.silence()) is not None:  # a warning: -q hides none
+                click.echo(quiet_note, err=True)
             got = sub.get(timeout=tolerance)
             if got is None:
-                if (quiet_note := sub.silence()) is not None:
-                    say(quiet_note)
                 if pending and time.time() - first > 2 * tolerance:
                     close()
                 continue

@@ -364,10 +364,10 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     intervals = FrameIntervals()  # the cameras' own rate, when --fps does not say it
     try:
         while not (t_end and time.monotonic() > t_end):
+            if (quiet_note := sub.silence()) is not None:  # a warning: -q hides none
+                click.echo(quiet_note, err=True)
             got = sub.get(timeout=0.2)
             if got is None:
-                if (quiet_note := sub.silence()) is not None:
-                    say(quiet_note)
                 continue
             t, cid, uv = got
             if t > time.time() + tracker.lost_after:
