@@ -528,25 +528,29 @@ class AsyncFrames:
         cannot be read."""
         return read_frame(self.root / camera_id / f"{frame_no}.jpg", missing=None)
 
-    def alone(self) -> list[tuple[str, float, float, float, float]]:
-        """The cameras whose capture times never overlap the other cameras' (a clock of its
-        own, or a recording of another time): ``(camera id, its first and last time, the
-        others' first and last)``. Its frames are never seen with another camera's."""
-        if len(self.camera_ids) < 2:
-            return []
+    def alone(self) -> list[tuple[str, float, float, tuple[str, ...]]]:
+        """The cameras on a clock of their own (or a recording of another time): the cameras
+        fall into groups whose capture times overlap, chained; those outside the largest
+        group (most cameras, then most frames) are given as ``(camera id, its first and last
+        time, the largest group's cameras)``. Their frames are never seen with those."""
         span: dict = {}
+        count: dict = {}
         for t, cid, _ in self.events:
             lo, hi = span.get(cid, (t, t))
             span[cid] = (min(lo, t), max(hi, t))
-        out = []
-        for cid, (lo, hi) in sorted(span.items()):
-            others = [v for k, v in span.items() if k != cid]
-            if not others:
-                continue
-            o_lo, o_hi = min(v[0] for v in others), max(v[1] for v in others)
-            if hi < o_lo or lo > o_hi:
-                out.append((cid, lo, hi, o_lo, o_hi))
-        return out
+            count[cid] = count.get(cid, 0) + 1
+        groups: list = []  # [first, last, cameras]: spans chained by overlap, in time order
+        for cid, (lo, hi) in sorted(span.items(), key=lambda kv: kv[1]):
+            if groups and lo <= groups[-1][1]:
+                groups[-1][1] = max(groups[-1][1], hi)
+                groups[-1][2].append(cid)
+            else:
+                groups.append([lo, hi, [cid]])
+        if len(groups) < 2:
+            return []
+        main = max(groups, key=lambda g: (len(g[2]), sum(count[c] for c in g[2])))
+        return [(cid, *span[cid], tuple(main[2])) for g in groups if g is not main
+                for cid in g[2]]
 
 
 def read_async_frames(root) -> AsyncFrames:

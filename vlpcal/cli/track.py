@@ -137,11 +137,11 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
     if unknown:
         raise UserError(f"{frames_dir}: cameras {', '.join(unknown)} are not in "
                         f"{deployment_path} (expected its camera ids)")
-    for cid, lo, hi, o_lo, o_hi in folder.alone():  # a warning: -q hides none
+    for cid, lo, hi, others in folder.alone():  # a warning: -q hides none
         click.echo(f"warning: {folder.root / 'times.csv'}: {cid}'s capture times "
-                   f"({lo:.6g}–{hi:.6g} s) never overlap the other cameras' ({o_lo:.6g}–"
-                   f"{o_hi:.6g} s), so its frames are never seen with another's: are all the "
-                   "times on one clock?", err=True)
+                   f"({lo:.6g}–{hi:.6g} s) never overlap those of {', '.join(others)}, so its "
+                   "frames are never seen with theirs: are all the times on one clock?",
+                   err=True)
     if fps is None:  # the slowest camera's median frame interval
         intervals = FrameIntervals(kept=None)
         for t, cid, _ in folder.events:
