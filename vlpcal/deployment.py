@@ -560,6 +560,10 @@ class Body:
         """Whether its LEDs give the full pose (:func:`~vlpcal.bodies.gives_full_pose`)."""
         return gives_full_pose(list(self.leds.values()))
 
+    def apart(self, a: str, b: str) -> float:
+        """How far apart its LEDs ``a`` and ``b`` are, m."""
+        return float(np.linalg.norm(np.subtract(self.leds[a], self.leds[b])))
+
 
 def _check_bodies(value, led_ids: set) -> None:
     """``bodies:`` a list of ``{id, leds: {LED id: [x, y, z]}}``: rigid bodies carrying LEDs

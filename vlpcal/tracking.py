@@ -49,7 +49,7 @@ from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode_phase
 from .bodies import angles, fit_pose, gives_full_pose, pose_from_points, rotation
 from .deployment import Body, Deployment
 from .detection import detect_frame
-from .fit_watch import LEAST, FitWatch
+from .fit_watch import FitWatch
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -73,6 +73,13 @@ HOLD_SECONDS = 5.0
 SHAPE_VOTES = 5
 #: moments kept per pair of a body's LEDs to judge its layout by (:meth:`Tracker.layout_misfits`)
 LAYOUT_MOMENTS = 1000
+#: … and no verdict on fewer
+LAYOUT_LEAST = 30
+#: a body's own measure: its LEDs' distances are known to this share of them
+BODY_MEASURE = 0.02
+#: placed LEDs tell a body's LEDs apart (or measure its layout) when their 3-sigma slack is
+#: this share of the distance or less
+SHAPE_SLACK = 0.25
 #: a bit's share, at each of its edges, where a track's blink code cannot say lit or dark
 BIT_EDGE = 0.2
 #: a track's path in an image is its last this many spots there, and is lost when no spot
@@ -250,9 +257,9 @@ class Tracker:
         self._pending: list[_Ray] = []
         self._next = 1
         self.codes = deployment.leds
-        #: the names the deployment gives (LEDs, bodies, bodies' LEDs): no track's id
-        self._named = {c.led for c in self.codes} | {b.id for b in deployment.bodies} \
-            | set(self._body_of)
+        #: the names the deployment gives (LEDs — a body's among them — and bodies): no
+        #: track's id
+        self._named = {c.led for c in self.codes} | {b.id for b in deployment.bodies}
         if spots is not None and not (isinstance(spots, (int, np.integer)) and spots >= 1):
             raise ValueError(f"spots: expected a whole number ≥ 1 (or None), got {spots!r}")
         self.spots = int(spots) if spots else max(1, len(self.codes))
@@ -641,11 +648,9 @@ class Tracker:
             pa, _, sa, _ = self._extrapolated(ta, t)
             for b, tb in now[i + 1:]:
                 pb, _, sb, _ = self._extrapolated(tb, t)
-                want = float(np.linalg.norm(body.leds[a] - body.leds[b]))
-                fits = _apart(pa, sa, pb, sb, want)[0]
+                fits = _apart(pa, sa, pb, sb, body.apart(a, b))[0]
                 lay = float(np.linalg.norm(pa - pb))
-                if 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) <= 0.25 * lay:  # placed well enough
-                    # to measure the layout by
+                if 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) <= SHAPE_SLACK * lay:  # measured well
                     state.apart.setdefault(tuple(sorted((a, b))), deque(
                         maxlen=LAYOUT_MOMENTS)).append(lay)
                 good = good and fits
@@ -653,22 +658,21 @@ class Tracker:
 
     def layout_misfits(self) -> list[LayoutMisfit]:
         """The bodies whose LEDs' tracks, placed, lay apart otherwise than the deployment's
-        ``bodies:`` block has them: the median over :data:`LEAST` moments or more off by more
-        than the 2 % a body's own measure is allowed (:func:`_apart`) — a layout in other
-        units, or measured wrong. Such a body's rows are refused, or skewed."""
+        ``bodies:`` block has them: the median over :data:`LAYOUT_LEAST` moments or more off
+        by more than a body's own measure (:data:`BODY_MEASURE`) — a layout in other units,
+        or measured wrong. Such a body's rows are refused, or skewed."""
         out = []
         for state in self.bodies:
             for (a, b), seen in sorted(state.apart.items()):
-                want = float(np.linalg.norm(state.body.leds[a] - state.body.leds[b]))
-                lay = float(np.median(seen))
-                if len(seen) >= LEAST and abs(lay - want) > 0.02 * want:
+                want, lay = state.body.apart(a, b), float(np.median(seen))
+                if len(seen) >= LAYOUT_LEAST and abs(lay - want) > BODY_MEASURE * want:
                     out.append(LayoutMisfit(state.body.id, (a, b), lay, want, len(seen)))
         return out
 
     def _by_shape(self, tr: _Track, t: float) -> None:
         """A track no code names yet, on a body one of whose other LEDs a track already
         names (placed now): the body's LED that lies at the right distance from every named
-        one — within their sigmas, which must be a quarter of it or less — alone, and for
+        one (:meth:`_beside`) — alone, and for
         :data:`SHAPE_VOTES` placements running, names it (the body's shape tells which LED it
         is)."""
         fits = []
@@ -678,8 +682,8 @@ class Tracker:
             if named:
                 fits += [led for led in state.body.leds
                          if led not in named and self._beside(tr, led, named)]
-        # one LED alone fits, among all of its body's not placed now (one another track holds,
-        # not placed now, may be this one's; it keeps its name, and this track waits)
+        # exactly one of the body's LEDs not placed now fits; if another track still holds
+        # that name (a track of it not placed now), that track keeps it and this one waits
         if len(fits) != 1 or any(o.led == fits[0] for o in self.tracks if o is not tr):
             tr.shape_votes = (None, 0)
             return
@@ -692,13 +696,13 @@ class Tracker:
     def _beside(self, tr: _Track, led: str, named: dict) -> bool:
         """Whether the track's latest fit lies where its body's LED ``led`` does beside the
         ``named`` tracks then: as far from each as on the body, within their sigmas
-        (:func:`_apart`) — which must be a quarter of it or less."""
+        (:func:`_apart`) — a slack of :data:`SHAPE_SLACK` of the distance or less."""
         body = self._body_of[led].body
         for other, o in named.items():
-            want = float(np.linalg.norm(body.leds[led] - body.leds[other]))
+            want = body.apart(led, other)
             pos, _, s_o, _ = self._extrapolated(o, tr.fit_t)
             fits, slack = _apart(tr.fit[:3], tr.s_pos, pos, s_o, want)
-            if slack > 0.25 * want or not fits:
+            if slack > SHAPE_SLACK * want or not fits:
                 return False
         return True
 
@@ -765,7 +769,9 @@ class Tracker:
         # within a rank, the likeliest pairs first: a track whose guess is loose (a dark run)
         # does not outbid one that foresees the spot closely (2D Gaussian: d²/2 + 2 ln σ)
         # … and the odds its LED is lit now: a code's dark bit near its edge, even; a track no
-        # code names yet, the codes' share of lit bits (1 without codes)
+        # code names yet, the codes' share of lit bits (1 without codes). Counted twice (− 2 ln
+        # p, not a likelihood's − ln p): once still let a track whose LED was dark take its
+        # sibling's spot (the robots of benchmarks/tracking.py, the commit that set it)
         lit = np.array([self._lit_odds(tr, t) for tr in owners])
         with np.errstate(divide="ignore", invalid="ignore"):
             cost = 0.5 * d * d + 2 * np.log(slack * self._f[k] / lit)[:, None]
@@ -1103,9 +1109,9 @@ def _carried(s0, s_rate, dt: float, acceleration: float):
 
 def _apart(pa, sa: float, pb, sb: float, want: float) -> tuple[bool, float]:
     """Whether two placed LEDs (positions, sigmas per axis) lie ``want`` apart, as their body
-    has them, within their sigmas (3 of them in 3D, and 2 % of the distance for the body's
-    own measure); and that slack."""
-    slack = 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) + 0.02 * want
+    has them, within their sigmas (3 of them in 3D, and the body's own measure,
+    :data:`BODY_MEASURE`); and that slack."""
+    slack = 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) + BODY_MEASURE * want
     return bool(abs(float(np.linalg.norm(pa - pb)) - want) <= slack), float(slack)
 
 
