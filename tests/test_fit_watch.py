@@ -204,3 +204,17 @@ def test_a_live_track_on_a_wrong_deployment_stops_at_once_and_keeps_its_rows(bro
     assert trk.returncode == 2 and "these frames do not fit" in err, err
     assert time.monotonic() - t0 < 15  # not the whole --duration
     assert out.exists() and out.read_text().startswith("t,led,")
+
+
+@pytest.mark.parametrize("starts, alone", [
+    ({"C1": 0, "C2": 0, "C3": 100, "C4": 100, "C5": 100}, ["C1", "C2"]),  # two clocks
+    ({"C1": 0, "C2": 100, "C3": 200}, ["C2", "C3"]),  # three: the middle one too
+    ({"C1": 0, "C2": 4, "C3": 8}, []),  # C1 and C3 never overlap, but each does with C2
+    ({"C1": 0}, []),
+])
+def test_cameras_on_clocks_of_their_own_are_found_by_chained_overlap(starts, alone):
+    from vlpcal.datasets import AsyncFrames
+
+    events = sorted((t0 + dt, cid, "0") for cid, t0 in starts.items() for dt in (0.0, 5.0))
+    got = AsyncFrames(Path("."), events, list(starts)).alone()
+    assert [g[0] for g in got] == alone
