@@ -211,3 +211,48 @@ def test_body_blocks_describe_the_simulated_robot():
     doc.update(blocks)
     dep = deployment.from_dict(doc, "x")
     assert dep.bodies[0].id == "R7" and len(dep.leds) == 3
+
+
+@pytest.mark.parametrize("profile, n, seed", [("cheap-wide", 2, 5), ("paper-2024", 3, 2)])
+def test_a_robots_leds_keep_their_names_and_its_heading_never_turns_round(profile, n, seed,
+                                                                         tmp_path):
+    """Two runs of a robot at 1.5 m/s that went wrong before the naming fixes of issue 29's
+    second session: with two LEDs on cheap-wide (seed 5) a fifth of the body rows turned the
+    robot half round — a track named by the body's shape took its sibling's spot at the end
+    of a dark run; with three on the paper's line (seed 2) a third of the LED rows were under
+    another LED's name — held tracks passed names and blink histories to siblings."""
+    from vlpcal.datasets import read_async_frames
+    from vlpcal.detection import detect_several
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.streams import robot_path, simulate_streams
+    from vlpcal.sim.writers import deployment_of
+
+    scene = make_scene(get_profile(profile), seed)
+    origin = robot_path(scene, 1.5, 0.0, seed)
+    leds, yaw = body_leds(origin, BODY_LAYOUTS[n], seed=seed)
+    simulate_streams(scene, tmp_path, leds, 20.0, seed=seed)
+    dep = deployment_of(scene, "true", body_blocks(leds, BODY_LAYOUTS[n]))
+    folder = read_async_frames(tmp_path)
+    cams = {c.id: c for c in dep.cameras}
+    found = {}
+    for cid in folder.camera_ids:
+        mine = [no for _, c, no in folder.events if c == cid]
+        uv = detect_several([folder.frame(cid, no) for no in mine], n,
+                            shape=(cams[cid].height, cams[cid].width))
+        found.update({(cid, no): u for no, u in zip(mine, uv)})
+    tr = Tracker(dep, period=1 / 30, spots=n)
+    rows = []
+    for t, cid, no in folder.events:
+        rows += tr.update_spots(cid, t, found[(cid, no)])
+    rows += tr.finish()
+    body = [r for r in rows if r.pose is not None and r.status == "ok"]
+    T = np.array([r.t for r in body])
+    e_yaw = np.abs(np.angle(np.exp(1j * (np.array([r.pose[0] for r in body]) - yaw(T)))))
+    e = np.linalg.norm(np.array([r.position for r in body]) - origin(T), axis=1)
+    assert len(body) > 100 and not (e_yaw > np.pi / 2).any()
+    assert (e > 0.05).mean() < 0.01, (e > 0.05).sum()
+    truth = {m.led: m.path for m in leds}
+    led_rows = [r for r in rows if r.pose is None and r.status == "ok" and r.led in truth]
+    named_wrong = [np.linalg.norm(r.position - truth[r.led](r.t)) > 0.05 for r in led_rows]
+    assert np.mean(named_wrong) < 0.02, sum(named_wrong)
