@@ -83,11 +83,22 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
                 click.echo(publisher_summary(publisher), err=True)
 
 
-def _say_layouts(tracker) -> None:
-    """A warning per pair of a body's LEDs that lay apart otherwise than its layout (-q hides
-    none)."""
-    for misfit in tracker.layout_misfits():
-        click.echo(f"warning: {misfit.message()}", err=True)
+class _Layouts:
+    """Says, once each, the pairs of a body's LEDs that lie apart otherwise than its layout
+    (:meth:`~vlpcal.tracking.Tracker.layout_misfits`; a warning: -q hides none): every
+    ``every`` calls during a live run, so a service says it within seconds, and at the end."""
+
+    def __init__(self, tracker, every: int = 300):
+        self.tracker, self.every, self.calls, self.said = tracker, every, 0, set()
+
+    def __call__(self, end: bool = False) -> None:
+        self.calls += 1
+        if not self.tracker.bodies or not (end or self.calls % self.every == 0):
+            return
+        for misfit in self.tracker.layout_misfits():
+            if (misfit.body, misfit.leds) not in self.said:
+                self.said.add((misfit.body, misfit.leds))
+                click.echo(f"warning: {misfit.message()}", err=True)
 
 
 def _no_rows(tracker, source) -> UserError:
@@ -203,7 +214,7 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += _published(publisher, tracker.finish())
-    _say_layouts(tracker)
+    _Layouts(tracker)(end=True)
     if not rows:
         raise _no_rows(tracker, frames_dir)
     _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
@@ -284,6 +295,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     t_end = time.monotonic() + duration if duration else None
     frames = TimedFrames(sources, deadline=t_end, on_event=say)
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
+    layouts = _Layouts(tracker)
     utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
     live = _LiveTracks(out, utc, bool(dep.bodies))  # row by row, flushed: a reader follows
     rows: list = []
@@ -295,6 +307,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             rows += made
             n += 1
             check(tracker.fit)
+            layouts()
             if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
                 tracker.period = frames.period()
     except KeyboardInterrupt:
@@ -322,7 +335,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
     say(f"{n} camera frames → {_summary(rows)} → {out}" + _lag_said(tracker))
-    _say_layouts(tracker)
+    layouts(end=True)
     if not rows:
         live.remove()
         raise _no_rows(tracker, "the cameras")
@@ -358,6 +371,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         raise UserError(f"--spots {e}") from None
     say(f"listening for spots on {target.shown()}/spots/+")
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
+    layouts = _Layouts(tracker)
     t_end = time.monotonic() + duration if duration else None
     rows: list = []
     n, future, crowded = 0, 0, 0
@@ -379,6 +393,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
             rows += made
             n += 1
             check(tracker.fit)
+            layouts()
             intervals.add(cid, t)
             if fps is None and n % 50 == 0:  # the slowest camera's, once it shows
                 tracker.period = min(intervals.period(tracker.period), 10.0)
@@ -405,7 +420,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     if sub.disconnects:
         said.append(f"the broker went away {sub.disconnects} time(s)")
     say("; ".join(said) + f" → {_summary(rows)} → {out}" + _lag_said(tracker))
-    _say_layouts(tracker)
+    layouts(end=True)
     if not rows:
         live.remove()
         raise _no_rows(tracker, f"{target.shown()}/spots/+")
