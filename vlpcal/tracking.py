@@ -145,6 +145,9 @@ class _Ray:
     #: ``a`` (3; ``a @ X = y``), ``y``, the ray's time, its camera's axis R₂ (3), R₂·C, and
     #: f over the spot noise (a depth's pixels per metre) — gathered for a window in one call
     eq: np.ndarray
+    #: seen while another camera saw a spot, and no track took it: judged for the fit watch
+    #: when it leaves the spots waiting for a partner (:meth:`Tracker._expire`)
+    judged: bool = False
 
 
 @dataclass
@@ -255,6 +258,8 @@ class Tracker:
         #: that met no other camera's recent one while another camera saw a spot
         self.fit = FitWatch(deployment.name, "spots seen while another camera saw one")
         self._pending: list[_Ray] = []
+        #: (time, camera) of the latest spots that met no other camera's (:meth:`_expire`)
+        self._unmet: deque = deque(maxlen=256)
         self._next = 1
         self.codes = deployment.leds
         #: the names the deployment gives (LEDs — a body's among them — and bodies): no
@@ -344,7 +349,10 @@ class Tracker:
                     given.discard(id(track))
                     self._start(ray)
             elif not self._start(ray) and together:
-                self.fit.add(False, "meeting no other camera's spot")
+                if self.spots == 1:  # the one LED, where another camera saw it: not placed
+                    self.fit.add(False, "meeting no other camera's spot")
+                else:  # with several, judged when it leaves the spots waiting for a partner
+                    ray.judged = True
         if self.codes:
             self._blink(k, t, given)
         if not self._lag:  # rows at once: this frame's too
@@ -608,10 +616,13 @@ class Tracker:
         pos, vel, s_pos, s_vel = self._extrapolated(tr, t)
         prior = (pos, vel, 3 * s_pos, 3 * s_vel)
         fit, resid, cov = self._solve(rays, t, prior, guess=pos)
-        meet = fit is not None and resid <= FIT_SIGMAS * self.pixel_sigma
-        inside = meet and self._plausible(fit, cov)
-        self.fit.add(inside, "" if inside else "outside the room" if meet
-                     else "rays that miss each other")
+        plausible = fit is not None and self._plausible(fit, cov)
+        inside = plausible and resid <= FIT_SIGMAS * self.pixel_sigma
+        if not (tr.tentative and self.spots > 1):  # whether the frames fit the deployment
+            # (with several LEDs in view, a start's pair may be two LEDs' joined by chance)
+            self.fit.add(inside, "" if inside else "rays that miss each other"
+                         if fit is not None and resid > FIT_SIGMAS * self.pixel_sigma
+                         else "outside the room")
         if not inside:
             if tr.tentative:  # two LEDs' spots paired by chance: undone, its rays set free
                 tr.misfits += 1
@@ -862,6 +873,7 @@ class Tracker:
         """A spot no track claims: start a track with the recent spot of another camera whose
         ray meets this one's best (:meth:`_meet`), else keep it for the next."""
         window = START_WINDOW * self.period
+        self._expire([p for p in self._pending if ray.t - p.t > window])
         self._pending = [p for p in self._pending if ray.t - p.t <= window]
         best, best_score = None, np.inf
         for p in self._pending:
@@ -881,6 +893,20 @@ class Tracker:
                                   ray.t, last_two=ray.t, s_pos=s_pos, s_vel=TOP_SPEED,
                                   latest=ray))
         return True
+
+    def _expire(self, rays) -> None:
+        """Spots that waited for a partner in vain: each seen while another camera saw one is
+        a moment not placed — when another camera's spot of about its time met none either (a
+        deployment that does not fit leaves both; a lamp one camera alone sees, or a spot too
+        near another LED's, leaves only itself while the other cameras' spots are placed)."""
+        window = START_WINDOW * self.period
+        for p in rays:
+            alone_too = any(c != p.camera and abs(u - p.t) <= window for u, c in self._unmet) \
+                or any(q.camera != p.camera and abs(q.t - p.t) <= window and q not in rays
+                       for q in self._pending)
+            if p.judged and alone_too:
+                self.fit.add(False, "meeting no other camera's spot")
+            self._unmet.append((p.t, p.camera))
 
     def _body_due(self, tr: _Track, t: float) -> None:
         """A ray of a body's LED at ``t``: the body's row of that time is due."""
