@@ -462,21 +462,27 @@ class SpotSubscriber:
         if self._looked or time.monotonic() - self._since < after:
             return None
         self._looked = True  # judged once, at the start: cheap on every call after
-        quiet = sorted(set(self.camera_ids) - self._heard)
+        if not set(self.camera_ids) - self._heard:
+            return None
+        topics = broker_topics(self.target, self._ca_file)
+        quiet = sorted(set(self.camera_ids) - self._heard)  # (some may begin during the look)
         if not quiet:
             return None
-        n = len(self.camera_ids) - len(quiet)  # heard, before the look takes its second
+        n = len(self.camera_ids) - len(quiet)
         listened = (f"{self.target.prefix}/spots/{{{', '.join(quiet[:6])}"
                     + (f", … {len(quiet) - 6} more" if len(quiet) > 6 else "") + "}")
-        topics = broker_topics(self.target, self._ca_file)
         if topics is None:
             there = "the broker did not let us look at what it carries (under #)"
         elif not topics:
             there = ("the broker showed no topic under # in a short look (nothing published, "
                      "or nothing we may read)")
-        else:
-            there = f"the broker carries {topics_said(_spots_first(topics))}: is the prefix, " \
-                    "or are the camera ids, right?"
+        else:  # a quiet camera's own topic there holds only a retained message from before
+            kept = [c for c in quiet if f"{self.target.prefix}/spots/{c}" in topics]
+            there = (f"the broker carries {topics_said(_spots_first(topics))}"
+                     + (f" — on {', '.join(kept)}'s only a message kept from before (retained)"
+                        if kept else "")
+                     + ": is the prefix, or are the camera ids, right"
+                     + (", and are those cameras publishing now?" if kept else "?"))
         heard = f" (while {n} other camera{'s were' if n > 1 else ' was'} heard)" if n else ""
         return (f"nothing heard on {listened} for {time.monotonic() - self._since:.0f} s"
                 f"{heard}; {there}")
