@@ -211,7 +211,9 @@ def test_a_live_track_on_a_wrong_deployment_stops_at_once_and_keeps_its_rows(bro
 
 @pytest.mark.parametrize("starts, alone", [
     ({"C1": 0, "C2": 0, "C3": 100, "C4": 100, "C5": 100}, ["C1", "C2"]),  # two clocks
-    ({"C1": 0, "C2": 100, "C3": 200}, ["C2", "C3"]),  # three: the middle one too
+    ({"C1": 0, "C2": 100, "C3": 200}, ["C1", "C2", "C3"]),  # three clocks: all
+    ({"C1": 0, "C2": 0, "C3": 100, "C4": 200}, ["C3", "C4"]),  # the middle one too
+    ({"C1": 0, "C2": 1000}, ["C1", "C2"]),  # two cameras: which is wrong is not known
     ({"C1": 0, "C2": 4, "C3": 8}, []),  # C1 and C3 never overlap, but each does with C2
     ({"C1": 0}, []),
 ])

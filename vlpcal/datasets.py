@@ -530,15 +530,14 @@ class AsyncFrames:
 
     def alone(self) -> list[tuple[str, float, float, tuple[str, ...]]]:
         """The cameras on a clock of their own (or a recording of another time): the cameras
-        fall into groups whose capture times overlap, chained; those outside the largest
-        group (most cameras, then most frames) are given as ``(camera id, its first and last
-        time, the largest group's cameras)``. Their frames are never seen with those."""
+        fall into groups whose capture times overlap, chained; those outside the group of
+        most cameras are given as ``(camera id, its first and last time, that group's
+        cameras)`` — every camera, against the others', when no group is the largest. Their
+        frames are never seen with those."""
         span: dict = {}
-        count: dict = {}
         for t, cid, _ in self.events:
             lo, hi = span.get(cid, (t, t))
             span[cid] = (min(lo, t), max(hi, t))
-            count[cid] = count.get(cid, 0) + 1
         groups: list = []  # [first, last, cameras]: spans chained by overlap, in time order
         for cid, (lo, hi) in sorted(span.items(), key=lambda kv: kv[1]):
             if groups and lo <= groups[-1][1]:
@@ -548,8 +547,12 @@ class AsyncFrames:
                 groups.append([lo, hi, [cid]])
         if len(groups) < 2:
             return []
-        main = max(groups, key=lambda g: (len(g[2]), sum(count[c] for c in g[2])))
-        return [(cid, *span[cid], tuple(main[2])) for g in groups if g is not main
+        most = max(len(g[2]) for g in groups)
+        mains = [g for g in groups if len(g[2]) == most]
+        if len(mains) > 1:  # no group the larger: which clock is wrong is not known
+            return [(cid, *span[cid], tuple(c for h in groups if h is not g for c in h[2]))
+                    for g in groups for cid in g[2]]
+        return [(cid, *span[cid], tuple(mains[0][2])) for g in groups if g is not mains[0]
                 for cid in g[2]]
 
 

@@ -194,7 +194,8 @@ class LayoutMisfit:
         return (f"body {self.body}: its LEDs {a} and {b} lay {self.measured:.3f} m apart (the "
                 f"median of {self.moments} moments both were placed), where its layout has "
                 f"them {self.wanted:.3f} m apart: are the bodies' LED positions in metres, "
-                "and measured on the robot? (its rows are refused, or skewed)")
+                "measured on the robot, and the cameras calibrated as they hang? (its rows "
+                "are refused, or skewed)")
 
 
 @dataclass(eq=False)
