@@ -143,6 +143,21 @@ def test_a_camera_on_a_clock_of_its_own_is_said(sim, tmp_path):
     assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
 
 
+def test_a_deployment_of_other_image_sizes_is_said_for_what_it_is(sim, tmp_path):
+    # from a hostile probe: a 320×240 deployment on 160×120 frames said "no frame had a
+    # spot (is the LED on…?)", though every frame was counted as of another size
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import write_deployments
+
+    write_deployments(make_scene(get_profile("qvga"), 0), tmp_path)
+    res = _run("track", "-d", tmp_path / "truth.yaml", "--frames", sim / "streams", "--out",
+               tmp_path / "t.csv")
+    assert res.returncode == 2 and "of another size than their camera's" in res.stderr, \
+        res.stderr
+    assert "is the LED on" not in res.stderr
+
+
 def test_a_track_with_no_rows_says_why(sim, tmp_path):
     """From a new user's run: track with a deployment of 12 cameras on a 3-camera folder
     exited 0 with no rows. Now the reason; and with --keep-going, no rows is still not 0."""

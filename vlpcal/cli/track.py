@@ -101,17 +101,27 @@ class _Layouts:
                 click.echo(f"warning: {misfit.message()}", err=True)
 
 
-def _no_rows(tracker, source) -> UserError:
-    """Why a run gave no row at all."""
+#: why a frame could not be measured, said of frames
+_UNREADABLE = {"wrong_size": "of another size than their camera's", "corrupt_frame": "not whole "
+               "JPEGs"}
+
+
+def _no_rows(tracker, source, unreadable=None, what: str = "frame") -> UserError:
+    """Why a run gave no row at all (``unreadable``: frames not measured, by reason;
+    ``what`` a frame is: a camera frame, or a spot message)."""
     fit = tracker.fit
-    if not tracker.frames_with_spot:
-        why = "no frame had a spot (is the LED on and in view, and the exposure right?)"
+    if unreadable and not tracker.frames_with_spot:
+        why = "; ".join(f"{n} frames {_UNREADABLE.get(w, w)}" for w, n in unreadable.items()) \
+            + " (is it the deployment of these cameras?)"
+    elif not tracker.frames_with_spot:
+        why = (f"no {what} had a spot (is the LED on and in view, and the exposure right?)"
+               if what == "frame" else f"no {what} carried a spot (is the LED on and in view?)")
     elif not fit.moments:
         why = (f"{tracker.frames_with_spot} frames had a spot, but never two cameras' at "
                "about the same moment (a track needs two cameras)")
     else:
-        why = (f"of {fit.moments} frames with a spot while another camera saw one, none "
-               "was placed: the spots do not meet as one LED; is it the right deployment?")
+        why = (f"of {fit.moments} spots seen while another camera saw one, none was "
+               "placed: the spots do not meet as one LED; is it the right deployment?")
     return UserError(f"{source}: no rows: {why}")
 
 
@@ -216,12 +226,10 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
     rows += _published(publisher, tracker.finish())
     _Layouts(tracker)(end=True)
     if not rows:
-        raise _no_rows(tracker, frames_dir)
+        raise _no_rows(tracker, frames_dir, unreadable)
     _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
     if not quiet:
-        words = {"wrong_size": "of another size than their camera's",
-                 "corrupt_frame": "not whole JPEGs"}
-        bad = "; ".join(f"{n} frames {words.get(w, w)}" for w, n in unreadable.items())
+        bad = "; ".join(f"{n} frames {_UNREADABLE.get(w, w)}" for w, n in unreadable.items())
         click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
                    + _lag_said(tracker)
                    + (f"; {missing} listed frames missing" if missing else "")
@@ -423,7 +431,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     layouts(end=True)
     if not rows:
         live.remove()
-        raise _no_rows(tracker, f"{target.shown()}/spots/+")
+        raise _no_rows(tracker, f"{target.shown()}/spots/+", what="spot message")
 
 
 class _LiveTracks:
