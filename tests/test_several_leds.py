@@ -24,6 +24,17 @@ def square_rig(leds=None):
     return Deployment("square", 2.3, ROOM, cams, [], extra)
 
 
+def test_a_code_counts_the_lit_bits_a_track_saw_dark():
+    """A track that follows another LED sees its own code's lit bits dark where that LED is
+    dark: its own code misses none, all dark misses every lit bit, the two LEDs' AND some."""
+    code, other = CODES[1], CODES[0]
+    t = np.arange(0, code.period, 1 / 30)
+    assert code.missed(t, code.lit(t, 0.03), 0.03, 0.2) == 0
+    assert code.missed(t, np.zeros(len(t), bool), 0.03, 0.2) == code.pattern.count("1")
+    both = code.lit(t, 0.03) & other.lit(t, 0.05)
+    assert 0 < code.missed(t, both, 0.03, 0.2) < code.pattern.count("1")
+
+
 def test_a_blink_code_names_its_led_at_any_phase_and_a_steady_light_none():
     rng = np.random.default_rng(1)
     t = np.sort(rng.uniform(0, 3.0, 400))

@@ -45,6 +45,20 @@ class BlinkCode:
         slot = np.floor((np.asarray(t, float) + phase) * self.bit_rate).astype(np.int64)
         return bits[np.mod(slot, len(bits))]
 
+    def missed(self, t, lit, phase: float, edge: float) -> int:
+        """How many of its lit bits the observations (times ``t``, ``lit`` or not) saw dark,
+        by majority within each bit, leaving out those within ``edge`` of a bit (a share of
+        one) of its edges: a track that follows another LED misses the bits where that one
+        is dark."""
+        at = (np.asarray(t, float) + phase) * self.bit_rate
+        away = np.minimum(at % 1.0, 1.0 - at % 1.0) >= edge
+        slot = np.floor(at[away]).astype(np.int64)
+        seen = np.where(np.asarray(lit, bool)[away], 1, -1)
+        slots, which = np.unique(slot, return_inverse=True)
+        votes = np.bincount(which, seen, len(slots))
+        return int(np.sum(self.lit(slots / self.bit_rate + 0.5 / self.bit_rate - phase, phase)
+                          & (votes < 0)))
+
 
 def _middle_of_best(wrong) -> int:
     """The phase in the middle of the longest run of phases (circular) that get the fewest

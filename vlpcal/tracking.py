@@ -69,6 +69,9 @@ COAST_PERIODS = 8.0
 FIT_SIGMAS = 4.0
 #: s: an ended track's id is kept this long for a new track that continues it
 HOLD_SECONDS = 5.0
+#: a named track whose last repeat saw this many of its code's lit bits dark follows another
+#: LED (one such bit may be a frame's glint or a blocked view)
+MISSED_BITS = 2
 #: placements running that name a track by the body's shape (:meth:`Tracker._by_shape`)
 SHAPE_VOTES = 5
 #: moments kept per pair of a body's LEDs to judge its layout by (:meth:`Tracker.layout_misfits`)
@@ -163,6 +166,8 @@ class _Track:
     last_two: float = 0.0  #: the last time two cameras' rays placed it
     anonymous: str = ""  #: its own name, T1…: ``led`` until a blink code names it
     seen: list = field(default_factory=list)  #: (t, lit) for the blink code
+    #: times in ``seen`` it saw dark while another track took a spot near it
+    contested: list = field(default_factory=list)
     decoded_at: float = -np.inf
     margin: int = 0  #: the runner-up code's wrong slots minus the chosen one's
     #: started from two spots that may be two LEDs: no rows until a third ray fits with them
@@ -325,7 +330,7 @@ class Tracker:
         if len(rays):
             self._spotted[k] = t
             self.frames_with_spot += 1
-        claims, follows = self._claim(k, t, rays)
+        claims, follows, near = self._claim(k, t, rays)
         for j, h in follows.items():  # a held track's path goes on
             h.rays = h.rays[-2 * PATH_SPOTS:] + [rays[j]]
             h.latest = rays[j]
@@ -355,7 +360,7 @@ class Tracker:
                 else:  # with several, judged when it leaves the spots waiting for a partner
                     ray.judged = True
         if self.codes:
-            self._blink(k, t, given)
+            self._blink(k, t, given, near)
         if not self._lag:  # rows at once: this frame's too
             out += self._due(t)
         return out
@@ -736,9 +741,10 @@ class Tracker:
         pred[~front] = np.nan
         return pred
 
-    def _claim(self, k: int, t: float, rays) -> tuple[dict, dict]:
+    def _claim(self, k: int, t: float, rays) -> tuple[dict, dict, set]:
         """Which track each ray of camera ``k`` at ``t`` belongs to: (ray index → track, ray
-        index → held track whose path it continues). Each spot goes to one track and each
+        index → held track whose path it continues, the ids of the tracks with a spot within
+        their gate — theirs or not). Each spot goes to one track and each
         track takes one spot, nearest pairs first within a rank: tracks two cameras placed
         within a window (the spot within :data:`GATE_SIGMAS` of their extrapolated position);
         then tracks one camera alone sees and held ones (a spot on their path in this image,
@@ -750,7 +756,7 @@ class Tracker:
         5-sigma gate), so no prediction goes through the lens model."""
         owners = self.tracks + self.held
         if not owners or not rays:
-            return {}, {}
+            return {}, {}, set()
         xy = np.array([r.xy for r in rays])
         by_body = [self._on_body(tr, t) for tr in owners]
         ext = [b if b is not None else self._extrapolated(tr, t) for tr, b in zip(owners, by_body)]
@@ -797,7 +803,8 @@ class Tracker:
                 continue  # a followed spot: a tentative track (its continuation) may share it
             (follows if held else claims)[int(j)] = owners[i]
             taken.add(i)
-        return claims, follows
+        near = {id(tr) for tr, row in zip(owners, d) if (row < GATE_SIGMAS).any()}
+        return claims, follows, near
 
     def _meet(self, p: _Ray, ray: _Ray):
         """How well two rays of two cameras meet as one LED: (their residual over what the
@@ -815,9 +822,11 @@ class Tracker:
             self._f[r.camera] / d for r, d in zip((p, ray), depth))
         return (resid / allowed if resid <= allowed else np.inf), X
 
-    def _blink(self, k: int, t: float, lit: set) -> None:
+    def _blink(self, k: int, t: float, lit: set, near: set) -> None:
         """Record, for the blink code, each placed track camera ``k`` should have seen at
-        ``t``: lit if it took a spot, dark if none; and name the tracks whose code is due."""
+        ``t``: lit if it took a spot, dark if none (contested when a spot another track took
+        was ``near`` it: it may have been its LED's); and name the tracks whose code is
+        due."""
         cam = self.cameras[k]
         pred = self._predicted(k, t)
         m = VIEW_MARGIN_PX
@@ -827,9 +836,13 @@ class Tracker:
             placed = t - tr.last_two <= COAST_PERIODS * self.period
             if id(tr) in lit or (there and placed):
                 tr.seen.append((t, id(tr) in lit))
+                if id(tr) not in lit and id(tr) in near:
+                    tr.contested.append(t)
             since = t - WINDOW_REPEATS * self._repeat
             if len(tr.seen) > 2 * MAX_OBSERVATIONS or (tr.seen and tr.seen[0][0] < since):
                 tr.seen = [o for o in tr.seen[-MAX_OBSERVATIONS:] if o[0] >= since]
+                tr.contested = [c for c in tr.contested if c >= tr.seen[0][0]] \
+                    if tr.seen else []
             if t - tr.decoded_at >= 0.5 * self._repeat / WINDOW_REPEATS:
                 tr.decoded_at = t
                 self._name(tr)
@@ -845,7 +858,15 @@ class Tracker:
             # named it) may still read against a steady light, for its dark times
             own = [c for c in self.codes if c.led == tr.led]
             mine = decode_phase(t, lit.astype(bool), own)[::3] if own else (None, 0.0)
-            tr.code = (own[0], mine[1]) if mine[0] is not None else None
+            if mine[0] is not None:
+                tr.code = (own[0], mine[1])
+            elif tr.code is not None:  # its code at its phase, over its last repeat: lit
+                # bits it saw dark (no spot near it another track took) are another LED's
+                # whose spots it took: its name is not its own
+                recent = (t >= t.max() - tr.code[0].period) & ~np.isin(t, tr.contested)
+                if tr.code[0].missed(t[recent], lit[recent], tr.code[1], BIT_EDGE) \
+                        >= MISSED_BITS:
+                    self._unname(tr)
             return
         holder = next((o for o in self.tracks if o is not tr and o.led == led), None)
         if holder is not None:
@@ -858,6 +879,12 @@ class Tracker:
                     self._body_of[name].fit = None
         tr.led, tr.margin = led, e2 - e1
         tr.code = (next(c for c in self.codes if c.led == led), phase)
+
+    def _unname(self, tr: _Track) -> None:
+        """A track whose name its blink code no longer bears out: back to its id, read afresh."""
+        if tr.led in self._body_of:
+            self._body_of[tr.led].fit = None
+        tr.led, tr.code, tr.margin, tr.seen, tr.contested = tr.anonymous, None, 0, [], []
 
     def _confirm(self, tr: _Track, t: float) -> None:
         """A track confirmed: the id of the held track it continues, else a new one."""
