@@ -1002,7 +1002,7 @@ class Tracker:
                                           eq[:, 8], eq[:, 9], np.repeat(points[keep], 2, axis=0),
                                           guess, full, self.acceleration,
                                           self.pixel_sigma, prior)
-            if fit is None or resid <= FIT_SIGMAS * self.pixel_sigma:
+            if fit is None:
                 break
             off = np.hypot(res[0::2], res[1::2]) > GATE_SIGMAS
             if not off.any():
