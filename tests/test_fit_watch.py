@@ -122,6 +122,20 @@ def test_a_robot_with_three_blinking_leds_on_a_right_deployment_raises_nothing(p
     assert "R1," in (tmp_path / "tracks.csv").read_text()  # the body was placed
 
 
+def test_a_lamp_one_camera_sees_instead_of_the_led_raises_nothing(tmp_path):
+    # one LED on cheap-wide (seed 6): the lamp is brighter than the LED in C1, which sends the
+    # lamp's spot in 145 of its frames; meeting no other camera's, a third of the moments
+    # looked unplaced. A spot that stays put where the camera's spots met none before is a
+    # fixed light, not a deployment that misplaces the LED (that one moves)
+    out = tmp_path / "one"
+    res = _run("simulate", "--profile", "cheap-wide", "--seed", "6", "--test-points", "0",
+               "--robot-speed", "1.5", "--seconds", "10", "--out", out)
+    assert res.returncode == 0, res.stderr
+    res = _run("track", "-d", out / "truth.yaml", "--frames", out / "streams", "--out",
+               tmp_path / "tracks.csv")
+    assert res.returncode == 0 and "do not fit" not in res.stderr, res.stderr
+
+
 def test_a_camera_on_a_clock_of_its_own_is_said(sim, tmp_path):
     # from a hostile probe: C2's times 1000 s on in times.csv — its frames were never with
     # another camera's, and the run said nothing of it

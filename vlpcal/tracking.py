@@ -72,6 +72,8 @@ HOLD_SECONDS = 5.0
 #: a named track whose last repeat saw this many of its code's lit bits dark follows another
 #: LED (one such bit may be a frame's glint or a blocked view)
 MISSED_BITS = 2
+#: a camera's latest spots that met none kept to tell a fixed light by
+LIGHT_SPOTS = 64
 #: placements running that name a track by the body's shape (:meth:`Tracker._by_shape`)
 SHAPE_VOTES = 5
 #: moments kept per pair of a body's LEDs to judge its layout by (:meth:`Tracker.layout_misfits`)
@@ -266,6 +268,8 @@ class Tracker:
         self._pending: list[_Ray] = []
         #: (time, camera) of the latest spots that met no other camera's (:meth:`_expire`)
         self._unmet: deque = deque(maxlen=256)
+        #: camera → where its latest spots that met none lay (:meth:`_fixed_light`)
+        self._alone_at: dict = {}
         self._next = 1
         self.codes = deployment.leds
         #: the names the deployment gives (LEDs — a body's among them — and bodies): no
@@ -355,8 +359,9 @@ class Tracker:
                     given.discard(id(track))
                     self._start(ray)
             elif not self._start(ray) and together:
-                if self.spots == 1:  # the one LED, where another camera saw it: not placed
-                    self.fit.add(False, "meeting no other camera's spot")
+                if self.spots == 1 and not self._fixed_light(ray):  # the one LED, where
+                    self.fit.add(False, "meeting no other camera's spot")  # another camera
+                    # saw it: not placed
                 else:  # with several, judged when it leaves the spots waiting for a partner
                     ray.judged = True
         if self.codes:
@@ -932,9 +937,20 @@ class Tracker:
             alone_too = any(c != p.camera and abs(u - p.t) <= window for u, c in self._unmet) \
                 or any(q.camera != p.camera and abs(q.t - p.t) <= window and q not in rays
                        for q in self._pending)
-            if p.judged and alone_too:
+            if p.judged and alone_too and not self._fixed_light(p):
                 self.fit.add(False, "meeting no other camera's spot")
             self._unmet.append((p.t, p.camera))
+
+    def _fixed_light(self, ray: _Ray) -> bool:
+        """Whether a spot that met no other camera's lies where two of its camera's latest
+        such spots lay (within a gate of the spot noise): a lamp or a reflection that stays
+        put, not an LED the deployment misplaces — that one moves with its robot. (A parked
+        LED the deployment misplaces is said once it moves.)"""
+        seen = self._alone_at.setdefault(ray.camera, deque(maxlen=LIGHT_SPOTS))
+        gate = GATE_SIGMAS * self.pixel_sigma / self._f[ray.camera]
+        still = sum(np.hypot(*(ray.xy - xy)) <= gate for xy in seen) >= 2
+        seen.append(ray.xy)
+        return still
 
     def _body_due(self, tr: _Track, t: float) -> None:
         """A ray of a body's LED at ``t``: the body's row of that time is due."""
