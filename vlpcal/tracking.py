@@ -74,6 +74,9 @@ HOLD_SECONDS = 5.0
 MISSED_BITS = 2
 #: a camera's latest spots that met none kept to tell a fixed light by
 LIGHT_SPOTS = 64
+#: a heading-only body's LED back from a dark run also gives its rays this many windows
+#: before a row's time (:meth:`Tracker._body_row`; the tracks hold two windows of rays)
+BRIDGE_WINDOWS = 1.5
 #: placements running that name a track by the body's shape (:meth:`Tracker._by_shape`)
 SHAPE_VOTES = 5
 #: moments kept per pair of a body's LEDs to judge its layout by (:meth:`Tracker.layout_misfits`)
@@ -972,6 +975,13 @@ class Tracker:
             if b is None or tr.tentative or tr.led in seen:
                 continue
             mine = [r for r in tr.rays if lo <= r.t <= hi]
+            if not body.full_pose and mine and mine[0].t > t - 0.5 * reach:
+                # back from a dark run, its window's rays all after t: its rays before the
+                # window join them, so the heading at t is held between the two, not carried
+                # on the one LED's rays alone (with three LEDs the others hold it, and the
+                # older rays' motion model costs more than it gives)
+                mine = [r for r in tr.rays if t - BRIDGE_WINDOWS * WINDOW * self.period
+                        <= r.t <= hi]
             rays += mine
             points += [b] * len(mine)
             if mine:
