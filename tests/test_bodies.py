@@ -143,6 +143,34 @@ def test_a_layout_in_other_units_or_measured_wrong_is_said(x, said):
         assert f"{x + 0.15:.3f} m apart" in misfits[0].message()
 
 
+@pytest.fixture(scope="module")
+def line_robot(tmp_path_factory):
+    out = tmp_path_factory.mktemp("line") / "sim"
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "simulate", "--profile", "paper-2024",
+                          "--test-points", "0", "--robot-speed", "1.5", "--body", "2",
+                          "--seconds", "10", "--out", str(out)], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+@pytest.mark.parametrize("x, said", [(0.15, False), (0.16, True), (15.0, True)])
+def test_a_layout_measured_wrong_is_said_under_the_papers_line_of_cameras(x, said, line_robot,
+                                                                         tmp_path):
+    """From a newcomer: under the paper's three cameras in a line, 10 s gave only 10 moments
+    both LEDs were placed, short of the 30 a verdict then waited for, so a layout in
+    centimetres or 1 cm off went unsaid. Ten measures 0.5 mm apart are sure enough."""
+    out = line_robot
+    doc = deployment.load(out / "truth.yaml").to_dict()
+    doc["bodies"][0]["leds"]["L1"] = [x, 0.0, 0.15]
+    deployment.save(deployment.from_dict(doc, "x"), tmp_path / "d.yaml")
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "track", "-d", str(tmp_path / "d.yaml"),
+                          "--frames", str(out / "streams"), "--out", str(tmp_path / "t.csv")],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert ("warning: body R1: its LEDs L1 and L2 lay 0.30" in res.stderr) == said, res.stderr
+
+
 def test_a_body_whose_leds_no_two_cameras_share_is_still_placed():
     """Two cameras, each seeing one of the robot's two LEDs only, for 0.2 s at a time: no
     LED is placed by two cameras then, the body is (its rays at their own times, its shape)."""

@@ -81,8 +81,8 @@ BRIDGE_WINDOWS = 1.5
 SHAPE_VOTES = 5
 #: moments kept per pair of a body's LEDs to judge its layout by (:meth:`Tracker.layout_misfits`)
 LAYOUT_MOMENTS = 1000
-#: … and no verdict on fewer
-LAYOUT_LEAST = 30
+#: … and no verdict on fewer (beyond them, the measures' own spread says how sure the median is)
+LAYOUT_LEAST = 5
 #: a body's own measure: its LEDs' distances are known to this share of them
 BODY_MEASURE = 0.02
 #: placed LEDs tell a body's LEDs apart (or measure its layout) when their 3-sigma slack is
@@ -684,13 +684,16 @@ class Tracker:
     def layout_misfits(self) -> list[LayoutMisfit]:
         """The bodies whose LEDs' tracks, placed, lay apart otherwise than the deployment's
         ``bodies:`` block has them: the median over :data:`LAYOUT_LEAST` moments or more off
-        by more than a body's own measure (:data:`BODY_MEASURE`) — a layout in other units,
-        or measured wrong. Such a body's rows are refused, or skewed."""
+        by more than a body's own measure (:data:`BODY_MEASURE`) and three of its standard
+        errors (from the measures' spread) — a layout in other units, or measured wrong. Such
+        a body's rows are refused, or skewed."""
         out = []
         for state in self.bodies:
             for (a, b), seen in sorted(state.apart.items()):
                 want, lay = state.body.apart(a, b), float(np.median(seen))
-                if len(seen) >= LAYOUT_LEAST and abs(lay - want) > BODY_MEASURE * want:
+                spread = 1.4826 * float(np.median(np.abs(np.asarray(seen) - lay)))
+                sure = 3 * 1.2533 * spread / np.sqrt(len(seen))  # a median's standard error
+                if len(seen) >= LAYOUT_LEAST and abs(lay - want) > BODY_MEASURE * want + sure:
                     out.append(LayoutMisfit(state.body.id, (a, b), lay, want, len(seen)))
         return out
 
