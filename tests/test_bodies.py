@@ -233,6 +233,35 @@ def test_track_writes_and_publishes_a_simulated_bodys_rows(broker, tmp_path):
     assert res.returncode == 2 and "--robot-speed" in res.stderr
 
 
+def test_a_simulated_robot_published_live_is_tracked_as_a_body(broker, tmp_path):
+    """From a newcomer: simulate --publish --body 2 published one steady LED, so the live
+    chain of a body could not be rehearsed. Now its cameras publish both LEDs' spots, each
+    blinking its code, and track --spots with the same seed's deployment places the body."""
+    import time
+
+    out = tmp_path / "sim"
+    run = [sys.executable, "-m", "vlpcal"]
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--robot-speed", "1.5",
+                                "--body", "2", "--seconds", "1", "--test-points", "0", "--out",
+                                str(out)], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    trk = subprocess.Popen(run + ["track", "-d", str(out / "truth.yaml"), "--spots",
+                                  broker.url("lab"), "--out", str(tmp_path / "t.csv"),
+                                  "--duration", "14", "--fps", "30"], stderr=subprocess.PIPE,
+                           text=True)
+    time.sleep(2.0)  # subscribed
+    res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--robot-speed", "1.5",
+                                "--body", "2", "--seconds", "10", "--publish",
+                                broker.url("lab")], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and "robot carrying 2 blinking LEDs" in res.stderr, res.stderr
+    _, err = trk.communicate(timeout=60)
+    assert trk.returncode == 0, err
+    rows = list(csv.DictReader(open(tmp_path / "t.csv")))
+    body = [r for r in rows if r["led"] == "R1" and r["status"] == "ok"]
+    assert len(body) > 50, err
+    assert {"L1", "L2"} <= {r["led"] for r in rows}, err
+
+
 def test_body_blocks_describe_the_simulated_robot():
     leds, _ = body_leds(lambda t: np.zeros(np.shape(t) + (3,)), BODY_LAYOUTS[3])
     blocks = body_blocks(leds, BODY_LAYOUTS[3], "R7")

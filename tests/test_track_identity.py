@@ -22,8 +22,8 @@ from vlpcal.tracking import HOLD_SECONDS, Tracker
 def _tracked(dep, events):
     tr = Tracker(dep, period=1 / 30)
     rows = []
-    for t, cid, u, v in events:
-        rows += tr.update_spots(cid, t, [] if np.isnan(u) else [[u, v]])
+    for t, cid, uv in events:
+        rows += tr.update_spots(cid, t, uv)
     return rows + tr.finish()
 
 
@@ -36,8 +36,8 @@ def test_one_robot_under_the_papers_line_of_cameras_keeps_one_id_for_a_minute():
     rows = _tracked(deployment_of(scene, "true"), events)
     assert {r.led for r in rows} == {"T1"}
     seen = {}  # tenth of a second → the cameras that saw it then
-    for t, cid, u, _ in events:
-        if not np.isnan(u):
+    for t, cid, uv in events:
+        if len(uv):
             seen.setdefault(int(t * 10), set()).add(cid)
     assert sum(len(c) == 1 for c in seen.values()) > 50  # seconds one camera alone saw it
     ok = [r for r in rows if r.status == "ok"]
@@ -100,8 +100,9 @@ def test_one_robot_keeps_one_id_over_mqtt(broker, tmp_path):
     c.connect("127.0.0.1", broker.port)
     c.loop_start()
     start = time.time() - 61.0
-    for t, cid, u, v in events:
-        msg = {"t": start + t} if np.isnan(u) else {"t": start + t, "u": u, "v": v}
+    for t, cid, uv in events:
+        msg = {"t": start + t} if not len(uv) else {"t": start + t, "u": uv[0, 0],
+                                                     "v": uv[0, 1]}
         c.publish(f"lab/spots/{cid}", json.dumps(msg), qos=1).wait_for_publish(5)
     c.loop_stop()
     c.disconnect()

@@ -44,15 +44,17 @@ from .common import Finite, UserError, _floats, _floor_diagonal, _load_deploymen
                    "cameras (OUT/streams/: <camera_id>/<frame_no>.jpg and times.csv, 30 fps "
                    "each from a random phase, 2 ms jitter, 5 % dropped) for vlpcal track.")
 @click.option("--body", type=click.IntRange(2, 3), default=None, metavar="N",
-              help="With --robot-speed: the robot carries N LEDs (2: 0.3 m apart along its "
-                   "heading; 3: a triangle, the full pose), each with its blink code; the "
-                   "deployments gain their leds: and bodies: blocks (body R1).")
+              help="With --robot-speed or --publish: the robot carries N LEDs (2: 0.3 m apart "
+                   "along its heading; 3: a triangle, the full pose), each with its blink "
+                   "code; the deployments gain their leds: and bodies: blocks (body R1; with "
+                   "--publish, the same seed's --out folder holds them).")
 @click.option("--seconds", default=10.0, show_default=True, type=Finite(0.1, 600.0),
               help="With --robot-speed: how long the robot drives.")
 @click.option("--publish", default=None, metavar="mqtt://…/PREFIX",
               help="Instead of a folder: the install's cameras publish their spots of a robot's "
                    "LED (--robot-speed, default 1 m/s) live on PREFIX/spots/<camera_id> for "
-                   "--seconds, each at 30 fps from its own phase (for vlpcal locate --spots).")
+                   "--seconds, each at 30 fps from its own phase (for vlpcal locate or track "
+                   "--spots).")
 @click.option("--overwrite", is_flag=True, help="Replace what is in --out.")
 @click.option("--describe", is_flag=True, help="Print the profile's parameters and sources.")
 def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heights,
@@ -96,7 +98,7 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
             click.echo(f"  {key}: {text}")
         return
     if publish:
-        _publish_spots(profile, seed, publish, robot_speed or 1.0, seconds)
+        _publish_spots(profile, seed, publish, robot_speed or 1.0, seconds, body)
         return
     if not out:
         raise click.UsageError("--out is required (the folder to write)")
@@ -229,27 +231,32 @@ def _check_wand(profile, length: float, free_height) -> None:
                                  f"{longest_wand(profile):.2f} m here", param_hint="--wand")
 
 
-def _publish_spots(profile, seed, url, speed, seconds) -> None:
-    """``simulate --publish``: the reference publisher of spots (:mod:`vlpcal.sim.publish`)."""
+def _publish_spots(profile, seed, url, speed, seconds, body=None) -> None:
+    """``simulate --publish``: the reference publisher of spots (:mod:`vlpcal.sim.publish`);
+    the robot (and its ``body``'s LEDs) as ``--robot-speed`` renders it into a folder."""
     from ..mqtt import MqttError
     from ..sim.publish import play_spots, spot_schedule
     from ..sim.scene import make_scene
-    from ..sim.streams import robot_path
+    from ..sim.streams import BODY_LAYOUTS, body_leds, robot_path
     from .mqtt import parse_mqtt
 
     target = parse_mqtt(url, "--publish")
     scene = make_scene(profile, seed)
-    events = spot_schedule(scene, robot_path(scene, speed, seed=seed), seconds, seed=seed)
-    seen = sum(u == u for _, _, u, _ in events)
+    path = robot_path(scene, speed, height=0.0 if body else 0.15, seed=seed)
+    leds = body_leds(path, BODY_LAYOUTS[body], seed=seed)[0] if body else path
+    events = spot_schedule(scene, leds, seconds, seed=seed)
+    seen = sum(len(uv) > 0 for _, _, uv in events)
+    what = (f"a robot carrying {body} blinking LEDs (body R1)" if body else "a robot's LED",
+            "with a spot" if body else "with the LED")
     click.echo(f"{profile.name}: {len(scene.true)} cameras publishing {len(events)} frames' "
-               f"spots ({seen} with the LED) of a robot at {speed:g} m/s over {seconds:g} s on "
+               f"spots ({seen} {what[1]}) of {what[0]} at {speed:g} m/s over {seconds:g} s on "
                f"{target.shown()}/spots/…", err=True)
     try:
         res = play_spots(target, events, say=lambda m: click.echo(m, err=True))
     except MqttError as e:
         raise UserError(f"--publish {e}") from None
     unsent = len(events) - res["sent"]
-    click.echo(f"published {res['sent']} spot messages, {res['spots']} with the LED (p99 "
+    click.echo(f"published {res['sent']} spot messages, {res['spots']} {what[1]} (p99 "
                f"{res['late_p99_ms']:.1f} ms behind schedule)"
                + (f"; {unsent} of the {len(events)} not sent (the broker went away)"
                   if unsent else ""), err=True)
