@@ -171,6 +171,27 @@ def test_a_layout_measured_wrong_is_said_under_the_papers_line_of_cameras(x, sai
     assert ("warning: body R1: its LEDs L1 and L2 lay 0.30" in res.stderr) == said, res.stderr
 
 
+def test_cameras_of_another_scale_are_said_by_the_bodys_layout(line_robot, tmp_path):
+    """From a newcomer: the cameras' plan at half scale (about the room's centre, heights
+    kept) fits every ray — rays alone cannot tell a plan scaled about the cameras' height — so
+    nothing was said and the body's rows came 1.3 m off at ok. Its LEDs, 0.15 m apart where
+    the layout has 0.3, say it, and the body gives no rows."""
+    doc = deployment.load(line_robot / "truth.yaml").to_dict()
+    room = np.array(doc["site"]["room"], float)
+    c = room.mean(axis=0)
+    for cam in doc["cameras"]:
+        cam["position"] = [*((np.array(cam["position"][:2]) - c) * 0.5 + c),
+                           cam["position"][2]]
+    deployment.save(deployment.from_dict(doc, "x"), tmp_path / "half.yaml")
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "track", "-d",
+                          str(tmp_path / "half.yaml"), "--frames", str(line_robot / "streams"),
+                          "--out", str(tmp_path / "t.csv")], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "its LEDs L1 and L2 lay 0.15" in res.stderr and "same scale" in res.stderr
+    assert not [r for r in csv.DictReader(open(tmp_path / "t.csv")) if r["led"] == "R1"]
+
+
 def test_a_body_whose_leds_no_two_cameras_share_is_still_placed():
     """Two cameras, each seeing one of the robot's two LEDs only, for 0.2 s at a time: no
     LED is placed by two cameras then, the body is (its rays at their own times, its shape)."""

@@ -203,9 +203,9 @@ class LayoutMisfit:
         a, b = self.leds
         return (f"body {self.body}: its LEDs {a} and {b} lay {self.measured:.3f} m apart (the "
                 f"median of {self.moments} moments both were placed), where its layout has "
-                f"them {self.wanted:.3f} m apart: are the bodies' LED positions in metres, "
-                "measured on the robot, and the cameras calibrated as they hang? (its rows "
-                "are refused, or skewed)")
+                f"them {self.wanted:.3f} m apart: are the bodies' LED positions in metres and "
+                "measured on the robot, and the cameras' positions of the same scale and "
+                "calibrated as they hang? (no rows of it while they disagree)")
 
 
 @dataclass(eq=False)
@@ -215,6 +215,8 @@ class _BodyState:
     #: (LED, LED) → how far apart their tracks lay, each moment both were placed (m; the
     #: latest :data:`LAYOUT_MOMENTS`): whether the ``bodies:`` block's layout is the robot's
     apart: dict = field(default_factory=dict)
+    #: its layout judged not the robot's (:meth:`Tracker.layout_misfits`): no rows
+    misfit: bool = False
     fit: np.ndarray | None = None  #: 13: position, velocity, acceleration, yaw, yaw rate,
     fit_t: float = -np.inf  #: pitch, roll at this time
     cov: np.ndarray | None = None  #: the fit's covariance
@@ -673,11 +675,16 @@ class Tracker:
             pa, _, sa, _ = self._extrapolated(ta, t)
             for b, tb in now[i + 1:]:
                 pb, _, sb, _ = self._extrapolated(tb, t)
-                fits = _apart(pa, sa, pb, sb, body.apart(a, b))[0]
+                want = body.apart(a, b)
+                fits = _apart(pa, sa, pb, sb, want)[0]
                 lay = float(np.linalg.norm(pa - pb))
-                if 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) <= SHAPE_SLACK * lay:  # measured well
-                    state.apart.setdefault(tuple(sorted((a, b))), deque(
-                        maxlen=LAYOUT_MOMENTS)).append(lay)
+                # measured well, for the layout it is held to
+                if 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) <= SHAPE_SLACK * want:
+                    seen_apart = state.apart.setdefault(tuple(sorted((a, b))),
+                                                        deque(maxlen=LAYOUT_MOMENTS))
+                    seen_apart.append(lay)
+                    if len(seen_apart) % LAYOUT_LEAST == 0:  # judged afresh now and then
+                        state.misfit = bool(self._layout_misfits(state))
                 good = good and fits
         return good
 
@@ -685,16 +692,20 @@ class Tracker:
         """The bodies whose LEDs' tracks, placed, lay apart otherwise than the deployment's
         ``bodies:`` block has them: the median over :data:`LAYOUT_LEAST` moments or more off
         by more than a body's own measure (:data:`BODY_MEASURE`) and three of its standard
-        errors (from the measures' spread) — a layout in other units, or measured wrong. Such
-        a body's rows are refused, or skewed."""
+        errors (from the measures' spread) — a layout in other units or measured wrong, or
+        cameras of another scale (rays alone cannot tell a plan scaled about the cameras'
+        height). Such a body has no rows while its verdict stands."""
+        return [m for state in self.bodies for m in self._layout_misfits(state)]
+
+    @staticmethod
+    def _layout_misfits(state: _BodyState) -> list[LayoutMisfit]:
         out = []
-        for state in self.bodies:
-            for (a, b), seen in sorted(state.apart.items()):
-                want, lay = state.body.apart(a, b), float(np.median(seen))
-                spread = 1.4826 * float(np.median(np.abs(np.asarray(seen) - lay)))
-                sure = 3 * 1.2533 * spread / np.sqrt(len(seen))  # a median's standard error
-                if len(seen) >= LAYOUT_LEAST and abs(lay - want) > BODY_MEASURE * want + sure:
-                    out.append(LayoutMisfit(state.body.id, (a, b), lay, want, len(seen)))
+        for (a, b), seen in sorted(state.apart.items()):
+            want, lay = state.body.apart(a, b), float(np.median(seen))
+            spread = 1.4826 * float(np.median(np.abs(np.asarray(seen) - lay)))
+            sure = 3 * 1.2533 * spread / np.sqrt(len(seen))  # a median's standard error
+            if len(seen) >= LAYOUT_LEAST and abs(lay - want) > BODY_MEASURE * want + sure:
+                out.append(LayoutMisfit(state.body.id, (a, b), lay, want, len(seen)))
         return out
 
     def _by_shape(self, tr: _Track, t: float) -> None:
@@ -989,8 +1000,8 @@ class Tracker:
             points += [b] * len(mine)
             if mine:
                 seen[tr.led] = tr
-        if len(seen) < 2 or not self._shaped(state, seen, t):
-            return None
+        if len(seen) < 2 or not self._shaped(state, seen, t) or state.misfit:
+            return None  # (a layout not the robot's gives poses skewed by it)
         prior = None
         if state.fit is not None and abs(t - state.fit_t) <= LOST_PERIODS * self.period:
             dt = t - state.fit_t  # the last pose, carried to t
