@@ -16,8 +16,9 @@ def mqtt_options(f):
     f = click.option("--qos", type=click.IntRange(0, 2), default=0, show_default=True,
                      help="MQTT quality of service of the published messages.")(f)
     f = click.option("--publish", default=None, metavar="mqtt://[USER[:PASS]@]HOST[:PORT]/PREFIX",
-                     help="Also publish each fix as JSON on PREFIX/fixes/<led>, with a retained "
-                          "PREFIX/status (mqtts:// for TLS; the password may instead be in "
+                     help="Also publish each fix as JSON on PREFIX/fixes/<led> (track: a "
+                          "body's pose on PREFIX/bodies/<id>), with a retained PREFIX/status "
+                          "(mqtts:// for TLS; the password may instead be in "
                           "VLPCAL_MQTT_PASSWORD).")(f)
     return f
 

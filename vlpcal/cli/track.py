@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import re
+
 import click
 
 from .common import Finite, FitCheck, UserError, _load_deployment, _output_file, main
@@ -121,7 +123,7 @@ def _no_rows(tracker, source, unreadable=None, what: str = "frame") -> UserError
                "about the same moment (a track needs two cameras)")
     else:
         why = (f"of {fit.moments} spots seen while another camera saw one, none was "
-               "placed: the spots do not meet as one LED; is it the right deployment?")
+               "placed: no two cameras' spots meet as one LED; is it the right deployment?")
     return UserError(f"{source}: no rows: {why}")
 
 
@@ -275,7 +277,8 @@ def _lag_said(tracker) -> str:
 
 def _summary(rows) -> str:
     ok = sum(r.status == "ok" for r in rows)
-    leds = sorted({r.led for r in rows if r.pose is None})
+    leds = sorted({r.led for r in rows if r.pose is None},  # T2 before T10
+                  key=lambda led: [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", led)])
     bodies = sorted({r.led for r in rows if r.pose is not None})
     shown = ", ".join(leds[:12]) + (f" and {len(leds) - 12} more" if len(leds) > 12 else "")
     return (f"{len(rows)} rows, {ok} placed by two cameras or more, tracks {shown or '–'}"
