@@ -242,6 +242,13 @@ def test_track_writes_and_publishes_a_simulated_bodys_rows(broker, tmp_path):
     assert list(rows[0])[-4:] == ["yaw", "pitch", "roll", "sigma_yaw"]
     body = [r for r in rows if r["led"] == "R1"]
     assert len(body) > 50 and all(r["yaw"] and not r["pitch"] for r in body)
+    # the robot's own truth, at each camera frame's time (a newcomer had to work it out)
+    truth = {r["t"]: r for r in csv.DictReader(open(out / "streams.bodies.truth.csv"))}
+    e = [np.hypot(float(r["x"]) - float(truth[r["t"]]["x"]),
+                  float(r["y"]) - float(truth[r["t"]]["y"])) for r in body if r["status"] == "ok"]
+    e_yaw = [abs(np.angle(np.exp(1j * (float(r["yaw"]) - float(truth[r["t"]]["yaw"])))))
+             for r in body if r["status"] == "ok"]
+    assert np.mean(e) < 0.005 and np.degrees(np.mean(e_yaw)) < 1.0, (np.mean(e), e_yaw)
     assert all(not r["yaw"] for r in rows if r["led"] != "R1")
     import time
 

@@ -190,9 +190,10 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
         if robot_speed:  # a robot's LED, or the LEDs it carries (and the deployments' blocks)
             from ..sim.streams import BODY_LAYOUTS, body_blocks, body_leds, robot_path
 
-            leds = robot_path(scene, robot_speed, height=0.0 if body else 0.15, seed=seed)
+            leds = origin = robot_path(scene, robot_speed, height=0.0 if body else 0.15,
+                                       seed=seed)
             if body:
-                leds, _ = body_leds(leds, BODY_LAYOUTS[body], seed=seed)
+                leds, yaw = body_leds(origin, BODY_LAYOUTS[body], seed=seed)
                 blocks = body_blocks(leds, BODY_LAYOUTS[body])
         _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, free_height,
                        refs, wand, trajectory, test_points, deployment_path is not None, route,
@@ -200,17 +201,36 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
         if robot_speed:
             from ..sim.streams import simulate_streams
 
-            simulate_streams(scene, stage / "streams", leds, seconds, seed=seed)
+            frames = simulate_streams(scene, stage / "streams", leds, seconds, seed=seed)
+            if body:  # the body's pose at each camera frame's time
+                import numpy as np
+
+                _write_body_truth(stage / "streams.bodies.truth.csv", origin, yaw,
+                                  np.unique(np.concatenate([t for _, t, _ in frames.values()])))
             click.echo(f"streams: a robot at up to {robot_speed:g} m/s (slower in its turns) "
                        + (f"carrying {body} blinking LEDs (body R1) " if body else "")
                        + f"for {seconds:g} s, cameras "
                        f"not synchronised → {out / 'streams'} (truth in "
-                       f"{out / 'streams.truth.csv'})")
+                       f"{out / 'streams.truth.csv'}"
+                       + (f", the body's in {out / 'streams.bodies.truth.csv'}" if body else "")
+                       + ")")
+
+
+def _write_body_truth(path, origin, yaw, t) -> None:
+    """``t,body,x,y,z,yaw,pitch,roll``: where the simulated robot (body R1, level) was."""
+    import csv
+
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(("t", "body", "x", "y", "z", "yaw", "pitch", "roll"))
+        w.writerows((f"{tt:.6f}", "R1", *(f"{v:.6f}" for v in p), f"{a:.6f}", "0", "0")
+                    for tt, p, a in zip(t, origin(t), yaw(t)))
 
 
 #: what vlpcal simulate writes in its --out folder
 SIMULATED = {"nominal.yaml", "truth.yaml", "survey", "frames", "frames.truth.csv",
-             "free-survey", "free-survey.truth.csv", "streams", "streams.truth.csv"}
+             "free-survey", "free-survey.truth.csv", "streams", "streams.truth.csv",
+             "streams.bodies.truth.csv"}
 
 
 def _check_wand(profile, length: float, free_height) -> None:
