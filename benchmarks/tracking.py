@@ -326,8 +326,8 @@ def line_of_three(seconds: float, seed: int) -> dict:
     events = spot_schedule(scene, path, seconds, seed=seed)
     tracker = Tracker(deployment_of(scene, "true"), period=1 / 30)
     rows = []
-    for t, cid, u, v in events:
-        rows += tracker.update_spots(cid, t, [] if np.isnan(u) else [[u, v]])
+    for t, cid, uv in events:
+        rows += tracker.update_spots(cid, t, uv)
     rows += tracker.finish()
     ok = [r for r in rows if r.status == "ok"]
     e = np.linalg.norm(np.array([r.position for r in ok]) - path(np.array([r.t for r in ok])),
@@ -393,8 +393,8 @@ def wrong_setups(seed: int) -> list[dict]:
     for name, dep in cases.items():
         tracker = Tracker(dep, period=1 / 30)
         said = None
-        for t, cid, u, v in events:
-            tracker.update_spots(cid, t, [] if np.isnan(u) else [[u, v]])
+        for t, cid, uv in events:
+            tracker.update_spots(cid, t, uv)
             if said is None and tracker.fit.misfit() is not None:
                 said = tracker.fit.moments
         ids = [c.id for c in scene.true]  # each camera's spots under its id

@@ -227,8 +227,9 @@ def test_a_live_track_on_a_wrong_deployment_stops_at_once_and_keeps_its_rows(bro
     c.loop_start()
     start = time.time() - 11.0
     t0 = time.monotonic()
-    for t, cid, u, v in events:
-        msg = {"t": start + t} if np.isnan(u) else {"t": start + t, "u": u, "v": v}
+    for t, cid, uv in events:
+        msg = {"t": start + t} if not len(uv) else {"t": start + t, "u": uv[0, 0],
+                                                     "v": uv[0, 1]}
         c.publish(f"lab/spots/{cid}", json.dumps(msg), qos=1).wait_for_publish(5)
     _, err = trk.communicate(timeout=60)
     c.loop_stop()
