@@ -171,6 +171,36 @@ def test_a_layout_measured_wrong_is_said_under_the_papers_line_of_cameras(x, sai
     assert ("warning: body R1: its LEDs L1 and L2 lay 0.30" in res.stderr) == said, res.stderr
 
 
+def test_a_track_that_goes_on_as_another_is_named_by_the_phases_its_codes_were_read_at(
+        line_robot, tmp_path):
+    """From a newcomer: under the paper's three cameras in a line a robot's LED tracks end
+    often (one camera alone sees the loop's ends) and each new track read its code afresh, a
+    whole repeat and more: 58 % of the LED rows went under a track id and the body had 128
+    rows in 10 s. The LEDs' codes keep their phases, so a few bits read at them name it."""
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "track", "-d",
+                          str(line_robot / "truth.yaml"), "--frames", str(line_robot / "streams"),
+                          "--out", str(tmp_path / "t.csv")], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    rows = [r for r in csv.DictReader(open(tmp_path / "t.csv")) if r["status"] == "ok"]
+    leds = [r for r in rows if r["led"] != "R1"]
+    assert sum(r["led"].startswith("T") for r in leds) < 0.45 * len(leds)
+    assert sum(r["led"] == "R1" for r in rows) > 180
+    # and named no worse: LED rows over 5 cm from the truth of their LED were 5.8 % (13 of
+    # 226; 10 of them 0.14 s where two tracks one camera alone saw swapped spots in its image,
+    # left in issue 29), now 13 of 338
+    truth = {}
+    for r in csv.DictReader(open(line_robot / "streams.truth.csv")):
+        truth.setdefault(r["led"], []).append([float(r[k]) for k in ("t", "x", "y", "z")])
+    named = [r for r in leds if r["led"] in truth]
+    off = []
+    for r in named:
+        path = np.array(sorted(truth[r["led"]]))
+        at = [np.interp(float(r["t"]), path[:, 0], path[:, k]) for k in (1, 2, 3)]
+        off.append(np.linalg.norm(np.subtract(at, [float(r[k]) for k in "xyz"])))
+    assert np.mean(np.array(off) > 0.05) < 0.05
+
+
 def test_cameras_of_another_scale_are_said_by_the_bodys_layout(line_robot, tmp_path):
     """From a newcomer: the cameras' plan at half scale (about the room's centre, heights
     kept) fits every ray — rays alone cannot tell a plan scaled about the cameras' height — so

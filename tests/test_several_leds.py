@@ -35,6 +35,14 @@ def test_a_code_counts_the_lit_bits_a_track_saw_dark():
     assert 0 < code.missed(t, both, 0.03, 0.2) < code.pattern.count("1")
 
 
+def test_a_code_at_a_known_phase_reads_a_few_bits_and_counts_the_wrong_ones():
+    code = CODES[1]
+    t = np.arange(0.3, 0.8, 1 / 30)  # half a repeat: five bits
+    assert code.wrong(t, code.lit(t, 0.03), 0.03, 0.2) == (0, 5)
+    assert code.wrong(t, ~code.lit(t, 0.03), 0.03, 0.2) == (5, 5)
+    assert code.wrong(t, CODES[0].lit(t, 0.05), 0.03, 0.2)[0] > 0  # another LED's
+
+
 def test_a_blink_code_names_its_led_at_any_phase_and_a_steady_light_none():
     rng = np.random.default_rng(1)
     t = np.sort(rng.uniform(0, 3.0, 400))

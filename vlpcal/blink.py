@@ -45,6 +45,20 @@ class BlinkCode:
         slot = np.floor((np.asarray(t, float) + phase) * self.bit_rate).astype(np.int64)
         return bits[np.mod(slot, len(bits))]
 
+    def wrong(self, t, lit, phase: float, edge: float) -> tuple[int, int]:
+        """(bits the observations read otherwise than the code at ``phase``, bits read): each
+        bit by the majority of its observations, leaving out those within ``edge`` of a bit
+        (a share of one) of its edges."""
+        at = (np.asarray(t, float) + phase) * self.bit_rate
+        away = np.minimum(at % 1.0, 1.0 - at % 1.0) >= edge
+        slot = np.floor(at[away]).astype(np.int64)
+        seen = np.where(np.asarray(lit, bool)[away], 1, -1)
+        slots, which = np.unique(slot, return_inverse=True)
+        votes = np.bincount(which, seen, len(slots))
+        want = self.lit((slots + 0.5) / self.bit_rate - phase, phase)
+        read = votes != 0  # (a tie reads neither way)
+        return int(np.sum(read & ((votes > 0) != want))), int(np.sum(read))
+
     def missed(self, t, lit, phase: float, edge: float) -> int:
         """How many of its lit bits the observations (times ``t``, ``lit`` or not) saw dark,
         by majority within each bit, leaving out those within ``edge`` of a bit (a share of

@@ -69,6 +69,8 @@ COAST_PERIODS = 8.0
 FIT_SIGMAS = 4.0
 #: s: an ended track's id is kept this long for a new track that continues it
 HOLD_SECONDS = 5.0
+#: bits a track's frames read, at the phases its LEDs' codes were read before, that name it
+KNOWN_BITS = 4
 #: a named track whose last repeat saw this many of its code's lit bits dark follows another
 #: LED (one such bit may be a frame's glint or a blocked view)
 MISSED_BITS = 2
@@ -273,6 +275,8 @@ class Tracker:
         self._pending: list[_Ray] = []
         #: (time, camera) of the latest spots that met no other camera's (:meth:`_expire`)
         self._unmet: deque = deque(maxlen=256)
+        #: LED → the phase its code was last read at (:meth:`_by_known_phase`)
+        self._phase_of: dict = {}
         #: camera → where its latest spots that met none lay (:meth:`_fixed_light`)
         self._alone_at: dict = {}
         self._next = 1
@@ -876,6 +880,8 @@ class Tracker:
             return
         t, lit = np.array(tr.seen).T
         led, e1, e2, phase = decode_phase(t, lit.astype(bool), self.codes)
+        if led is None and tr.led == tr.anonymous:  # too short a read for the phases: the
+            led, e1, e2, phase = self._by_known_phase(t, lit)  # phases the LEDs were read at
         if led is None:  # no code reads clearly among all: its own LED's (a body's shape
             # named it) may still read against a steady light, for its dark times
             own = [c for c in self.codes if c.led == tr.led]
@@ -901,6 +907,23 @@ class Tracker:
                     self._body_of[name].fit = None
         tr.led, tr.margin = led, e2 - e1
         tr.code = (next(c for c in self.codes if c.led == led), phase)
+        self._phase_of[led] = phase
+
+    def _by_known_phase(self, t, lit):
+        """(LED, its wrong bits, the runner-up's, its phase) when every LED's code was read
+        before at a phase of its own (LEDs keep theirs) and the track's frames read one of
+        them at its phase without a wrong bit, over :data:`KNOWN_BITS` bits or more, and every
+        other at its phase with two or more wrong: a code known in phase needs a few bits, not
+        a whole repeat (a track that ended and went on as another). Else (None, …)."""
+        if len(self._phase_of) < len(self.codes):
+            return None, 0, 0, 0.0
+        read = sorted((c.wrong(t, lit.astype(bool), self._phase_of[c.led], BIT_EDGE), c.led)
+                      for c in self.codes)
+        (e1, bits), led = read[0]
+        e2 = read[1][0][0] if len(read) > 1 else bits
+        if e1 == 0 and bits >= KNOWN_BITS and e2 >= 2:
+            return led, e1, e2, self._phase_of[led]
+        return None, 0, 0, 0.0
 
     def _unname(self, tr: _Track) -> None:
         """A track whose name its blink code no longer bears out: back to its id, read afresh."""
