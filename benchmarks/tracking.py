@@ -393,8 +393,8 @@ def wrong_setups(seed: int) -> list[dict]:
     for name, dep in cases.items():
         tracker = Tracker(dep, period=1 / 30)
         said = None
-        for t, cid, uv in events:
-            tracker.update_spots(cid, t, uv)
+        for t, cid, spots in events:
+            tracker.update_spots(cid, t, spots)
             if said is None and tracker.fit.misfit() is not None:
                 said = tracker.fit.moments
         ids = [c.id for c in scene.true]  # each camera's spots under its id
