@@ -1078,15 +1078,16 @@ class Tracker:
             return None
         if prior is not None and not self._follows(guess_before, s2, fit, cov):
             return None  # a pose its last one could not have moved to: a swapped LED
-        # its LEDs where their own tracks, placed now, put them: else a ray was another's
+        # its LEDs where their own tracks, placed now, put them, within the track's sigma
+        # (not the pose's too: a pose turned half round, its sigma 0.1 m, passed that): else
+        # a ray was another's
         R = rotation(fit[9], fit[11], fit[12])
-        s_body = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0) / 3))
         for led, tr in seen.items():
             if t - tr.last_two > WINDOW * self.period:
                 continue
             pos, _, s_led, _ = self._extrapolated(tr, t)
             off = float(np.linalg.norm(fit[:3] + R @ body.leds[led] - pos))
-            if off > GATE_SIGMAS * np.sqrt(3 * (s_led ** 2 + s_body ** 2)):
+            if off > GATE_SIGMAS * np.sqrt(3) * s_led:
                 return None
         rays = [r for r, k in zip(rays, keep) if k]
         sigma = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0)))
