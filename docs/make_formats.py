@@ -182,7 +182,9 @@ Example: `surveys/paper-2024/survey/`.
 - Asynchronous frames: `DIR/<camera_id>/<frame_no>.jpg` and `DIR/times.csv` with
   `camera_id,frame_no,t` (each frame's capture time, s, on one clock) — `vlpcal track --frames
   DIR`; `vlpcal simulate --robot-speed V` writes one (`streams/`, with `streams.truth.csv`:
-  `camera_id,frame_no,t,x,y,z,led,lit`, where each LED was and whether it was lit).
+  `camera_id,frame_no,t,x,y,z,led,lit`, where each LED was and whether it was lit; with
+  `--body N` also `streams.bodies.truth.csv`: `t,body,x,y,z,yaw,pitch,roll`, the robot's pose
+  at each camera frame's time, as a body's track rows have it).
 - Live: `vlpcal track --camera ID=URL …`: MJPEG parts' `X-Timestamp` header (the capture time
   on the camera's clock, s, as the ESP32 CameraWebServer sends it) is the frame's time, mapped
   to the host's clock by each camera's offset and drift estimated online (the lower envelope of
