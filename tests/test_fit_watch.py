@@ -136,6 +136,23 @@ def test_a_lamp_one_camera_sees_instead_of_the_led_raises_nothing(tmp_path):
     assert res.returncode == 0 and "do not fit" not in res.stderr, res.stderr
 
 
+def test_a_slow_robot_on_a_wrong_deployment_is_still_said(tmp_path):
+    # from a hostile probe: a spot that stayed within the gate of the camera's last two that
+    # met none counted as a fixed light, and a robot at 0.1 m/s moves less than that between
+    # frames: the paper's triangle deployment on the line's frames wrote 926 rows ~1 m off as
+    # ok, exit 0. A fixed light is one whose place is older than a track lasts without spots
+    out = tmp_path / "slow"
+    res = _run("simulate", "--profile", "paper-2024", "--test-points", "0", "--robot-speed",
+               "0.1", "--seconds", "30", "--out", out)
+    assert res.returncode == 0, res.stderr
+    res = _run("track", "-d", LAYOUTS / "paper-triangle.deployment.yaml", "--frames",
+               out / "streams", "--out", tmp_path / "t.csv")
+    assert res.returncode == 2 and "do not fit paper-triangle" in res.stderr, res.stderr
+    res = _run("track", "-d", out / "truth.yaml", "--frames", out / "streams", "--out",
+               tmp_path / "t.csv")
+    assert res.returncode == 0 and "do not fit" not in res.stderr, res.stderr
+
+
 def test_a_camera_on_a_clock_of_its_own_is_said(sim, tmp_path):
     # from a hostile probe: C2's times 1000 s on in times.csv — its frames were never with
     # another camera's, and the run said nothing of it

@@ -74,7 +74,7 @@ KNOWN_BITS = 4
 #: a named track whose last repeat saw this many of its code's lit bits dark follows another
 #: LED (one such bit may be a frame's glint or a blocked view)
 MISSED_BITS = 2
-#: a camera's latest spots that met none kept to tell a fixed light by
+#: a camera's latest places of spots that met none kept to tell a fixed light by
 LIGHT_SPOTS = 64
 #: a heading-only body's LED back from a dark run also gives its rays this many windows
 #: before a row's time (:meth:`Tracker._body_row`; the tracks hold two windows of rays)
@@ -277,8 +277,8 @@ class Tracker:
         self._unmet: deque = deque(maxlen=256)
         #: LED → the phase its code was last read at (:meth:`_by_known_phase`)
         self._phase_of: dict = {}
-        #: camera → where its latest spots that met none lay (:meth:`_fixed_light`)
-        self._alone_at: dict = {}
+        #: camera → where its spots that met none lay, since when (:meth:`_fixed_light`)
+        self._lights: dict = {}
         self._next = 1
         self.codes = deployment.leds
         #: the names the deployment gives (LEDs — a body's among them — and bodies): no
@@ -982,15 +982,20 @@ class Tracker:
             self._unmet.append((p.t, p.camera))
 
     def _fixed_light(self, ray: _Ray) -> bool:
-        """Whether a spot that met no other camera's lies where two of its camera's latest
-        such spots lay (within a gate of the spot noise): a lamp or a reflection that stays
-        put, not an LED the deployment misplaces — that one moves with its robot. (A parked
-        LED the deployment misplaces is said once it moves.)"""
-        seen = self._alone_at.setdefault(ray.camera, deque(maxlen=LIGHT_SPOTS))
+        """Whether a spot that met no other camera's lies where such a spot of its camera lay
+        (within a gate of the spot noise) as long before as a track lasts without spots
+        (:data:`LOST_PERIODS`) or longer: a lamp or a reflection that stays put, not an LED
+        the deployment misplaces — that one moves with its robot (a slow one, 5 cm/s, leaves
+        the gate sooner), or, parked, is judged before it has stood that long."""
+        lights = self._lights.setdefault(ray.camera, [])  # [xy, first seen, last seen]
         gate = GATE_SIGMAS * self.pixel_sigma / self._f[ray.camera]
-        still = sum(np.hypot(*(ray.xy - xy)) <= gate for xy in seen) >= 2
-        seen.append(ray.xy)
-        return still
+        for light in lights:
+            if np.hypot(*(ray.xy - light[0])) <= gate:
+                light[2] = max(light[2], ray.t)
+                return ray.t - light[1] >= LOST_PERIODS * self.period
+        lights.append([ray.xy, ray.t, ray.t])
+        del lights[:-LIGHT_SPOTS]  # the latest places kept
+        return False
 
     def _body_due(self, tr: _Track, t: float) -> None:
         """A ray of a body's LED at ``t``: the body's row of that time is due."""
