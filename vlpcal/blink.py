@@ -46,32 +46,27 @@ class BlinkCode:
         return bits[np.mod(slot, len(bits))]
 
     def wrong(self, t, lit, phase: float, edge: float) -> tuple[int, int]:
-        """(bits the observations read otherwise than the code at ``phase``, bits read): each
-        bit by the majority of its observations, leaving out those within ``edge`` of a bit
-        (a share of one) of its edges."""
-        at = (np.asarray(t, float) + phase) * self.bit_rate
-        away = np.minimum(at % 1.0, 1.0 - at % 1.0) >= edge
-        slot = np.floor(at[away]).astype(np.int64)
-        seen = np.where(np.asarray(lit, bool)[away], 1, -1)
-        slots, which = np.unique(slot, return_inverse=True)
-        votes = np.bincount(which, seen, len(slots))
-        want = self.lit((slots + 0.5) / self.bit_rate - phase, phase)
-        read = votes != 0  # (a tie reads neither way)
+        """(bits the observations read otherwise than the code at ``phase``, bits read)
+        (:meth:`_votes`; a tie reads neither way)."""
+        votes, want = self._votes(t, lit, phase, edge)
+        read = votes != 0
         return int(np.sum(read & ((votes > 0) != want))), int(np.sum(read))
 
     def missed(self, t, lit, phase: float, edge: float) -> int:
-        """How many of its lit bits the observations (times ``t``, ``lit`` or not) saw dark,
-        by majority within each bit, leaving out those within ``edge`` of a bit (a share of
-        one) of its edges: a track that follows another LED misses the bits where that one
-        is dark."""
+        """How many of its lit bits the observations saw dark (:meth:`_votes`): a track that
+        follows another LED misses the bits where that one is dark."""
+        votes, want = self._votes(t, lit, phase, edge)
+        return int(np.sum(want & (votes < 0)))
+
+    def _votes(self, t, lit, phase: float, edge: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per bit the observations (times ``t``, ``lit`` or not) fall in, at ``phase``: their
+        vote (lit minus dark, leaving out those within ``edge`` of a bit — a share of one — of
+        its edges) and whether the code has it lit."""
         at = (np.asarray(t, float) + phase) * self.bit_rate
         away = np.minimum(at % 1.0, 1.0 - at % 1.0) >= edge
-        slot = np.floor(at[away]).astype(np.int64)
-        seen = np.where(np.asarray(lit, bool)[away], 1, -1)
-        slots, which = np.unique(slot, return_inverse=True)
-        votes = np.bincount(which, seen, len(slots))
-        return int(np.sum(self.lit(slots / self.bit_rate + 0.5 / self.bit_rate - phase, phase)
-                          & (votes < 0)))
+        slots, which = np.unique(np.floor(at[away]).astype(np.int64), return_inverse=True)
+        votes = np.bincount(which, np.where(np.asarray(lit, bool)[away], 1, -1), len(slots))
+        return votes, self.lit((slots + 0.5) / self.bit_rate - phase, phase)
 
 
 def _middle_of_best(wrong) -> int:

@@ -987,13 +987,12 @@ class Tracker:
         (:data:`LOST_PERIODS`) or longer: a lamp or a reflection that stays put, not an LED
         the deployment misplaces — that one moves with its robot (a slow one, 5 cm/s, leaves
         the gate sooner), or, parked, is judged before it has stood that long."""
-        lights = self._lights.setdefault(ray.camera, [])  # [xy, first seen, last seen]
+        lights = self._lights.setdefault(ray.camera, [])  # (xy, first seen)
         gate = GATE_SIGMAS * self.pixel_sigma / self._f[ray.camera]
-        for light in lights:
-            if np.hypot(*(ray.xy - light[0])) <= gate:
-                light[2] = max(light[2], ray.t)
-                return ray.t - light[1] >= LOST_PERIODS * self.period
-        lights.append([ray.xy, ray.t, ray.t])
+        for xy, since in lights:
+            if np.hypot(*(ray.xy - xy)) <= gate:
+                return ray.t - since >= LOST_PERIODS * self.period
+        lights.append((ray.xy, ray.t))
         del lights[:-LIGHT_SPOTS]  # the latest places kept
         return False
 
