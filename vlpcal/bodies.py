@@ -3,12 +3,13 @@
 Motion capture tracks rigid bodies: several markers on one object give its pose. Here a body
 carries LEDs at known places in its frame (the deployment's ``bodies:``), and each camera
 frame's spot of one of them is a ray at that frame's time. Over a short window the body's
-origin follows a quadratic path (as one LED's does in :mod:`vlpcal.tracking`) and its heading
-turns at a steady rate; its pitch and roll hold. All of them are fitted at once to every ray
-of every LED of the body in the window, by Gauss–Newton in pixels: no two rays need to be
-simultaneous, nor of one LED, nor from one camera, so a body is placed even when each of its
-LEDs is seen by a different camera at a different moment. Two LEDs (or LEDs on one line) give
-the position and heading of a level body; three or more not on one line the full pose.
+origin follows a quadratic path (as one LED's does in :mod:`vlpcal.tracking`) and so does its
+heading (a robot's turn quickens and slows as its path bends); its pitch and roll hold. All
+of them are fitted at once to every ray of every LED of the body in the window, by
+Gauss–Newton in pixels: no two rays need to be simultaneous, nor of one LED, nor from one
+camera, so a body is placed even when each of its LEDs is seen by a different camera at a
+different moment. Two LEDs (or LEDs on one line) give the position and heading of a level
+body; three or more not on one line the full pose.
 
 Angles are Z-Y-X (yaw about z, then pitch about y, then roll about x), body to world:
 ``X_world = position + R(yaw, pitch, roll) · X_body``.
@@ -81,32 +82,37 @@ def _derivatives(yaw, pitch, roll):
 
 
 def fit_pose(rows, y, tau, axis, along, ff, led_points, guess, full: bool,
-             acceleration: float, pixel_sigma: float, prior=None):
+             acceleration: float, spin: float, pixel_sigma: float, prior=None):
     """Gauss–Newton over a window's rays of a body's LEDs: M equations (two per ray) —
     ``rows`` M×3 and ``y`` M (``rows · X = y`` for the LED's world position X on the ray),
     ``tau`` M (the ray's time from the fit's), ``axis`` M×3 and ``along`` M (its camera's
     optical axis and axis·centre: the depth), ``ff`` M (f over the spot noise), ``led_points``
     M×3 (the ray's LED in the body's frame) — for the body's origin at ``t + τ``, ``a + b τ +
-    c τ² / 2`` (its acceleration held to ``acceleration``), its yaw ``ψ + ω τ``, and (``full``)
-    its pitch and roll. ``guess``: the 9 + 4 unknowns to start from (position, velocity,
-    acceleration, yaw, yaw rate, pitch, roll); ``prior``: (13 values, 13 informations — 0:
-    none), the body's state before, joined as equations. Returns (the 13 unknowns, RMS
-    residual px, their covariance 13×13 — pitch and roll held at the guess's, their variance
-    0, when not ``full`` — and each equation's residual in spot sigmas), or (None, inf, None,
-    None) when the rays do not determine them."""
+    c τ² / 2`` (its acceleration held to ``acceleration``), its yaw ``ψ + ω τ + α τ² / 2``
+    (``α`` held to ``spin``, rad/s²: a turn's rate changes as its path bends), and (``full``)
+    its pitch and roll. ``guess``: the 14 unknowns to start from (position, velocity,
+    acceleration, yaw, yaw rate, pitch, roll, yaw acceleration); ``prior``: (14 values, 14
+    informations — 0: none), the body's state before, joined as equations. Returns (the 14
+    unknowns, RMS residual px, their covariance 14×14 — pitch and roll held at the guess's,
+    their variance 0, when not ``full`` — and each equation's residual in spot sigmas), or
+    (None, inf, None, None) when the rays do not determine them."""
     q = np.array(guess, float)
-    n_free = 13 if full else 11
+    free = np.arange(14) if full else np.r_[0:11, 13]
+    n_free = len(free)
     P = tau[:, None] ** np.arange(3.0) * np.array([1.0, 1.0, 0.5])  # M×3
     A_pos = (P[:, :, None] * rows[:, None, :]).reshape(len(rows), 9)
-    D = np.zeros(n_free)
+    D = np.zeros(14)
     D[6:9] = 1.0 / acceleration ** 2
-    centre = np.zeros(13)
+    D[13] = 1.0 / spin ** 2
+    centre = np.zeros(14)
     if prior is not None:
         centre = np.array(prior[0], float)
-        D = D + np.asarray(prior[1], float)[:n_free]
+        D = D + np.asarray(prior[1], float)
+    D = D[free]
     cov = None
+    J = np.empty((len(rows), 14))
     for _ in range(ITERATIONS):
-        yaw = q[9] + q[10] * tau
+        yaw = q[9] + q[10] * tau + q[13] * P[:, 2]
         R = rotation(yaw, q[11], q[12])  # M×3×3
         Rb = np.einsum("mij,mj->mi", R, led_points)
         X = P @ q[:9].reshape(3, 3) + Rb  # the LED at each ray's time
@@ -117,19 +123,19 @@ def fit_pose(rows, y, tau, axis, along, ff, led_points, guess, full: bool,
         r = (np.einsum("mi,mi->m", rows, X) - y) * w
         dR = _derivatives(yaw, q[11], q[12])
         dyaw = np.einsum("mi,mij,mj->m", rows, dR[0], led_points)
-        J = np.empty((len(rows), n_free))
         J[:, :9] = A_pos
         J[:, 9] = dyaw
         J[:, 10] = dyaw * tau
+        J[:, 13] = dyaw * P[:, 2]
         if full:
             J[:, 11] = np.einsum("mi,mij,mj->m", rows, dR[1], led_points)
             J[:, 12] = np.einsum("mi,mij,mj->m", rows, dR[2], led_points)
-        J *= w[:, None]
-        N = J.T @ J
+        Jf = J[:, free] * w[:, None]
+        N = Jf.T @ Jf
         N.flat[::n_free + 1] += D
-        dq = q[:n_free] - centre[:n_free]
+        dq = q - centre
         dq[9] = math.remainder(dq[9], 2 * math.pi)  # the yaw's, the short way round
-        g = J.T @ r + D * dq
+        g = Jf.T @ r + D * dq[free]
         try:
             cov = np.linalg.inv(N)
         except np.linalg.LinAlgError:
@@ -138,17 +144,17 @@ def fit_pose(rows, y, tau, axis, along, ff, led_points, guess, full: bool,
         if not (np.isfinite(inflation).all() and (inflation < 1e12).all()):
             return None, np.inf, None, None
         step = -cov @ g
-        q[:n_free] += step
+        q[free] += step
         if np.all(np.abs(step) <= CONVERGED * np.sqrt(np.maximum(np.diag(cov), 1e-300))):
             break
-    yaw = q[9] + q[10] * tau
+    yaw = q[9] + q[10] * tau + q[13] * P[:, 2]
     X = P @ q[:9].reshape(3, 3) + np.einsum("mij,mj->mi", rotation(yaw, q[11], q[12]),
                                             led_points)
     depth = np.einsum("mi,mi->m", axis, X) - along
     if not (depth > 0).all():
         return None, np.inf, None, None
     r = (np.einsum("mi,mi->m", rows, X) - y) * ff / depth
-    full_cov = np.zeros((13, 13))
-    full_cov[:n_free, :n_free] = cov
+    full_cov = np.zeros((14, 14))
+    full_cov[np.ix_(free, free)] = cov
     q[9] = math.remainder(q[9], 2 * math.pi)
     return q, float(pixel_sigma * np.sqrt(r @ r / len(r))), full_cov, r

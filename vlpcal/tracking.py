@@ -219,8 +219,8 @@ class _BodyState:
     apart: dict = field(default_factory=dict)
     #: its layout judged not the robot's (:meth:`Tracker.layout_misfits`): no rows
     misfit: bool = False
-    fit: np.ndarray | None = None  #: 13: position, velocity, acceleration, yaw, yaw rate,
-    fit_t: float = -np.inf  #: pitch, roll at this time
+    fit: np.ndarray | None = None  #: 14: position, velocity, acceleration, yaw, yaw rate,
+    fit_t: float = -np.inf  #: pitch, roll, yaw acceleration at this time
     cov: np.ndarray | None = None  #: the fit's covariance
 
 
@@ -1030,22 +1030,23 @@ class Tracker:
         if len(seen) < 2 or not self._shaped(state, seen, t) or state.misfit:
             return None  # (a layout not the robot's gives poses skewed by it)
         prior = None
+        # rad/s²: the turn's rate changes no faster than its LEDs' acceleration allows
+        spin = self.acceleration / max(float(np.max(np.linalg.norm(
+            np.array(list(body.leds.values())), axis=1))), 1e-9)
         if state.fit is not None and abs(t - state.fit_t) <= LOST_PERIODS * self.period:
             dt = t - state.fit_t  # the last pose, carried to t
             f = state.fit
             guess = np.r_[f[:3] + f[3:6] * dt, f[3:6], np.zeros(3), f[9] + f[10] * dt, f[10],
-                          f[11:]]
+                          f[11:13], 0.0]
             # … and its state there joins the fit, loosened threefold (the rays it held are
             # among these), widened by the motion it cannot foresee (as a track's)
             var = np.diag(state.cov)
-            spin = self.acceleration / max(float(np.max(np.linalg.norm(
-                np.array(list(body.leds.values())), axis=1))), 1e-9)
-            s2 = np.zeros(13)
+            s2 = np.zeros(14)
             s2[:3] = _carried(np.sqrt(var[:3]), np.sqrt(var[3:6]), dt, self.acceleration) ** 2
             s2[3:6] = var[3:6] + (self.acceleration * dt) ** 2
             s2[9] = _carried(np.sqrt(var[9]), np.sqrt(var[10]), dt, spin) ** 2
             s2[10] = var[10] + (spin * dt) ** 2
-            info = np.zeros(13)
+            info = np.zeros(14)
             on = s2 > 0
             info[on] = 1.0 / (9.0 * s2[on])
             prior = (guess, info)
@@ -1054,20 +1055,20 @@ class Tracker:
             led_ids = list(seen)
             pos, ang = pose_from_points([body.leds[k] for k in led_ids],
                                         [self._extrapolated(seen[k], t)[0] for k in led_ids])
-            guess = np.r_[pos, np.zeros(6), ang[0], 0.0, ang[1:]]
+            guess = np.r_[pos, np.zeros(6), ang[0], 0.0, ang[1:], 0.0]
         points = np.array(points)
         # the full pose from three LEDs or more not on one line, seen now; else the heading,
         # the tilt held (a level body's, or the last full fit's)
         full = body.full_pose and gives_full_pose([body.leds[k] for k in seen])
         if not full:
-            guess[11:] = (state.fit[11:] if body.full_pose and state.fit is not None
+            guess[11:13] = (state.fit[11:13] if body.full_pose and state.fit is not None
                           else 0.0)
         keep = np.ones(len(rays), bool)
         for _ in range(3):  # a ray far off the others' pose (a lamp a track took): left out
             eq = np.concatenate([r.eq for r, k in zip(rays, keep) if k])
             fit, resid, cov, res = fit_pose(eq[:, :3], eq[:, 3], eq[:, 4] - t, eq[:, 5:8],
                                           eq[:, 8], eq[:, 9], np.repeat(points[keep], 2, axis=0),
-                                          guess, full, self.acceleration,
+                                          guess, full, self.acceleration, spin,
                                           self.pixel_sigma, prior)
             if fit is None:
                 break
