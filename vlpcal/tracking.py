@@ -309,10 +309,15 @@ class Tracker:
     def update(self, camera_id: str, t: float, frame) -> list[TrackUpdate]:
         """A camera's frame (JPEG bytes or an image array) captured at ``t`` s: its spots are
         found and the tracks updated; returns the rows now complete."""
+        return self.update_spots(camera_id, t, self.detect(camera_id, frame))
+
+    def detect(self, camera_id: str, frame) -> np.ndarray:
+        """A camera's frame → its spots (K×2 px, NaN rows: none), as :meth:`update` finds
+        them (for a caller that also shows them)."""
         cam = self.cameras[self._camera(camera_id)]
         uv, _ = detect_frame(frame, self.spots, self.deployment.detector,
                              self.deployment.detector_settings, shape=(cam.height, cam.width))
-        return self.update_spots(camera_id, t, uv)
+        return uv
 
     def update_spot(self, camera_id: str, t: float, uv) -> list[TrackUpdate]:
         """As :meth:`update`, from a spot already found (px; None: the camera saw no LED)."""

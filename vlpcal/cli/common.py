@@ -66,7 +66,7 @@ def _stop_on_signals() -> None:
 #: is asked for: one command's start does not pay for every other's imports
 COMMANDS = {"demo": "demo", "simulate": "demo", "plan": "plan", "check": "plan",
             "survey": "survey", "locate": "locate", "track": "track", "export": "interchange",
-            "import": "interchange", "show": "show"}
+            "import": "interchange", "show": "show", "view": "view"}
 
 
 class OneLineErrors(click.Group):

@@ -9,6 +9,7 @@ import click
 
 from .common import Finite, FitCheck, UserError, _load_deployment, _output_file, main
 from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary, subscriber_notes
+from .view import DEFAULT_BIND
 
 #: camera frames read and detected at once, at most — and at most this many bytes of them
 BLOCK, BLOCK_BYTES = 2048, 64 << 20
@@ -48,8 +49,12 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
                    "stale calibration); said once as a warning.  [default: stop, exit 2]")
 @mqtt_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
+@click.option("--view", "view_bind", is_flag=False, flag_value=DEFAULT_BIND, default=None,
+              metavar="[HOST:PORT]",
+              help=f"Show the run live in the browser (vlpcal view's page; default "
+                   f"{DEFAULT_BIND}): the cameras' frames and spots, the tracks on the plan.")
 def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots, out, fps,
-          keep_going, publish, qos, ca_file, quiet):
+          keep_going, publish, qos, ca_file, quiet, view_bind):
     """Track moving LEDs from cameras that are not synchronised.
 
     Each camera frame is a ray at its own capture time; the LED's path over a short window is
@@ -68,17 +73,30 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
                         "camera) or --spots mqtt://…")
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
+    if view_bind is not None and frames_dir:
+        raise UserError("--view shows a live run (--camera or --spots); a folder of frames is "
+                        "tracked faster than it could be watched")
     publisher = open_publisher(publish, qos, ca_file, dep, deployment_path)
     check = FitCheck(keep_going, "the rows so far are kept" if publisher or spots_url or cameras
                      else "nothing was written")
+    hub = server = None
     try:
+        if view_bind is not None:
+            from .view import open_view
+
+            hub, server = open_view(dep, view_bind, source=f"vlpcal track → {out}")
         if spots_url:
             _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"), ca_file,
-                         duration, lag, spots, out, fps, quiet, publisher, check)
+                         duration, lag, spots, out, fps, quiet, publisher, check, hub)
+        elif cameras:
+            _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
+                        publisher, check, hub)
         else:
-            _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out, fps,
-                   quiet, publisher, check)
+            _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, quiet,
+                   publisher, check)
     finally:
+        if server is not None:
+            server.close()
         if publisher:
             publisher.close()
             if not quiet:
@@ -138,7 +156,7 @@ def _published(publisher, rows, utc: float = 0.0):
     return rows
 
 
-def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out, fps, quiet,
+def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, quiet,
            publisher, check) -> None:
     import sys
 
@@ -146,10 +164,6 @@ def _track(dep, deployment_path, frames_dir, cameras, duration, lag, spots, out,
     from ..live import FrameIntervals
     from ..tracking import Tracker
 
-    if cameras:
-        _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
-                    publisher, check)
-        return
     if duration is not None:
         raise click.BadParameter("is for live cameras (--camera)", param_hint="--duration")
     try:
@@ -286,10 +300,12 @@ def _summary(rows) -> str:
 
 
 def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
-                publisher, check) -> None:
+                publisher, check, hub=None) -> None:
     """``vlpcal track --camera …``: frames as they come, each at its capture time on the
     host's clock (X-Timestamp through each camera's clock estimate, else arrival), fed to
-    the tracker in that order; rows in UTC seconds."""
+    the tracker in that order; rows in UTC seconds. ``out`` None: no file (the view alone);
+    ``hub``: the live page's (:class:`~vlpcal.view.ViewHub`), given each frame, its spots
+    and the rows."""
     import time
 
     from ..live import TimedFrames
@@ -297,7 +313,8 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     from .common import _camera_sources
 
     sources = _camera_sources(cameras, dep, stamps=True)
-    out = _output_file(out, inputs=(deployment_path,), what="the tracks")
+    if out is not None:
+        out = _output_file(out, inputs=(deployment_path,), what="the tracks")
 
     def say(msg):
         if not quiet:
@@ -308,13 +325,29 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
     layouts = _Layouts(tracker)
     utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
-    live = _LiveTracks(out, utc, bool(dep.bodies))  # row by row, flushed: a reader follows
+    # row by row, flushed: a reader follows
+    live = _LiveTracks(out, utc, bool(dep.bodies)) if out is not None else None
     rows: list = []
     n = 0
+
+    def put(made):
+        if live is not None:
+            live.write(made)
+        if hub is not None:
+            hub.track_rows(made, utc)
+
     try:
         for t, cid, frame in frames:
-            made = _published(publisher, tracker.update(cid, t, frame), utc)
-            live.write(made)
+            if hub is None:
+                made = tracker.update(cid, t, frame)
+            else:  # its spots shown with the frame
+                uv = tracker.detect(cid, frame)
+                made = tracker.update_spots(cid, t, uv)
+                hub.frame(cid, t + utc, uv, frame if isinstance(frame, bytes) else None)
+                if n % 30 == 0:
+                    _camera_facts(hub, frames)
+            made = _published(publisher, made, utc)
+            put(made)
             rows += made
             n += 1
             check(tracker.fit)
@@ -326,12 +359,16 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     finally:
         frames.stop()
         made = _published(publisher, tracker.finish(), utc)
-        live.write(made)
+        put(made)
         rows += made
-        live.close()
+        if live is not None:
+            live.close()
+        if hub is not None:
+            _camera_facts(hub, frames)
     st = frames.stats
     if not n:
-        live.remove()
+        if live is not None:
+            live.remove()
         why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)
         raise UserError(f"no frames from any camera, nothing tracked ({why})")
     for cid in sources:
@@ -345,15 +382,27 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
                if frames.stamped[cid] else ", no X-Timestamp (arrival times used)")
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
-    say(f"{n} camera frames → {_summary(rows)} → {out}" + _lag_said(tracker))
+    say(f"{n} camera frames → {_summary(rows)}" + (f" → {out}" if out is not None else "")
+        + _lag_said(tracker))
     layouts(end=True)
-    if not rows:
+    if not rows and live is not None:
         live.remove()
         raise _no_rows(tracker, "the cameras")
 
 
+def _camera_facts(hub, frames) -> None:
+    """Each camera's clock offset, frames the command dropped and why it stopped, to the
+    page."""
+    st = frames.stats
+    for cid in frames.sources:
+        offset = frames.clocks[cid].offset(frames.last_stamp[cid]) \
+            if frames.stamped[cid] else None
+        hub.camera_status(cid, clock_offset=offset, dropped=st.dropped[cid],
+                          stopped=st.ended.get(cid))
+
+
 def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, out, fps, quiet,
-                 publisher, check) -> None:
+                 publisher, check, hub=None) -> None:
     """``vlpcal track --spots mqtt://…``: the spots cameras publish, each at its capture time
     (UTC s), fed to the tracker as they come; rows in UTC seconds. Each camera's message of a
     frame without a spot (``{"t": …}``) tells the tracker that camera saw nothing then. A spot
@@ -401,6 +450,9 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
             crowded += len(uv) > tracker.spots
             made = _published(publisher, tracker.update_spots(cid, t, uv))
             live.write(made)
+            if hub is not None:
+                hub.frame(cid, t, uv)
+                hub.track_rows(made)
             rows += made
             n += 1
             check(tracker.fit)
@@ -414,6 +466,8 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         sub.close()
         made = _published(publisher, tracker.finish())
         live.write(made)
+        if hub is not None:
+            hub.track_rows(made)
         rows += made
         live.close()
     if not n:

@@ -1,0 +1,314 @@
+"""The live page (issue 30): its hub never holds a command up, its server asks for the token
+off loopback and loads nothing from outside, and in a real browser (Debian's Chromium,
+headless) it shows a simulated live site as the command tracks it."""
+
+import csv
+import json
+import re
+import shutil
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vlpcal.deployment import load
+from vlpcal.view import ViewHub
+from vlpcal.view.hub import ROWS_KEPT
+from vlpcal.view.scene import scene, site_of
+from vlpcal.view.server import STATIC, ViewError, ViewServer, parse_bind
+
+LAYOUT = Path(__file__).parents[1] / "layouts" / "paper-linear.deployment.yaml"
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+needs_browser = pytest.mark.skipif(
+    not Path(CHROMIUM).exists(), reason="Debian's chromium is not installed (.ci/run installs it)")
+
+
+class _Row:
+    def __init__(self, t, led, xyz):
+        self.t, self.led, self.position = t, led, np.array(xyz, float)
+        self.sigma_m, self.cameras, self.status, self.pose = 0.001, "C1+C2", "ok", None
+
+
+def test_the_hub_keeps_every_row_for_a_page_and_only_the_latest_frame():
+    hub = ViewHub({"C1": (160, 120)})
+    for k in range(5):
+        hub.frame("C1", 100.0 + k, [[10.0 + k, 20.0], [np.nan, np.nan]], jpeg=b"j%d" % k)
+    hub.track_rows([_Row(1.0 + k, "L1", (k, 0, 0)) for k in range(7)], utc=1000.0)
+    seen: dict = {}
+    cams, rows, missed = hub.since(0, seen)
+    assert cams["C1"]["seq"] == 5 and cams["C1"]["uv"] == [[14.0, 20.0]]  # NaN: no spot
+    assert [r["n"] for r in rows] == list(range(1, 8)) and rows[0]["t"] == 1001.0
+    assert missed == 0
+    assert hub.latest_frame("C1")[0] == 5 and hub.latest_frame("C1")[3] == b"j4"
+    cams, rows, missed = hub.since(7, seen)  # nothing new: nothing sent
+    assert cams == {} and rows == [] and missed == 0
+    # a page far behind is told how many rows it can no longer read, then reads on
+    hub.track_rows([_Row(k, "L1", (0, 0, 0)) for k in range(ROWS_KEPT + 3)])
+    cams, rows, missed = hub.since(7, seen)
+    assert missed == 3 and rows[0]["n"] == 11
+
+
+def test_bind_addresses_are_read_as_a_person_writes_them():
+    assert parse_bind("127.0.0.1:8765") == ("127.0.0.1", 8765)
+    assert parse_bind(":9000") == ("127.0.0.1", 9000)
+    assert parse_bind("9000") == ("127.0.0.1", 9000)
+    assert parse_bind("0.0.0.0") == ("0.0.0.0", 8765)
+    assert parse_bind("[::1]:80") == ("::1", 80)
+    with pytest.raises(ViewError, match="port 0–65535"):
+        parse_bind("host:99999")
+
+
+def _get(url):
+    try:
+        with urllib.request.urlopen(url, timeout=5) as r:
+            return r.status, r.read(), dict(r.headers)
+    except urllib.error.HTTPError as e:
+        return e.code, e.read(), dict(e.headers)
+
+
+def test_off_loopback_the_view_refuses_a_request_without_its_token():
+    dep = load(LAYOUT)
+    server = ViewServer(scene(site_of(dep), dep.cameras), ViewHub({}), "0.0.0.0", 0)
+    try:
+        base = f"http://127.0.0.1:{server.port}/"
+        assert server.token and server.token in server.url
+        for path in ("", "scene", "events", "static/view.js", "frame/C1"):
+            status, body, _ = _get(base + path)
+            assert status == 403 and b"token" in body, path
+        status, _, _ = _get(base + "scene?token=wrong" + server.token)
+        assert status == 403
+        status, body, headers = _get(base + f"scene?token={server.token}")
+        assert status == 200 and json.loads(body)["name"] == dep.name
+        assert "default-src 'self'" in headers["Content-Security-Policy"]
+        assert server.refused == 6
+    finally:
+        server.close()
+    # on loopback it is open, and says so by printing no token
+    server = ViewServer(scene(site_of(dep), dep.cameras), None, "127.0.0.1", 0)
+    try:
+        assert server.token is None and "token" not in server.url
+        assert _get(f"http://127.0.0.1:{server.port}/scene")[0] == 200
+    finally:
+        server.close()
+
+
+def test_a_port_in_use_is_one_line_not_a_traceback():
+    dep = load(LAYOUT)
+    first = ViewServer(scene(site_of(dep), dep.cameras), None, "127.0.0.1", 0)
+    try:
+        res = subprocess.run([sys.executable, "-m", "vlpcal", "view", str(LAYOUT), "--bind",
+                              f"127.0.0.1:{first.port}", "--duration", "1"],
+                             capture_output=True, text=True, timeout=60)
+        assert res.returncode == 2 and "cannot serve the view there" in res.stderr
+        assert "Traceback" not in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    finally:
+        first.close()
+
+
+def test_the_page_loads_nothing_from_outside():
+    for f in STATIC.iterdir():
+        text = f.read_text()
+        assert not re.search(r"(https?:)?//[a-z0-9]", text.replace("http://", "")
+                             .replace("https://", "")), f  # no URL of another host
+        assert "http://" not in text and "https://" not in text, f
+
+
+def test_the_scene_has_each_camera_footprints_and_maps_to_hover():
+    dep = load(LAYOUT)
+    doc = scene(site_of(dep), dep.cameras).doc
+    assert [c["id"] for c in doc["cameras"]] == [c.id for c in dep.cameras]
+    lo, hi = doc["heights"]
+    assert lo == 0.0 and 0 < hi < dep.ceiling_height
+    cam = doc["cameras"][1]
+    # a higher plane is nearer the camera: its footprint is smaller
+    def area(f):  # the shoelace formula
+        x, y = np.array(f)[:-1].T
+        return abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1))) / 2
+
+    area = [area(f) for f in cam["footprints"]]
+    assert area[1] < area[0]
+    g, m = doc["grid"], doc["maps"][0]
+    assert len(m["views"]) == g["nx"] * g["ny"] == len(m["error"]) == len(m["cameras"])
+    # under C2 every camera of the line sees the floor; its predicted error is a few mm
+    i = round((dep.cameras[1].position[0] - g["x0"]) / g["step"])
+    j = round((dep.cameras[1].position[1] - g["y0"]) / g["step"])
+    k = j * g["nx"] + i
+    assert m["views"][k] == len(m["cameras"][k]) >= 2 and 0 < m["error"][k] < 0.02
+
+
+# -- in a real browser ---------------------------------------------------------------------------
+def _browser(pw):
+    return pw.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+
+
+def _url_of(proc, timeout=60):
+    """The page's address, from the command's first lines on stderr."""
+    end = time.monotonic() + timeout
+    seen = []
+    while time.monotonic() < end:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        seen.append(line)
+        m = re.search(r"view: (http://\S+)", line)
+        if m:
+            return m.group(1)
+    raise AssertionError("no view address: " + "".join(seen))
+
+
+@pytest.fixture(scope="module")
+def live_run(tmp_path_factory):
+    """A simulated site of four live cameras (paper-square, MJPEG on 127.0.0.1, each on its
+    own clock) and a robot's LED at 1.5 m/s, tracked by ``vlpcal track --view`` while a
+    headless Chromium watches the page: the page's samples, the rows written, the truth."""
+    from playwright.sync_api import sync_playwright
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from dataclasses import replace
+
+    from test_tracking import square_rig
+
+    from vlpcal.deployment import save
+    from vlpcal.sim.mjpeg import StreamServer
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.streams import robot_path, simulate_streams
+    from vlpcal.sim.writers import deployment_of
+
+    tmp = tmp_path_factory.mktemp("view")
+    scene_ = make_scene(replace(get_profile("paper-2024"), name="paper-square",
+                                nominal=tuple(square_rig().cameras),
+                                room=((0, 0), (2.6, 0), (2.6, 2.4), (0, 2.4))), 0)
+    dep = deployment_of(scene_, "true")
+    save(dep, tmp / "d.yaml")
+    path = robot_path(scene_, 1.5)
+    seconds = 8.0
+    simulate_streams(scene_, tmp / "s", path, seconds)
+    server = StreamServer(tmp / "s", latency=0.001, latency_jitter=0.002, start=4.0)
+    cmd = [sys.executable, "-m", "vlpcal", "track", "-d", str(tmp / "d.yaml"), "--out",
+           str(tmp / "t.csv"), "--duration", str(seconds + 4.5), "--view", "127.0.0.1:0"]
+    for cam in dep.cameras:
+        cmd += ["--camera", f"{cam.id}={server.url(cam.id)}"]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    samples, frames = [], {}
+    try:
+        url = _url_of(proc)
+        with sync_playwright() as pw:
+            browser = _browser(pw)
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            page.goto(url)
+            page.wait_for_function("window.vlpcalView && window.vlpcalView.ready", timeout=30000)
+            t0 = time.monotonic()
+            shot = False
+            while proc.poll() is None and time.monotonic() - t0 < seconds + 20:
+                samples.append(page.evaluate("""() => {
+                    const s = window.vlpcalView, tr = {};
+                    for (const [id, t] of Object.entries(s.tracks)) tr[id] = {xyz: t.xyz, t: t.t};
+                    const tiles = {};
+                    for (const [id, t] of Object.entries(s.tiles))
+                        tiles[id] = {seq: t.shownSeq, drawn: t.drawn};
+                    return {at: Date.now() / 1000, updates: s.updates, tracks: tr, tiles};
+                }"""))
+                for cid in (c.id for c in dep.cameras) if len(samples) % 8 == 0 else ():
+                    got = page.evaluate("id => window.vlpcalView.tileFrame(id)", cid)
+                    if got and got["spots"]:
+                        frames.setdefault(cid, []).append(got)
+                if not shot and len(samples) > 10 and samples[-1]["tracks"]:
+                    out = Path(__file__).parents[1] / "benchmarks" / "out"
+                    out.mkdir(parents=True, exist_ok=True)
+                    page.screenshot(path=str(out / "view-live.png"), full_page=True)
+                    shot = True
+                time.sleep(0.1)
+            latency = page.evaluate("window.vlpcalView.latencies()")
+            browser.close()
+        proc.wait(60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        server.close()
+    rows = list(csv.DictReader(open(tmp / "t.csv")))
+    return {"samples": samples, "frames": frames, "rows": rows, "latency": latency,
+            "returncode": proc.returncode, "cameras": [c.id for c in dep.cameras]}
+
+
+@needs_browser
+def test_the_page_shows_each_live_camera_with_its_spot_where_the_frame_has_it(live_run):
+    assert live_run["returncode"] == 0
+    last = live_run["samples"][-1]
+    assert sorted(last["tiles"]) == sorted(live_run["cameras"])  # four tiles
+    for cid in live_run["cameras"]:
+        assert last["tiles"][cid]["drawn"] > 10, cid
+        checked = 0
+        for got in live_run["frames"].get(cid, []):
+            grey = np.array(got["grey"], float).reshape(got["height"], got["width"])
+            # the spot where the frame has it: the bright blob's centroid, found here
+            # independently (the top pixels above half the peak over the background)
+            v, u = np.unravel_index(np.argmax(grey), grey.shape)
+            lo, hi = np.median(grey), grey[v, u]
+            rows_, cols_ = slice(max(v - 6, 0), v + 7), slice(max(u - 6, 0), u + 7)
+            win = grey[rows_, cols_]
+            w = np.clip(win - (lo + hi) / 2, 0, None)
+            vv, uu = np.mgrid[rows_, cols_][:, :win.shape[0], :win.shape[1]]
+            centre = np.array([(w * uu).sum(), (w * vv).sum()]) / w.sum()
+            drawn = np.array(got["spots"], float)
+            assert np.min(np.linalg.norm(drawn - centre, axis=1)) <= 2.0, (cid, drawn, centre)
+            checked += 1
+        assert checked >= 3, cid
+
+
+@needs_browser
+def test_the_page_moves_the_track_with_the_fixes_the_run_writes(live_run):
+    rows = live_run["rows"]
+    assert sum(r["status"] == "ok" for r in rows) > 100
+    written = {(r["led"], round(float(r["t"]), 6)): np.array([float(r[c] or "nan") for c in "xyz"])
+               for r in rows}
+    shown = [(id_, s["t"], s["xyz"]) for x in live_run["samples"] for id_, s in x["tracks"].items()]
+    assert len(shown) > 20
+    near = []
+    for id_, t, xyz in shown:
+        X = written.get((id_, round(t, 6)))
+        assert X is not None, (id_, t)  # a row the run wrote…
+        near.append(np.linalg.norm(np.array(xyz, float) - X))
+    assert max(near) <= 0.01  # … drawn where the run put it (within 1 cm)
+    xy = np.array([xyz[:2] for _, _, xyz in shown])
+    assert np.ptp(xy, axis=0).max() > 0.5  # and it moved on the page as the LED drove
+    # the page updated at 5 Hz or more while the LED moved
+    s = [x for x in live_run["samples"] if x["tracks"]]
+    rate = (s[-1]["updates"] - s[0]["updates"]) / (s[-1]["at"] - s[0]["at"])
+    assert rate >= 5, rate
+    lat = live_run["latency"]
+    assert lat["frame_p50"] is not None and 0 < lat["frame_p95"] < 2.0, lat
+
+
+@needs_browser
+def test_a_browser_without_the_token_is_refused_off_loopback(tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    proc = subprocess.Popen([sys.executable, "-m", "vlpcal", "view", str(LAYOUT), "--bind",
+                             "0.0.0.0:0", "--duration", "60"], stderr=subprocess.PIPE, text=True)
+    try:
+        url = _url_of(proc)
+        token = url.split("token=")[1]
+        bare = url.split("?")[0]
+        with sync_playwright() as pw:
+            browser = _browser(pw)
+            page = browser.new_page()
+            res = page.goto(bare)
+            assert res.status == 403 and "token" in page.content()
+            page.goto(url)
+            page.wait_for_function("window.vlpcalView && window.vlpcalView.ready", timeout=30000)
+            assert page.evaluate("window.vlpcalView.scene.cameras.length") == 3
+            page.goto(bare)  # the token given once is kept by this browser (a cookie)
+            page.wait_for_function("window.vlpcalView && window.vlpcalView.ready", timeout=30000)
+            browser.close()
+        assert token
+    finally:
+        proc.terminate()
+        proc.wait(10)

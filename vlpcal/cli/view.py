@@ -1,0 +1,117 @@
+"""The live page (``vlpcal view``, and ``--view`` on ``track``): a deployment's plan, its
+cameras' frames and the tracks, in a browser (issue 30)."""
+
+from __future__ import annotations
+
+import click
+
+from .common import Finite, UserError, main
+
+#: the page's address unless told otherwise
+DEFAULT_BIND = "127.0.0.1:8765"
+
+
+def open_view(dep, bind: str, source: str = "", live: bool = True, site=None):
+    """Serve the page of deployment ``dep`` (or of ``site``, a planner's site file, with no
+    cameras) on ``bind``; returns (its hub — None when not ``live`` —, its server). Says
+    where it is on stderr (with the token, when bound off loopback)."""
+    from ..view.scene import scene, site_of
+    from ..view.server import ViewError, ViewServer, parse_bind
+
+    try:
+        host, port = parse_bind(bind)
+    except ViewError as e:
+        raise UserError(f"--view/--bind {e}") from None
+    if site is None:
+        drawn = scene(site_of(dep), list(dep.cameras), calibration=_calibration(dep))
+        cameras = {c.id: (c.width, c.height) for c in dep.cameras}
+    else:
+        drawn, cameras = scene(site, []), {}
+    hub = None
+    if live:
+        from ..view import ViewHub
+
+        hub = ViewHub(cameras, source)
+    try:
+        server = ViewServer(drawn, hub, host, port)
+    except ViewError as e:
+        raise UserError(f"view: {e}") from None
+    line = f"view: {server.url}"
+    if server.token:
+        line += ("  (bound beyond this machine: the page asks for this token; anyone on the "
+                 "network who has the address has the view)")
+    click.echo(line, err=True)
+    return hub, server
+
+
+def _calibration(dep) -> dict | None:
+    """A calibrated deployment's survey figures, as its provenance holds them."""
+    prov = dep.extra.get("provenance")
+    if not isinstance(prov, dict):
+        return None
+    held = prov.get("held_out") or prov.get("calibration")
+    return held if isinstance(held, dict) else None
+
+
+@main.command()
+@click.argument("path", type=click.Path(dir_okay=False))
+@click.option("--bind", default=DEFAULT_BIND, show_default=True, metavar="HOST:PORT",
+              help="Where the page is served; another interface than loopback asks for the "
+                   "token printed at start.")
+@click.option("--camera", "cameras", multiple=True, metavar="ID=SOURCE",
+              help="A live camera (as vlpcal track --camera): its frames, spots and the "
+                   "tracks drawn live.")
+@click.option("--duration", type=Finite(0, 1e7, min_open=True), default=None,
+              help="Stop after this many seconds (default: until Ctrl-C).")
+def view(path, bind, cameras, duration):
+    """A deployment (or a planner's site) in the browser: the floor plan to scale, the
+    cameras and their footprints at the lowest and highest LED height, the maps of how many
+    cameras see each point and its predicted error (hover a point to read them); with
+    --camera, each camera's latest frame and spots and the tracks on the plan, live.
+
+    Example: vlpcal view layouts/paper-linear.deployment.yaml
+    """
+    import time
+
+    dep, site = _deployment_or_site(path)
+    if cameras and dep is None:
+        raise UserError(f"{path}: a site has no cameras to show live; give a deployment")
+    hub, server = open_view(dep, bind, source=path if not cameras else
+                            f"{path}, {len(cameras)} live camera(s)",
+                            live=bool(cameras), site=site)
+    t_end = time.monotonic() + duration if duration else None
+    try:
+        if cameras:
+            from .track import _track_live
+
+            _track_live(dep, path, cameras, duration, None, None, None, None, True, None,
+                        lambda watch: None, hub)
+        else:
+            click.echo("Ctrl-C to stop", err=True)
+            while t_end is None or time.monotonic() < t_end:
+                time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+
+
+def _deployment_or_site(path):
+    """A deployment file → (deployment, None); a planner's site file → (None, site)."""
+    from ..deployment import DeploymentError, load
+    from ..planning import SiteError, load_site
+    from ..reading import ReadError, load_yaml
+
+    try:
+        doc = load_yaml(path, "a deployment or a site file (docs/formats.md)")
+    except ReadError as e:
+        raise UserError(str(e)) from None
+    if isinstance(doc, dict) and doc.get("format") == "vlpcal-site":
+        try:
+            return None, load_site(path)
+        except SiteError as e:
+            raise UserError(str(e)) from None
+    try:
+        return load(path), None
+    except DeploymentError as e:
+        raise UserError(str(e)) from None
