@@ -3,18 +3,21 @@ one well-kept package, on asyncio, so no separate ASGI server is needed).
 
 It runs in a thread of its own beside the command. ``/`` the page, ``/static/…`` its script
 and style (from the package: no build step, no outside URL), ``/scene`` the room (JSON),
-``/events`` the live stream (server-sent events, :data:`TICK` apart when something changed),
-``/frame/<id>`` a camera's latest JPEG. Bound to loopback it is open; bound to any other
+``/events`` the live stream (server-sent events, :data:`TICK` apart when something changed;
+each camera's latest frame in it, :data:`FRAME_HZ` a second at most), ``/frame/<id>`` a
+camera's latest JPEG. Bound to loopback it is open; bound to any other
 interface every request needs the token printed at start (``?token=`` once, then a cookie)."""
 
 from __future__ import annotations
 
 import asyncio
+import base64
 import hmac
 import ipaddress
 import json
 import secrets
 import threading
+import time
 from pathlib import Path
 
 from aiohttp import web
@@ -23,7 +26,10 @@ from .hub import ViewHub
 from .scene import Scene
 
 #: s between two updates of a page (at most; none while nothing changed)
-TICK = 0.05
+TICK = 0.1
+#: a camera's frames sent to a page a second, at most: enough to aim a camera by, and cheap
+#: beside the tracker (the rest are skipped; the page counts them)
+FRAME_HZ = 10
 #: the page's files
 STATIC = Path(__file__).with_name("static")
 #: what the page may load: its own server's files and frames, nothing outside
@@ -178,12 +184,20 @@ class ViewServer:
         await response.write(_event("hello", hello))
         if self.hub is None:
             return response
-        status = None
+        status, sent = None, {}  # camera → when its last frame went to this page
         try:
             while True:
                 cams, rows, missed = self.hub.since(after, seen)
                 if rows:
                     after = rows[-1]["n"]
+                now = time.monotonic()
+                for cid, cam in cams.items():  # a frame with its own spots and time
+                    if cam["frame"] and now - sent.get(cid, -1e9) >= 1 / FRAME_HZ:
+                        seq, t, uv, jpeg = self.hub.latest_frame(cid)
+                        if jpeg is not None:
+                            cam["jpeg"] = base64.b64encode(jpeg).decode()
+                            cam["jpeg_seq"], cam["jpeg_t"], cam["jpeg_uv"] = seq, t, uv
+                            sent[cid] = now
                 said = self.hub.status
                 if cams or rows or missed or said != status:
                     status = said

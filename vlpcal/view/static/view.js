@@ -199,28 +199,17 @@ function tileOf(id, size) {
   return t;
 }
 
-async function loadFrame(id, t) {
-  if (t.loading) return;
-  t.loading = true;
-  try {
-    const res = await fetch(`frame/${encodeURIComponent(id)}`, {cache: "no-store"});
-    if (!res.ok) return;
-    const seq = +res.headers.get("X-Frame-Seq"), when = +res.headers.get("X-Frame-Time");
-    const spots = JSON.parse(res.headers.get("X-Frame-Spots") || "[]");
-    const img = await createImageBitmap(await res.blob());
-    if (seq <= t.shownSeq) return;
-    if (t.shownSeq) t.skipped += Math.max(0, seq - t.shownSeq - 1);
-    t.shownSeq = seq;
-    t.image = img;
-    drawTile(t, img, spots);
-    t.drawn += 1;
-    push(state.latency.frame, Date.now() / 1000 - when);
-  } catch (e) {
-    // a frame lost on the way: the next one comes
-  } finally {
-    t.loading = false;
-    if (t.seq > t.shownSeq && t.summary.frame) loadFrame(id, t);
-  }
+async function showFrame(t, c) {
+  // the frame came in the update with its own spots and time (base64 JPEG)
+  const bytes = Uint8Array.from(atob(c.jpeg), ch => ch.charCodeAt(0));
+  const img = await createImageBitmap(new Blob([bytes], {type: "image/jpeg"}));
+  if (c.jpeg_seq <= t.shownSeq) return;
+  if (t.shownSeq) t.skipped += Math.max(0, c.jpeg_seq - t.shownSeq - 1);
+  t.shownSeq = c.jpeg_seq;
+  t.image = img;
+  drawTile(t, img, c.jpeg_uv);
+  t.drawn += 1;
+  push(state.latency.frame, Date.now() / 1000 - c.jpeg_t);
 }
 
 function drawTile(t, img, spots) {
@@ -239,8 +228,8 @@ function drawTile(t, img, spots) {
 function updateCamera(id, c) {
   const t = tileOf(id, [c.width, c.height]);
   t.summary = c; t.seq = c.seq;
-  if (c.frame) loadFrame(id, t);
-  else if (c.seq !== t.shownSeq) {   // spots without frames (over MQTT)
+  if (c.jpeg) showFrame(t, c);
+  else if (!c.frame && c.seq !== t.shownSeq) {   // spots without frames (over MQTT)
     if (t.shownSeq) t.skipped += Math.max(0, c.seq - t.shownSeq - 1);
     t.shownSeq = c.seq; drawTile(t, null, c.uv); t.drawn += 1;
     if (c.t !== null) push(state.latency.frame, Date.now() / 1000 - c.t);
