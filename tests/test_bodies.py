@@ -125,7 +125,7 @@ def test_a_robot_carrying_blinking_leds_gets_its_position_and_heading(n):
     assert all(r.pose is None for r in led_rows)
 
 
-@pytest.mark.parametrize("x, said", [(0.15, False), (0.16, True), (15.0, True)])
+@pytest.mark.parametrize("x, said", [(0.15, False), (0.16, True), (15.0, True), (0.06, True)])
 def test_a_layout_in_other_units_or_measured_wrong_is_said(x, said):
     """From a hostile probe: a bodies: block in centimetres gave no body row and no word; one
     measured 1 cm off gave rows skewed by it, without a word."""
@@ -154,12 +154,15 @@ def line_robot(tmp_path_factory):
     return out
 
 
-@pytest.mark.parametrize("x, said", [(0.15, False), (0.16, True), (15.0, True)])
+@pytest.mark.parametrize("x, said", [(0.15, False), (0.16, True), (15.0, True), (0.06, True)])
 def test_a_layout_measured_wrong_is_said_under_the_papers_line_of_cameras(x, said, line_robot,
                                                                          tmp_path):
     """From a newcomer: under the paper's three cameras in a line, 10 s gave only 10 moments
     both LEDs were placed, short of the 30 a verdict then waited for, so a layout in
-    centimetres or 1 cm off went unsaid. Ten measures 0.5 mm apart are sure enough."""
+    centimetres or 1 cm off went unsaid. Ten measures 0.5 mm apart are sure enough. From a
+    hostile probe: a layout too small (0.7 ×) was never judged (a measure counted only when
+    its sigmas were small beside the layout's distance), its rows decimetres off at ok; and
+    rows given before a verdict were written. Offline, the file holds none of them."""
     out = line_robot
     doc = deployment.load(out / "truth.yaml").to_dict()
     doc["bodies"][0]["leds"]["L1"] = [x, 0.0, 0.15]
@@ -169,6 +172,8 @@ def test_a_layout_measured_wrong_is_said_under_the_papers_line_of_cameras(x, sai
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert ("warning: body R1: its LEDs L1 and L2 lay 0.30" in res.stderr) == said, res.stderr
+    body_rows = [r for r in csv.DictReader(open(tmp_path / "t.csv")) if r["led"] == "R1"]
+    assert (len(body_rows) == 0) == said, len(body_rows)
 
 
 def test_a_track_that_goes_on_as_another_is_named_by_the_phases_its_codes_were_read_at(

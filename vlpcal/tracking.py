@@ -687,8 +687,9 @@ class Tracker:
                 want = body.apart(a, b)
                 fits = _apart(pa, sa, pb, sb, want)[0]
                 lay = float(np.linalg.norm(pa - pb))
-                # measured well, for the layout it is held to
-                if 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) <= SHAPE_SLACK * want:
+                # measured well, for the layout it is held to or the distance it measures
+                # (a layout too small is judged as readily as one too large)
+                if 3 * np.sqrt(3 * (sa ** 2 + sb ** 2)) <= SHAPE_SLACK * max(want, lay):
                     seen_apart = state.apart.setdefault(tuple(sorted((a, b))),
                                                         deque(maxlen=LAYOUT_MOMENTS))
                     seen_apart.append(lay)

@@ -73,6 +73,10 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
                         "camera) or --spots mqtt://…")
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
+    if spots is not None and spots < len(dep.leds):  # a warning: -q hides none
+        click.echo(f"warning: --leds {spots}: {deployment_path} has {len(dep.leds)} LEDs in "
+                   f"its leds: block; each frame is searched for {spots} spot(s), so the "
+                   "others are not tracked whenever more are in view", err=True)
     if view_bind is not None and frames_dir:
         raise UserError("--view shows a live run (--camera or --spots); a folder of frames is "
                         "tracked faster than it could be watched")
@@ -241,6 +245,13 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += _published(publisher, tracker.finish())
     _Layouts(tracker)(end=True)
+    wrong = {m.body for m in tracker.layout_misfits()}
+    if wrong:  # its rows before the verdict were skewed by the layout too: none written
+        kept = [r for r in rows if not (r.pose is not None and r.led in wrong)]
+        if len(kept) < len(rows):
+            click.echo(f"warning: {len(rows) - len(kept)} rows of {', '.join(sorted(wrong))} "
+                       "given before its layout was judged are left out of the file", err=True)
+        rows = kept
     if not rows:
         raise _no_rows(tracker, frames_dir, unreadable)
     _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
