@@ -385,3 +385,66 @@ def test_a_robots_leds_keep_their_names_and_its_heading_never_turns_round(profil
     led_rows = [r for r in rows if r.pose is None and r.status == "ok" and r.led in truth]
     named_wrong = [np.linalg.norm(r.position - truth[r.led](r.t)) > 0.05 for r in led_rows]
     assert np.mean(named_wrong) < 0.02, sum(named_wrong)
+
+
+def test_two_robots_side_by_side_are_not_taken_for_a_wrong_deployment(tmp_path):
+    """From a hostile probe: two two-LED robots driving side by side 0.4 m apart under the
+    paper's line of cameras — their four LEDs' first tracks took each other's spots, and the
+    fit watch stopped the right deployment after 31 moments (61 % not placed). It now waits
+    for as many moments per LED a frame is searched for as one LED's."""
+    from vlpcal.datasets import read_async_frames
+    from vlpcal.detection import detect_several
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.streams import MovingLed, robot_path, simulate_streams
+    from vlpcal.sim.writers import deployment_of
+
+    scene = make_scene(get_profile("paper-2024"), 0)
+    path = robot_path(scene, 1.0, height=0.0, seed=0)
+
+    def beside(d):
+        def at(t):
+            t = np.asarray(t, float)
+            v = path(t + 1e-3) - path(t - 1e-3)
+            n = np.stack([-v[..., 1], v[..., 0], 0 * v[..., 0]], -1)
+            return path(t) + d * n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-9)
+        return at
+
+    def heading(t):
+        v = path(np.asarray(t, float) + 1e-3) - path(np.asarray(t, float) - 1e-3)
+        return np.arctan2(v[..., 1], v[..., 0])
+
+    def robot(origin, codes, prefix):  # the LEDs' phases as the probe drew them
+        rng = np.random.default_rng([0, 29, 2])
+        out = []
+        for (led, b), pattern in zip(BODY_LAYOUTS[2].items(), codes):
+            code = BlinkCode(prefix + led, pattern, 10.0)
+            lever = np.asarray(b, float)
+            out.append(MovingLed(prefix + led, lambda t, b=lever: origin(t)
+                                 + np.einsum("...ij,j->...i", rotation(heading(t)), b),
+                                 code, float(rng.uniform(0, code.period))))
+        return out
+
+    a = robot(beside(0.2), ("0010111101", "0011001111"), "A")
+    b = robot(beside(-0.2), ("0101010111", "0001011011"), "B")
+    blocks = body_blocks(a, BODY_LAYOUTS[2], "R1")
+    more = body_blocks(b, BODY_LAYOUTS[2], "R2")
+    blocks = {k: blocks[k] + more[k] for k in blocks}
+    simulate_streams(scene, tmp_path / "s", a + b, 10.0, seed=0)
+    dep = deployment_of(scene, "true", blocks)
+    folder = read_async_frames(tmp_path / "s")
+    found = {}
+    for cam in dep.cameras:
+        mine = [no for _, c, no in folder.events if c == cam.id]
+        uv = detect_several([folder.frame(cam.id, no) for no in mine], 4,
+                            shape=(cam.height, cam.width))
+        found.update({(cam.id, no): u for no, u in zip(mine, uv)})
+    tr = Tracker(dep, period=1 / 30)
+    rows, said = [], []
+    for t, cid, no in folder.events:
+        rows += tr.update_spots(cid, t, found[(cid, no)])
+        if tr.fit.misfit() is not None:
+            said.append(tr.fit.misfit().message())
+    rows += tr.finish()
+    assert not said, said[0]
+    assert {r.led for r in rows if r.pose is not None} == {"R1", "R2"}

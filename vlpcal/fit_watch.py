@@ -24,7 +24,8 @@ FIT_SHARE = 0.8
 CONFIDENCE_Z = 2.58
 #: the moments judged: the latest this many (a camera bumped mid-run shows) …
 RECENT = 300
-#: … and no verdict on fewer than this many
+#: … and no verdict on fewer than this many (per LED a frame is searched for: several LEDs
+#: side by side confuse their tracks' first moments)
 LEAST = 30
 
 
@@ -56,8 +57,8 @@ class FitWatch:
     """Moments two cameras or more saw the LED, placed or not (and why not), as they come;
     :meth:`misfit` says when the latest of them show the frames do not fit."""
 
-    def __init__(self, deployment: str, what: str, recent: int = RECENT):
-        self.deployment, self.what = deployment, what
+    def __init__(self, deployment: str, what: str, recent: int = RECENT, least: int = LEAST):
+        self.deployment, self.what, self.least = deployment, what, least
         self._recent: deque = deque(maxlen=recent)
         self._placed = 0
         self.moments = 0  #: all moments seen
@@ -87,7 +88,7 @@ class FitWatch:
         """The latest moments' verdict: a :class:`Misfit` when their share placed is below
         :data:`FIT_SHARE` beyond doubt, else None."""
         n = len(self._recent)
-        if n < LEAST or _wilson_upper(self._placed, n) >= FIT_SHARE:
+        if n < self.least or _wilson_upper(self._placed, n) >= FIT_SHARE:
             return None
         reasons = Counter(r for placed, r in self._recent if not placed)
         return Misfit(self.deployment, n, self._placed, tuple(reasons.most_common()), self.what)

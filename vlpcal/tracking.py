@@ -49,7 +49,7 @@ from .blink import MAX_OBSERVATIONS, WINDOW_REPEATS, decode_phase
 from .bodies import angles, fit_pose, gives_full_pose, pose_from_points, rotation
 from .deployment import Body, Deployment
 from .detection import detect_frame
-from .fit_watch import FitWatch
+from .fit_watch import LEAST, FitWatch
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -268,10 +268,6 @@ class Tracker:
         self._body_of = {led: state for state in self.bodies for led in state.body.leds}
         self._spotted: dict = {}  #: camera index → the time of its newest frame with a spot
         self.frames_with_spot = 0
-        #: whether the frames fit: each spot a track's window of two cameras' rays took (the
-        #: window placed, or its rays miss each other or fall outside the room), and each spot
-        #: that met no other camera's recent one while another camera saw a spot
-        self.fit = FitWatch(deployment.name, "spots seen while another camera saw one")
         self._pending: list[_Ray] = []
         #: (time, camera) of the latest spots that met no other camera's (:meth:`_expire`)
         self._unmet: deque = deque(maxlen=256)
@@ -287,6 +283,13 @@ class Tracker:
         if spots is not None and not (isinstance(spots, (int, np.integer)) and spots >= 1):
             raise ValueError(f"spots: expected a whole number ≥ 1 (or None), got {spots!r}")
         self.spots = int(spots) if spots else max(1, len(self.codes))
+        #: whether the frames fit: each spot a track's window of two cameras' rays took (the
+        #: window placed, or its rays miss each other or fall outside the room), and each spot
+        #: that met no other camera's recent one while another camera saw a spot — judged on
+        #: as many moments per LED as one LED's (several side by side confuse their tracks'
+        #: first moments)
+        self.fit = FitWatch(deployment.name, "spots seen while another camera saw one",
+                            least=LEAST * self.spots)
         self._repeat = max((c.period for c in self.codes), default=0.0)
         # a blinking LED is dark for its code's longest run of 0s: no spot then is no loss
         dark = max((max(map(len, (c.pattern * 2).split("1"))) / c.bit_rate
