@@ -524,13 +524,19 @@ class Tracker:
         pose is of the last window: the body's other LEDs place it even while its own track
         is stale (dark, or one camera alone sees it). None otherwise."""
         state = self._body_of.get(tr.led)
-        if state is None or state.fit is None or tr.tentative \
-                or abs(t - state.fit_t) > 2 * WINDOW * self.period:
+        if state is None or tr.tentative:
+            return None
+        return self._posed(state, tr.led, t)
+
+    def _posed(self, state: _BodyState, led: str, t: float):
+        """Where the body's latest pose, of the last windows, carried to ``t`` puts its LED
+        ``led``: (position, velocity, their sigmas); None when it has no such pose."""
+        if state.fit is None or abs(t - state.fit_t) > 2 * WINDOW * self.period:
             return None
         f, var = state.fit, np.diag(state.cov)
         dt = t - state.fit_t
         yaw = f[9] + f[10] * dt
-        b = state.body.leds[tr.led]
+        b = state.body.leds[led]
         R = rotation(yaw, f[11], f[12])
         lever = float(np.linalg.norm(b[:2]))
         spin = self.acceleration / max(lever, 1e-9)
@@ -732,18 +738,35 @@ class Tracker:
             named = {o.led: o for o in self.tracks if o.led in state.body.leds and o is not tr
                      and t - o.last_two <= WINDOW * self.period}  # placed now
             if named:
-                fits += [led for led in state.body.leds
+                fits += [(led, named) for led in state.body.leds
                          if led not in named and self._beside(tr, led, named)]
         # exactly one of the body's LEDs not placed now fits; if another track still holds
         # that name (a track of it not placed now), that track keeps it and this one waits
-        if len(fits) != 1 or any(o.led == fits[0] for o in self.tracks if o is not tr):
+        if len(fits) != 1 or any(o.led == fits[0][0] for o in self.tracks if o is not tr):
             tr.shape_votes = (None, 0)
             return
-        led = fits[0]
+        led, named = fits[0]
+        # … and no other track no code names lies there too (another robot's LED passing
+        # at that distance from the named one), nor does the body's pose put it elsewhere
+        if any(o is not tr and not o.tentative and o.led == o.anonymous and o.fit is not None
+               and t - o.last_two <= WINDOW * self.period and self._beside(o, led, named)
+               for o in self.tracks) or not self._where_posed(tr, led, t):
+            tr.shape_votes = (None, 0)
+            return
         votes = tr.shape_votes[1] + 1 if tr.shape_votes[0] == led else 1
         tr.shape_votes = (led, votes)
         if votes >= SHAPE_VOTES:
             tr.led, tr.margin, tr.code = led, 0, None
+
+    def _where_posed(self, tr: _Track, led: str, t: float) -> bool:
+        """Whether the track's latest fit lies where its body's latest pose, of the last
+        windows, puts ``led`` (within :data:`GATE_SIGMAS` of the two's sigmas); True when
+        the body has no such pose."""
+        guess = self._posed(self._body_of[led], led, tr.fit_t)
+        if guess is None:
+            return True
+        pos, _, s_pos, _ = guess
+        return bool(np.linalg.norm(tr.fit[:3] - pos) <= GATE_SIGMAS * np.hypot(s_pos, tr.s_pos))
 
     def _beside(self, tr: _Track, led: str, named: dict) -> bool:
         """Whether the track's latest fit lies where its body's LED ``led`` does beside the
