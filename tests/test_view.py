@@ -316,3 +316,51 @@ def test_a_browser_without_the_token_is_refused_off_loopback(tmp_path):
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_the_view_follows_what_a_running_track_publishes(broker):
+    """``vlpcal view D --follow mqtt://…/prefix``: the fixes, tracks and bodies a running
+    command publishes (and the spots the cameras publish) reach the page; a message that is
+    none of them is counted, not shown."""
+    import paho.mqtt.client as mqtt
+
+    proc = subprocess.Popen([sys.executable, "-m", "vlpcal", "view", str(LAYOUT), "--bind",
+                             "127.0.0.1:0", "--follow", broker.url("lab"), "--duration", "8"],
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        url = _url_of(proc)
+        assert "following" in proc.stderr.readline()
+        c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+        c.connect("127.0.0.1", broker.port)
+        c.loop_start()
+        now = time.time()
+        track = {"t": now, "led": "L1", "x": 1.2, "y": 0.9, "z": 0.15, "vx": 1.0, "vy": 0.0,
+                 "vz": 0.0, "sigma_m": 0.002, "cameras": "C1+C2", "status": "ok"}
+        body = dict(track, led="R1", yaw=0.5, pitch=None, roll=None, sigma_yaw=0.01)
+        fix = {"t": now, "frame_id": "7", "x": None, "y": None, "z": None, "sigma_m": None,
+               "cameras": "", "status": "degenerate"}
+        for topic, payload in (("lab/fixes/L1", track), ("lab/bodies/R1", body),
+                               ("lab/fixes/L2", fix), ("lab/spots/C2", {"t": now, "u": 80.5,
+                                                                        "v": 60.25}),
+                               ("lab/fixes/L3", {"t": "soon"})):
+            c.publish(topic, json.dumps(payload)).wait_for_publish()
+        c.disconnect()
+        c.loop_stop()
+        got, end = [], time.monotonic() + 10
+        with urllib.request.urlopen(url + "events", timeout=10) as stream:
+            for line in stream:
+                if line.startswith(b"data: ") and b'"rows"' in line:
+                    got.append(json.loads(line[6:]))
+                rows = [r for g in got for r in g["rows"]]
+                spots = [c for g in got for c in g["cameras"].items()]
+                if len(rows) >= 3 and spots or time.monotonic() > end:
+                    break
+        ids = {r["id"]: r for r in rows}
+        assert ids["L1"]["xyz"] == [1.2, 0.9, 0.15] and ids["L1"]["kind"] == "track"
+        assert ids["R1"]["yaw"] == 0.5 and ids["L2"]["xyz"] is None
+        assert "L3" not in ids
+        assert [c["uv"] for cid, c in spots if cid == "C2"][-1] == [[80.5, 60.25]]
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=10)
+    assert "1 message on" in err and "was not a fix" in err, err

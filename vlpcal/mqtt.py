@@ -493,6 +493,77 @@ class SpotSubscriber:
         self.client.loop_stop()
 
 
+class RowSubscriber:
+    """What a running ``locate`` or ``track`` publishes on ``prefix`` — fixes, track updates
+    and bodies' poses (``prefix/fixes/<led>``, ``prefix/bodies/<id>``) — and the spots cameras
+    publish there (``prefix/spots/<camera>``), for a page to follow. :meth:`get` gives
+    ``("row", kind, message)`` (kind ``fixes`` or ``bodies``, the message as
+    :func:`fix_message` and :func:`track_message` make it, ``led`` filled from the topic) or
+    ``("spots", camera, (t, uv))``; a message that is not one is counted (``bad``)."""
+
+    def __init__(self, target: Target, ca_file=None, timeout: float = CONNECT_TIMEOUT):
+        self.target = target
+        self.bad = self.received = self.dropped = 0
+        self._queue: queue.Queue = queue.Queue(maxsize=BUFFER)
+        self._connected = threading.Event()
+        self._refused: list = []
+        self._ever = False
+        self.client = _client(target, f"vlpcal-follow-{os.getpid()}-{time.time_ns()}", ca_file)
+        self.client.on_connect = self._on_connect
+        self.client.on_message = self._on_message
+        _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
+
+    def _on_connect(self, client, userdata, flags, reason_code, properties=None):
+        if reason_code.is_failure:
+            if not self._ever:
+                self._refused.append(str(reason_code).lower())
+            return
+        self._ever = True
+        client.subscribe([(f"{self.target.prefix}/{kind}/+", 0)
+                          for kind in ("fixes", "bodies", "spots")])
+        self._connected.set()
+
+    def _on_message(self, client, userdata, msg):
+        try:
+            item = self._take(msg)
+        except Exception:  # whatever a message holds, the client's thread goes on listening
+            item = None
+        if item is None:
+            self.bad += 1
+            return
+        self.received += 1
+        try:
+            self._queue.put_nowait(item)
+        except queue.Full:
+            self.dropped += 1
+
+    def _take(self, msg):
+        kind, name = msg.topic.rsplit("/", 2)[-2:]
+        if msg.retain or len(msg.payload) > MAX_SPOT_MESSAGE:
+            return None
+        if kind == "spots":
+            spots = _spots_of(msg.payload)
+            return None if spots is None else ("spots", name, spots)
+        message = json.loads(msg.payload)
+        if not (isinstance(message, dict) and _number(message.get("t"))
+                and all(message.get(k) is None or _number(message.get(k))
+                        for k in ("x", "y", "z", "sigma_m", "yaw", "sigma_yaw"))):
+            return None
+        message.setdefault("led", name)
+        return "row", kind, message
+
+    def get(self, timeout: float):
+        """The next item, or None after ``timeout`` s."""
+        try:
+            return self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
 def broker_topics(target: Target, ca_file=None, seconds: float = LOOK_SECONDS,
                   most: int = LOOK_TOPICS) -> list[str] | None:
     """The topics the broker carries now: a short look under the wildcard ``#`` (retained

@@ -61,9 +61,14 @@ def _calibration(dep) -> dict | None:
 @click.option("--camera", "cameras", multiple=True, metavar="ID=SOURCE",
               help="A live camera (as vlpcal track --camera): its frames, spots and the "
                    "tracks drawn live.")
+@click.option("--follow", "follow_url", default=None, metavar="mqtt://…/PREFIX",
+              help="Follow a running locate or track that publishes on PREFIX (--publish): "
+                   "its fixes, tracks and bodies, and the spots cameras publish there.")
+@click.option("--ca-file", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="The broker's CA certificate (mqtts:// with a private CA).")
 @click.option("--duration", type=Finite(0, 1e7, min_open=True), default=None,
               help="Stop after this many seconds (default: until Ctrl-C).")
-def view(path, bind, cameras, duration):
+def view(path, bind, cameras, follow_url, ca_file, duration):
     """A deployment (or a planner's site) in the browser: the floor plan to scale, the
     cameras and their footprints at the lowest and highest LED height, the maps of how many
     cameras see each point and its predicted error (hover a point to read them); with
@@ -74,14 +79,23 @@ def view(path, bind, cameras, duration):
     import time
 
     dep, site = _deployment_or_site(path)
-    if cameras and dep is None:
+    if (cameras or follow_url) and dep is None:
         raise UserError(f"{path}: a site has no cameras to show live; give a deployment")
-    hub, server = open_view(dep, bind, source=path if not cameras else
-                            f"{path}, {len(cameras)} live camera(s)",
-                            live=bool(cameras), site=site)
+    if cameras and follow_url:
+        raise UserError("give --camera … or --follow, not both")
+    target = None
+    if follow_url:
+        from .mqtt import parse_mqtt
+
+        target = parse_mqtt(follow_url, "--follow")
+    source = (f"{path}, {len(cameras)} live camera(s)" if cameras else
+              f"{path}, following {target.shown()}" if target else path)
+    hub, server = open_view(dep, bind, source=source, live=bool(cameras or target), site=site)
     t_end = time.monotonic() + duration if duration else None
     try:
-        if cameras:
+        if target is not None:
+            _follow(target, ca_file, hub, t_end)
+        elif cameras:
             from .track import _track_live
 
             _track_live(dep, path, cameras, duration, None, None, None, None, True, None,
@@ -94,6 +108,38 @@ def view(path, bind, cameras, duration):
         pass
     finally:
         server.close()
+
+
+def _follow(target, ca_file, hub, t_end) -> None:
+    """What a running command publishes on ``target``'s prefix, to the page, until
+    ``t_end`` (monotonic s) or Ctrl-C."""
+    import time
+
+    from ..mqtt import MqttError, RowSubscriber
+
+    try:
+        sub = RowSubscriber(target, ca_file)
+    except MqttError as e:
+        raise UserError(f"--follow {e}") from None
+    click.echo(f"following {target.shown()}/{{fixes,bodies,spots}}/+ (Ctrl-C to stop)",
+               err=True)
+    try:
+        while t_end is None or time.monotonic() < t_end:
+            item = sub.get(timeout=0.2)
+            if item is None:
+                continue
+            if item[0] == "spots":
+                t, uv = item[2]
+                hub.frame(item[1], t, uv)
+            else:
+                hub.message_rows([item[2]])
+    finally:
+        sub.close()
+        if sub.bad:
+            one = sub.bad == 1
+            click.echo(f"{sub.bad} message{'' if one else 's'} on {target.shown()} "
+                       f"{'was not a fix' if one else 'were not fixes'}, track update, body "
+                       "pose or spots (not shown)", err=True)
 
 
 def _deployment_or_site(path):

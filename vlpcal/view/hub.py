@@ -106,10 +106,20 @@ class ViewHub:
             made.append(row)
         self._put(made)
 
-    def fix_rows(self, rows) -> None:
-        """Fixes as dicts: ``t`` (UTC s), ``xyz`` (m; None when not placed), ``sigma`` (m),
-        ``status``, ``id`` (the LED, or "" for one without)."""
-        self._put([{"kind": "fix", **r} for r in rows])
+    def message_rows(self, messages) -> None:
+        """Rows as ``locate`` and ``track`` publish them over MQTT (docs/mqtt.md): a fix, a
+        track update (it has a velocity) or a body's pose (a yaw)."""
+        made = []
+        for m in messages:
+            xyz = [m.get(k) for k in ("x", "y", "z")]
+            row = {"kind": "track" if "vx" in m else "fix", "t": float(m["t"]),
+                   "id": str(m.get("led", "")), "xyz": xyz if None not in xyz else None,
+                   "sigma": m.get("sigma_m"), "cameras": str(m.get("cameras", "")),
+                   "status": str(m.get("status", ""))}
+            if m.get("yaw") is not None:
+                row["yaw"], row["sigma_yaw"] = m["yaw"], m.get("sigma_yaw")
+            made.append(row)
+        self._put(made)
 
     def _put(self, rows: list) -> None:
         if not rows:
