@@ -218,7 +218,8 @@ Example: `surveys/paper-2024/survey/`.
 Beside the calibrated deployment: `held_out_m` (per comparison — nominal or calibrated cameras
 × fusion — the k-fold `mean`, `median`, `p90`, `p95`, `max` in metres, `null` where no held-out
 point got a fix, and `fixed`, the share of held-out points with a fix), `folds`, `cameras` (per
-camera `rms_px`, `points`, `outliers`, `moved_m` (and `moved_cm`), `moved_share` (of its
+camera `rms_px`, `points`, `outliers`, `nominal_position_m` (where the deployment it started
+from had it), `moved_m` (and `moved_cm`), `moved_share` (of its
 distance to the survey), `turned_deg`, the fitted intrinsics, `lens_model` (the one used),
 `lens_forced`, `lens_candidates` (per lens model fitted: `held_out_3d_m`, the held-out 3D
 error of survey points with this camera in that model and the others as chosen, `held_out_px`,

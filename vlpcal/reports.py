@@ -47,7 +47,8 @@ def _place_labels(ax, labels, avoid=()) -> list:
     renderer = ax.figure.canvas.get_renderer()
     frame = ax.get_window_extent(renderer)
     taken = np.zeros((len(avoid) + len(labels), 4))  # x0, y0, x1, y1 of each box so far
-    taken[: len(avoid)] = [(b.x0, b.y0, b.x1, b.y1) for b in avoid]
+    if len(avoid):
+        taken[: len(avoid)] = [(b.x0, b.y0, b.x1, b.y1) for b in avoid]
     n = len(avoid)
     placed = []
 
@@ -189,48 +190,142 @@ def survey_plan_figure(path, dep, plan, route=None) -> list:
     return [b for panel in boxes for b in panel]
 
 
-def calibration_figure(path, stats, per_point, X, cameras, lens_rows=()) -> None:
-    """Held-out errors: map over the floor (nominal vs calibrated, all-camera LS) and CDF; with
-    ``lens_rows`` (the report's per-camera rows) a panel of each camera's lens models and
-    the held-out error that chose among them, the chosen one marked."""
+#: a calibration report's error maps: one panel per LED height, at most this many (more
+#: heights are binned)
+MAP_HEIGHTS = 4
+
+
+def calibration_figure(path, stats, per_point, X, cameras, lens_rows=(), rows=()) -> None:
+    """A survey calibration's report as panels that each answer one question: where each
+    camera moved from its nominal place (``rows``: the report's per-camera rows, with
+    ``nominal_position_m``; arrows drawn to scale, their lengths written), the held-out error
+    over the floor calibrated and nominal — each on its own colour scale, one panel per LED
+    height —, the error's CDF, and (``lens_rows``) each camera's lens models and the held-out
+    error that chose among them."""
     plt = _pyplot()
     nom = per_point["nominal, all-camera LS"] * 100
     cal = per_point["calibrated, all-camera LS"] * 100
-    panels = 4 if lens_rows else 3
-    fig, axes = plt.subplots(1, panels, figsize=(4.7 * panels, 4.2), constrained_layout=True)
-    both = np.concatenate([nom, cal])
-    vmax = np.nanpercentile(both, 95) if np.isfinite(both).any() else 1.0
-    for ax, err, title in ((axes[0], nom, "nominal cameras"), (axes[1], cal, "calibrated")):
-        ok = np.isfinite(err)
-        sc = ax.scatter(X[ok, 0], X[ok, 1], c=err[ok], cmap="viridis", vmin=0, vmax=vmax, s=18)
-        ax.scatter(X[~ok, 0], X[~ok, 1], marker="x", c="0.6", s=12, lw=0.8,
-                   label="no fix (seen by one camera, or refused)")
-        for c in cameras:
-            ax.plot(*c.position[:2], "rs", ms=6)
-            ax.annotate(c.id, c.position[:2], fontsize=7, xytext=(3, 3),
-                        textcoords="offset points")
-        mean = f"{np.mean(err[ok]):.3g} cm" if ok.any() else "no fix"
-        ax.set_title(f"held-out error (all-camera LS), {title}: mean {mean}", fontsize=9)
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        if (~ok).any():
-            ax.legend(fontsize=6, loc="lower right")
-    fig.colorbar(sc, ax=axes[:2].tolist(), label="3D error (cm)", shrink=0.8)
+    band, names = _height_bands(X[:, 2])
+    n_maps = len(names)
+    top = 2 + bool(lens_rows)
+    cols = max(n_maps, top)
+    fig = plt.figure(figsize=(4.4 * cols, 3.9 * 3), constrained_layout=True)
+    grid = fig.add_gridspec(3, cols)
+    moved = fig.add_subplot(grid[0, 0])
+    _movement_panel(moved, cameras, rows, X)
+    cdf = fig.add_subplot(grid[0, 1])
     for label, err in per_point.items():
         e = np.sort(err[np.isfinite(err)] * 100)
         if len(e):
-            axes[2].plot(e, np.arange(1, len(e) + 1) / len(e), label=label,
-                         ls="--" if label.startswith("nominal") else "-")
-    axes[2].set_xscale("log")
-    axes[2].set_xlabel("held-out 3D error (cm)")
-    axes[2].set_ylabel("CDF")
-    axes[2].grid(alpha=0.3)
-    if axes[2].get_legend_handles_labels()[0]:
-        axes[2].legend(fontsize=6)
+            cdf.plot(e, np.arange(1, len(e) + 1) / len(e), label=label,
+                     ls="--" if label.startswith("nominal") else "-")
+    cdf.set_xscale("log")
+    cdf.set_xlabel("held-out 3D error (cm)")
+    cdf.set_ylabel("share of held-out points")
+    cdf.set_title("held-out 3D error, all points (CDF)", fontsize=10)
+    cdf.grid(alpha=0.3)
+    if cdf.get_legend_handles_labels()[0]:
+        cdf.legend(fontsize=7, loc="lower right")
     if lens_rows:
-        _lens_panel(axes[3], lens_rows)
-    save_figure(fig, path, dpi=110)
+        _lens_panel(fig.add_subplot(grid[0, 2]), lens_rows)
+    for r, (err, title) in enumerate(((cal, "calibrated"), (nom, "nominal cameras")), start=1):
+        ok = np.isfinite(err)
+        vmax = float(np.nanpercentile(err, 95)) if ok.any() else 1.0  # its own scale
+        axes = [fig.add_subplot(grid[r, k]) for k in range(n_maps)]
+        for k, ax in enumerate(axes):
+            here = band == k
+            sc = ax.scatter(X[here & ok, 0], X[here & ok, 1], c=err[here & ok], cmap="viridis",
+                            vmin=0, vmax=max(vmax, 1e-9), s=22)
+            ax.scatter(X[here & ~ok, 0], X[here & ~ok, 1], marker="x", c="0.55", s=14, lw=0.8)
+            for c in cameras:
+                ax.plot(*c.position[:2], "s", color="0.3", ms=4)
+            mean = f"mean {np.mean(err[here & ok]):.2g} cm" if (here & ok).any() else "no fix"
+            ax.set_title(f"{title}, {names[k]}: {mean}", fontsize=9)
+            ax.set_aspect("equal")
+            ax.set_xlabel("x (m)", fontsize=8)
+            ax.tick_params(labelsize=7)
+        axes[0].set_ylabel("y (m)", fontsize=8)
+        fig.colorbar(sc, ax=axes, label=f"held-out 3D error, {title} (cm)", shrink=0.85)
+        if (~ok).any():
+            axes[-1].scatter([], [], marker="x", c="0.55", label="no fix (one camera, or refused)")
+            axes[-1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                            borderaxespad=0)
+    fig.canvas.draw()
+    _movement_labels(moved, cameras, rows)
+    save_figure(fig, path, dpi=100)
+
+
+def _height_bands(z) -> tuple[np.ndarray, list[str]]:
+    """The LED heights of a survey as bands to draw apart: heights part where they leave a
+    gap of a twentieth of their range (a survey at 0, 0.35 and 0.7 m, each measured to a
+    few millimetres: three), at most :data:`MAP_HEIGHTS` (else as many points in each).
+    Returns each point's band and the bands' names."""
+    z = np.asarray(z, float)
+    order = np.sort(z)
+    span = float(order[-1] - order[0]) if len(z) else 0.0
+    cuts = order[:-1][np.diff(order) > span / 20] if span > 0 else np.zeros(0)
+    if len(cuts) >= MAP_HEIGHTS or (span > 0 and not len(cuts)):  # too many heights, or
+        # heights spread without a gap: bands of as many points
+        cuts = np.quantile(z, np.linspace(0, 1, MAP_HEIGHTS + 1)[1:-1])
+    band = np.searchsorted(cuts, z, side="left")
+    names = []
+    for k in range(len(cuts) + 1):
+        h = z[band == k]
+        lo, hi = (float(h.min()), float(h.max())) if len(h) else (0.0, 0.0)
+        mid, lo, hi = (round(float(v), 2) + 0.0 for v in (np.median(h) if len(h) else 0.0,
+                                                            lo, hi))  # no "-0.00"
+        names.append(f"LED at {mid:.2f} m" if hi - lo <= max(span / 20, 1e-9)
+                     else f"LED {lo:.2f}–{hi:.2f} m")
+    return band, names
+
+
+def _movement_panel(ax, cameras, rows, X) -> None:
+    """Each camera from its nominal place (hollow) to where the survey put it (filled), the
+    arrow drawn longer by a factor written in the title so that millimetres show on a room."""
+    nominal = {r["camera"]: np.asarray(r["nominal_position_m"], float) for r in rows
+               if r.get("nominal_position_m") is not None}
+    size = float(np.ptp(np.vstack([X[:, :2]] + [c.position[:2] for c in cameras]),
+                        axis=0).max()) or 1.0
+    moves = [np.linalg.norm(c.position[:2] - nominal[c.id][:2]) for c in cameras
+             if c.id in nominal]
+    largest = max(moves, default=0.0)
+    scale = 1.0
+    if largest > 0:  # the longest arrow a sixth of the room or less, a round factor (1-2-5)
+        want = size / 6 / largest
+        decade = 10 ** np.floor(np.log10(want))
+        scale = float(max(f * decade for f in (1, 2, 5) if f * decade <= want))
+    ax.scatter(X[:, 0], X[:, 1], s=4, c="0.85")
+    for c in cameras:
+        if c.id in nominal:
+            n = nominal[c.id]
+            ax.plot(*n[:2], "s", mfc="none", mec="C0", ms=7)
+            end = n[:2] + scale * (c.position[:2] - n[:2])
+            ax.annotate("", end, n[:2], arrowprops={"arrowstyle": "-|>", "color": "C3",
+                                                    "lw": 1.6}, zorder=3)
+        else:
+            ax.plot(*c.position[:2], "s", color="C3", ms=5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)", fontsize=8)
+    ax.set_ylabel("y (m)", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.set_title(f"camera moves from nominal (□), arrows ×{scale:g}", fontsize=10)
+    ax.margins(0.12)
+
+
+def _movement_labels(ax, cameras, rows) -> None:
+    """Each camera's id, how far it moved (mm, in 3D) and turned (°), placed clear of the
+    others' (the figure's layout final)."""
+    by_id = {r["camera"]: r for r in rows}
+    labels = []
+    for c in cameras:
+        r = by_id.get(c.id, {})
+        text = c.id
+        if r.get("moved_m") is not None:
+            text += f" {1000 * r['moved_m']:.0f} mm"
+        if r.get("turned_deg") is not None:
+            text += f", {r['turned_deg']:.1f}°"
+        labels.append((c.position[:2], text, {"fontsize": 7}))
+    _place_labels(ax, labels)
 
 
 def _lens_panel(ax, rows) -> None:
@@ -386,7 +481,8 @@ def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Pa
         else:
             calibration_figure(png, result.stats, result.per_point, result.points,
                                result.deployment.cameras,
-                               [r for r in result.cameras if r.get("lens_candidates")])
+                               [r for r in result.cameras if r.get("lens_candidates")],
+                               result.cameras)
     return paths[2], paths[0], paths[1]
 
 

@@ -127,7 +127,9 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
         sentence = lens_sentence(choice, c, nom)
         words.append(sentence)
         rows.append({"camera": c.id, "rms_px": fit.rms_px, "points": fit.used,
-                     "outliers": fit.outliers, "moved_m": moved, "moved_cm": moved * 100,
+                     "outliers": fit.outliers, "nominal_position_m": list(map(float,
+                                                                            nom.position)),
+                     "moved_m": moved, "moved_cm": moved * 100,
                      "moved_share": moved / distance, "turned_deg": angle,
                      "lens_model": fit.model, "lens_forced": choice.forced,
                      "lens_candidates": choice.candidates, "lens": sentence,
