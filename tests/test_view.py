@@ -364,3 +364,29 @@ def test_the_view_follows_what_a_running_track_publishes(broker):
         proc.terminate()
         _, err = proc.communicate(timeout=10)
     assert "1 message on" in err and "was not a fix" in err, err
+
+
+def test_track_draws_its_run_on_the_plan_when_asked(tmp_path):
+    """``track --plot run.png``: the paths on the plan and sigma over time, a PNG written
+    beside the tracks; a name that is not .png, or the tracks' own file, is refused first."""
+    sim = tmp_path / "sim"
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "simulate", "--profile", "paper-2024",
+                          "--test-points", "0", "--robot-speed", "1.5", "--body", "2",
+                          "--seconds", "3", "--out", str(sim)], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    track = [sys.executable, "-m", "vlpcal", "track", "-d", str(sim / "truth.yaml"), "--frames",
+             str(sim / "streams"), "--out", str(tmp_path / "t.csv")]
+    res = subprocess.run(track + ["--plot", str(tmp_path / "run.jpg")], capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 2 and "a PNG picture" in res.stderr, res.stderr
+    same = track[:-1] + [str(tmp_path / "run.png"), "--plot", str(tmp_path / "run.png")]
+    res = subprocess.run(same, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 2 and "same file as --out" in res.stderr, res.stderr
+    assert not (tmp_path / "t.csv").exists() and not (tmp_path / "run.png").exists()
+    res = subprocess.run(track + ["--plot", str(tmp_path / "run.png")], capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    png = (tmp_path / "run.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 20_000
+    assert (tmp_path / "t.csv").exists()

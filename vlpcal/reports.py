@@ -576,3 +576,69 @@ def demo_figure(path, site, truth, fixes_of: dict, cameras, shown: tuple) -> Non
     cdf.legend(fontsize=7)
     cdf.set_title("every pipeline on the same frames", fontsize=9)
     save_figure(fig, Path(path), dpi=110)
+
+
+#: a run's figure draws this many ids by name, the most rows first (the rest grey)
+PLOTTED_IDS = 8
+
+
+def track_figure(path, dep, rows, title: str = "") -> None:
+    """A tracking run at a glance: on the plan, each id's path (its ``ok`` rows; rows of one
+    camera or none light), a body's heading now and then; beside it, each id's ``sigma_m``
+    over time (log scale), so where the fixes were loose shows. ``rows``:
+    :class:`~vlpcal.tracking.TrackUpdate`."""
+    from collections import Counter
+
+    plt = _pyplot()
+    fig, (plan, sig) = plt.subplots(1, 2, figsize=(13, 5.2), constrained_layout=True,
+                                    gridspec_kw={"width_ratios": [1.1, 1.0]})
+    room = np.array(dep.room, float)
+    plan.fill(*np.vstack([room, room[:1]]).T, fc="none", ec="k", lw=1.2)
+    for poly in dep.keep_out:
+        plan.fill(*np.array(poly, float).T, color="0.85", ec="0.5")
+    for c in dep.cameras:
+        plan.plot(*c.position[:2], "s", color="0.3", ms=5)
+        plan.annotate(c.id, c.position[:2], fontsize=7, xytext=(3, 3),
+                      textcoords="offset points", color="0.3")
+    counts = Counter(r.led for r in rows)
+    named = [i for i, _ in counts.most_common(PLOTTED_IDS)]
+    t0 = min((r.t for r in rows), default=0.0)
+    size = float(np.ptp(room, axis=0).max()) or 1.0
+    for k, led in enumerate(named + ["others"]):
+        mine = [r for r in rows if (r.led == led if led != "others" else r.led not in named)]
+        if not mine:
+            continue
+        colour = f"C{k % 10}" if led != "others" else "0.6"
+        T = np.array([r.t for r in mine]) - t0
+        P = np.array([r.position for r in mine])
+        ok = np.array([r.status == "ok" for r in mine]) & np.isfinite(P).all(axis=1)
+        if ok.any():
+            plan.plot(P[ok, 0], P[ok, 1], ".", ms=2, color=colour,
+                      label=f"{led} ({ok.sum()} ok of {len(mine)})")
+        loose = ~ok & np.isfinite(P).all(axis=1)
+        if loose.any():
+            plan.plot(P[loose, 0], P[loose, 1], "x", ms=3, color=colour, alpha=0.4)
+        posed = [r for r in mine if r.pose is not None and r.status == "ok"]
+        for r in posed[:: max(1, len(posed) // 15)]:  # a body's heading, now and then
+            d = 0.05 * size * np.array([np.cos(r.pose[0]), np.sin(r.pose[0])])
+            plan.annotate("", r.position[:2] + d, r.position[:2],
+                          arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 1.2})
+        s = np.array([r.sigma_m for r in mine]) * 1000
+        good = np.isfinite(s) & (s > 0)
+        sig.plot(T[good & ok], s[good & ok], ".", ms=2, color=colour, label=led)
+        sig.plot(T[good & ~ok], s[good & ~ok], "x", ms=3, color=colour, alpha=0.4)
+    plan.set_aspect("equal")
+    plan.set_xlabel("x (m)")
+    plan.set_ylabel("y (m)")
+    plan.set_title("paths on the plan (dots: ok; ×: one camera or none; arrows: a body's "
+                   "heading)", fontsize=9)
+    if plan.get_legend_handles_labels()[0]:
+        plan.legend(fontsize=7, markerscale=4, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    sig.set_yscale("log")
+    sig.set_xlabel("time from the first row (s)")
+    sig.set_ylabel("predicted error sigma_m (mm)")
+    sig.set_title("each row's sigma_m over time (×: not ok)", fontsize=9)
+    sig.grid(alpha=0.3, which="both")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    save_figure(fig, path, dpi=100)

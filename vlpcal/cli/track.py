@@ -49,12 +49,15 @@ BLOCK, BLOCK_BYTES = 2048, 64 << 20
                    "stale calibration); said once as a warning.  [default: stop, exit 2]")
 @mqtt_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
+@click.option("--plot", "plot", default=None, type=click.Path(dir_okay=False),
+              metavar="PNG", help="Also draw the run: each id's path on the plan and its "
+                                  "sigma_m over time (a PNG, written at the end).")
 @click.option("--view", "view_bind", is_flag=False, flag_value=DEFAULT_BIND, default=None,
               metavar="[HOST:PORT]",
               help=f"Show the run live in the browser (vlpcal view's page; default "
                    f"{DEFAULT_BIND}): the cameras' frames and spots, the tracks on the plan.")
 def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots, out, fps,
-          keep_going, publish, qos, ca_file, quiet, view_bind):
+          keep_going, publish, qos, ca_file, quiet, plot, view_bind):
     """Track moving LEDs from cameras that are not synchronised.
 
     Each camera frame is a ray at its own capture time; the LED's path over a short window is
@@ -77,6 +80,13 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
         click.echo(f"warning: --leds {spots}: {deployment_path} has {len(dep.leds)} LEDs in "
                    f"its leds: block; each frame is searched for {spots} spot(s), so the "
                    "others are not tracked whenever more are in view", err=True)
+    if plot is not None:
+        if not str(plot).lower().endswith(".png"):
+            raise UserError(f"--plot {plot}: the figure is a PNG picture (.png)")
+        plot = _output_file(plot, inputs=(deployment_path,) + ((frames_dir,) if frames_dir
+                                                               else ()), what="the figure")
+        if str(plot) == str(_output_file(out, inputs=(deployment_path,), what="the tracks")):
+            raise UserError(f"--plot {plot}: the same file as --out")
     if view_bind is not None and frames_dir:
         raise UserError("--view shows a live run (--camera or --spots); a folder of frames is "
                         "tracked faster than it could be watched")
@@ -90,14 +100,23 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
 
             hub, server = open_view(dep, view_bind, source=f"vlpcal track → {out}")
         if spots_url:
-            _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"), ca_file,
-                         duration, lag, spots, out, fps, quiet, publisher, check, hub)
+            rows = _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"),
+                                ca_file, duration, lag, spots, out, fps, quiet, publisher,
+                                check, hub)
         elif cameras:
-            _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
-                        publisher, check, hub)
+            rows = _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps,
+                               quiet, publisher, check, hub)
         else:
-            _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, quiet,
-                   publisher, check)
+            rows = _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps,
+                          quiet, publisher, check)
+        if plot is not None:
+            from ..reports import track_figure
+            from ..writing import OutputSet
+
+            with OutputSet(plot) as (png,):
+                track_figure(png, dep, rows, f"{dep.name}: vlpcal track → {out}")
+            if not quiet:
+                click.echo(f"figure → {plot}", err=True)
     finally:
         if server is not None:
             server.close()
@@ -161,7 +180,7 @@ def _published(publisher, rows, utc: float = 0.0):
 
 
 def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, quiet,
-           publisher, check) -> None:
+           publisher, check) -> list:
     import sys
 
     from ..datasets import DatasetError, read_async_frames
@@ -261,6 +280,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                    + _lag_said(tracker)
                    + (f"; {missing} listed frames missing" if missing else "")
                    + (f"; {bad} (not used)" if bad else ""), err=True)
+    return rows
 
 
 def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False) -> None:
@@ -311,7 +331,7 @@ def _summary(rows) -> str:
 
 
 def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, quiet,
-                publisher, check, hub=None) -> None:
+                publisher, check, hub=None) -> list:
     """``vlpcal track --camera …``: frames as they come, each at its capture time on the
     host's clock (X-Timestamp through each camera's clock estimate, else arrival), fed to
     the tracker in that order; rows in UTC seconds. ``out`` None: no file (the view alone);
@@ -399,6 +419,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     if not rows and live is not None:
         live.remove()
         raise _no_rows(tracker, "the cameras")
+    return rows
 
 
 def _camera_facts(hub, frames) -> None:
@@ -413,7 +434,7 @@ def _camera_facts(hub, frames) -> None:
 
 
 def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, out, fps, quiet,
-                 publisher, check, hub=None) -> None:
+                 publisher, check, hub=None) -> list:
     """``vlpcal track --spots mqtt://…``: the spots cameras publish, each at its capture time
     (UTC s), fed to the tracker as they come; rows in UTC seconds. Each camera's message of a
     frame without a spot (``{"t": …}``) tells the tracker that camera saw nothing then. A spot
@@ -500,6 +521,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     if not rows:
         live.remove()
         raise _no_rows(tracker, f"{target.shown()}/spots/+", what="spot message")
+    return rows
 
 
 class _LiveTracks:
