@@ -390,3 +390,22 @@ def test_track_draws_its_run_on_the_plan_when_asked(tmp_path):
     png = (tmp_path / "run.png").read_bytes()
     assert png.startswith(b"\x89PNG") and len(png) > 20_000
     assert (tmp_path / "t.csv").exists()
+
+
+def test_locate_draws_its_fixes_when_asked(tmp_path):
+    """``locate --plot fixes.png``: the fixes on the plan and their sigma, written with the
+    fixes; an interrupted or refused run draws nothing."""
+    sim = tmp_path / "sim"
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "simulate", "--profile", "paper-2024",
+                          "--test-points", "0", "--trajectory", "60", "--out", str(sim)],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    cmd = [sys.executable, "-m", "vlpcal", "locate", "-d", str(sim / "truth.yaml"), "--frames",
+           str(sim / "frames"), "--out", str(tmp_path / "f.csv")]
+    res = subprocess.run(cmd + ["--plot", str(tmp_path / "f.gif")], capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 2 and "a PNG picture" in res.stderr, res.stderr
+    res = subprocess.run(cmd + ["--plot", str(tmp_path / "f.png")], capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "f.png").read_bytes().startswith(b"\x89PNG")

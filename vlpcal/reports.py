@@ -583,10 +583,22 @@ PLOTTED_IDS = 8
 
 
 def track_figure(path, dep, rows, title: str = "") -> None:
-    """A tracking run at a glance: on the plan, each id's path (its ``ok`` rows; rows of one
-    camera or none light), a body's heading now and then; beside it, each id's ``sigma_m``
-    over time (log scale), so where the fixes were loose shows. ``rows``:
-    :class:`~vlpcal.tracking.TrackUpdate`."""
+    """:func:`run_figure` of a tracking run's rows (:class:`~vlpcal.tracking.TrackUpdate`)."""
+    t = np.array([r.t for r in rows], float)
+    run_figure(path, dep, t - (t.min() if len(t) else 0.0), [r.led for r in rows],
+               np.array([r.position for r in rows], float).reshape(-1, 3),
+               np.array([r.sigma_m for r in rows], float), [r.status for r in rows],
+               np.array([r.pose[0] if r.pose is not None else np.nan for r in rows], float),
+               title, "time from the first row (s)")
+
+
+def run_figure(path, dep, t, ids, X, sigma, status, yaw=None, title: str = "",
+               time_label: str = "time (s)") -> None:
+    """A run at a glance: on the plan, each id's path (its ``ok`` rows; rows of one camera or
+    none light), a body's heading (``yaw``, NaN for none) now and then; beside it, each
+    id's ``sigma`` over ``t`` (log scale over a decade), so where the fixes were loose
+    shows. One row per fix or track update: ``t`` N, ``ids`` N, ``X`` N×3 m, ``sigma`` N m,
+    ``status`` N."""
     from collections import Counter
 
     plt = _pyplot()
@@ -600,44 +612,48 @@ def track_figure(path, dep, rows, title: str = "") -> None:
         plan.plot(*c.position[:2], "s", color="0.3", ms=5)
         plan.annotate(c.id, c.position[:2], fontsize=7, xytext=(3, 3),
                       textcoords="offset points", color="0.3")
-    counts = Counter(r.led for r in rows)
-    named = [i for i, _ in counts.most_common(PLOTTED_IDS)]
-    t0 = min((r.t for r in rows), default=0.0)
+    ids = np.asarray(ids, dtype=object)
+    yaw = np.full(len(ids), np.nan) if yaw is None else np.asarray(yaw, float)
+    named = [i for i, _ in Counter(ids.tolist()).most_common(PLOTTED_IDS)]
+    placed = np.isfinite(X).all(axis=1)
+    ok = (np.asarray(status, dtype=object) == "ok") & placed
     size = float(np.ptp(room, axis=0).max()) or 1.0
     for k, led in enumerate(named + ["others"]):
-        mine = [r for r in rows if (r.led == led if led != "others" else r.led not in named)]
-        if not mine:
+        mine = ids == led if led != "others" else ~np.isin(ids, named)
+        if not mine.any():
             continue
         colour = f"C{k % 10}" if led != "others" else "0.6"
-        T = np.array([r.t for r in mine]) - t0
-        P = np.array([r.position for r in mine])
-        ok = np.array([r.status == "ok" for r in mine]) & np.isfinite(P).all(axis=1)
-        if ok.any():
-            plan.plot(P[ok, 0], P[ok, 1], ".", ms=2, color=colour,
-                      label=f"{led} ({ok.sum()} ok of {len(mine)})")
-        loose = ~ok & np.isfinite(P).all(axis=1)
+        good, loose = mine & ok, mine & ~ok & placed
+        if good.any():
+            plan.plot(X[good, 0], X[good, 1], ".", ms=2, color=colour,
+                      label=f"{led} ({good.sum()} ok of {mine.sum()})")
         if loose.any():
-            plan.plot(P[loose, 0], P[loose, 1], "x", ms=3, color=colour, alpha=0.4)
-        posed = [r for r in mine if r.pose is not None and r.status == "ok"]
-        for r in posed[:: max(1, len(posed) // 15)]:  # a body's heading, now and then
-            d = 0.05 * size * np.array([np.cos(r.pose[0]), np.sin(r.pose[0])])
-            plan.annotate("", r.position[:2] + d, r.position[:2],
+            plan.plot(X[loose, 0], X[loose, 1], "x", ms=3, color=colour, alpha=0.4)
+        posed = np.flatnonzero(good & np.isfinite(yaw))
+        for i in posed[:: max(1, len(posed) // 15)]:  # a body's heading, now and then
+            d = 0.05 * size * np.array([np.cos(yaw[i]), np.sin(yaw[i])])
+            plan.annotate("", X[i, :2] + d, X[i, :2],
                           arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 1.2})
-        s = np.array([r.sigma_m for r in mine]) * 1000
-        good = np.isfinite(s) & (s > 0)
-        sig.plot(T[good & ok], s[good & ok], ".", ms=2, color=colour, label=led)
-        sig.plot(T[good & ~ok], s[good & ~ok], "x", ms=3, color=colour, alpha=0.4)
+        s = sigma * 1000
+        shown = mine & np.isfinite(s) & (s > 0)
+        sig.plot(t[shown & ok], s[shown & ok], ".", ms=2, color=colour, label=led)
+        sig.plot(t[shown & ~ok], s[shown & ~ok], "x", ms=3, color=colour, alpha=0.4)
     plan.set_aspect("equal")
     plan.set_xlabel("x (m)")
     plan.set_ylabel("y (m)")
-    plan.set_title("paths on the plan (dots: ok; ×: one camera or none; arrows: a body's "
-                   "heading)", fontsize=9)
+    plan.set_title("paths on the plan (dots: ok; ×: not ok; arrows: a body's heading)",
+                   fontsize=9)
     if plan.get_legend_handles_labels()[0]:
         plan.legend(fontsize=7, markerscale=4, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-    sig.set_yscale("log")
-    sig.set_xlabel("time from the first row (s)")
+    lo, hi = sig.get_ylim()
+    if hi > 10 * max(lo, 1e-12):  # over a decade: a log scale, millimetres as numbers
+        from matplotlib.ticker import FuncFormatter
+
+        sig.set_yscale("log")
+        sig.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    sig.set_xlabel(time_label)
     sig.set_ylabel("predicted error sigma_m (mm)")
-    sig.set_title("each row's sigma_m over time (×: not ok)", fontsize=9)
+    sig.set_title("each row's sigma_m (×: not ok)", fontsize=9)
     sig.grid(alpha=0.3, which="both")
     if title:
         fig.suptitle(title, fontsize=10)

@@ -62,8 +62,11 @@ from .mqtt import (
 @click.option("--max-sets", type=click.IntRange(1), default=None,
               help="Live: stop after this many frame sets.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
+@click.option("--plot", default=None, type=click.Path(dir_okay=False), metavar="PNG",
+              help="Also draw the run: the fixes on the plan and their sigma_m (a PNG, "
+                   "written when the fixes are).")
 def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, keep_going,
-           publish, qos, ca_file, out, fmt, batch, tolerance, duration, max_sets, quiet):
+           publish, qos, ca_file, out, fmt, batch, tolerance, duration, max_sets, quiet, plot):
     """Turn camera frames into 3D fixes (metres, world frame, z up).
 
     One row per frame set: frame_id,x,y,z,status first (the contract), then the cameras used,
@@ -96,6 +99,14 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
         out = str(_output_file(out, inputs=[p for p in (deployment_path, frames_dir,
                                                          observations, ca_file) if p],
                                what="the fixes"))
+    if plot is not None:
+        if not str(plot).lower().endswith(".png"):
+            raise UserError(f"--plot {plot}: the figure is a PNG picture (.png)")
+        plot = _output_file(plot, inputs=[p for p in (deployment_path, frames_dir,
+                                                      observations, ca_file) if p],
+                            what="the figure")
+        if out != "-" and str(plot) == str(out):
+            raise UserError(f"--plot {plot}: the same file as --out")
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
     live = bool(cameras) or bool(spots_url)
     publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path, zone)
@@ -108,6 +119,8 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
             publisher.close()
         raise UserError(str(e) if isinstance(e, OutputError) else
                         f"{out}: cannot write the fixes there ({e.strerror})") from None
+    if plot is not None:
+        writer = _PlottingWriter(writer, plot, dep, led_of(dep), live, say)
     if publisher:
         writer = PublishingWriter(writer, publisher, site_led if zone else led_of(dep),
                                   utc="t_s" if spots_url else None)
@@ -171,6 +184,47 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     if not n:
         say("no frame sets located")
     sys.stdout.flush()
+
+
+class _PlottingWriter:
+    """The fixes written, kept as numbers, and drawn (:func:`~vlpcal.reports.run_figure`)
+    into ``plot`` when the fixes are closed; an aborted run draws nothing."""
+
+    def __init__(self, writer, plot, dep, led: str, live: bool, say):
+        self.writer, self.plot, self.dep, self.led, self.live, self.say = (writer, plot, dep,
+                                                                           led, live, say)
+        self.parts: list = []  # per batch: (t, X, sigma, status)
+
+    def write(self, fixes, extra: dict | None = None) -> None:
+        import numpy as np
+
+        fixes = list(fixes)
+        self.writer.write(fixes, extra)
+        n = sum(len(p[0]) for p in self.parts)
+        t = np.full(len(fixes), float(extra["t_s"])) if extra and "t_s" in extra \
+            else np.arange(n, n + len(fixes), dtype=float)
+        self.parts.append((t, np.array([(f.x, f.y, f.z) for f in fixes], float).reshape(-1, 3),
+                           np.array([f.sigma for f in fixes], float),
+                           np.array([f.status for f in fixes], dtype=object)))
+
+    def close(self) -> None:
+        import numpy as np
+
+        from ..reports import run_figure
+        from ..writing import OutputSet
+
+        self.writer.close()
+        if not self.parts:
+            return
+        t, X, sigma, status = (np.concatenate(k) for k in zip(*self.parts))
+        with OutputSet(self.plot) as (png,):
+            run_figure(png, self.dep, t - t.min() if self.live else t, [self.led] * len(t), X,
+                       sigma, status, None, f"{self.dep.name}: vlpcal locate",
+                       "time from the first fix (s)" if self.live else "frame set (in order)")
+        self.say(f"figure → {self.plot}")
+
+    def abort(self) -> None:
+        self.writer.abort()
 
 
 class _Tally(Counter):
