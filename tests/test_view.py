@@ -409,3 +409,33 @@ def test_locate_draws_its_fixes_when_asked(tmp_path):
                          text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "f.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_a_calibrated_deployment_shows_its_report(tmp_path):
+    """A deployment with ``survey calibrate``'s report beside it: the page gets per camera how
+    far it moved and turned, the held-out errors, and the report's figure; one without (or
+    with a report that cannot be read) is shown without it."""
+    from vlpcal.cli.view import _calibration
+
+    shutil.copy(LAYOUT, tmp_path / "d.yaml")
+    (tmp_path / "d.report.json").write_text(json.dumps({
+        "cameras": [{"camera": "C1", "moved_m": 0.0182, "turned_deg": 0.48, "lens_model": "k1"}],
+        "held_out_m": {"calibrated, all-camera LS": {"mean": 0.0052, "p95": 0.0091,
+                                                     "fixed": 0.87}}}))
+    (tmp_path / "d.png").write_bytes(b"\x89PNG fake")
+    cal, figure = _calibration(tmp_path / "d.yaml")
+    assert cal["cameras"] == [{"id": "C1", "moved_mm": 18.2, "turned_deg": 0.48, "lens": "k1"}]
+    assert cal["held_out"]["calibrated, all-camera LS"]["mean_m"] == 0.0052
+    assert figure == b"\x89PNG fake" and cal["figure"]
+    dep = load(tmp_path / "d.yaml")
+    server = ViewServer(scene(site_of(dep), dep.cameras, cal), None, "127.0.0.1", 0,
+                        figure=figure)
+    try:
+        base = f"http://127.0.0.1:{server.port}/"
+        assert json.loads(_get(base + "scene")[1])["calibration"]["cameras"][0]["id"] == "C1"
+        assert _get(base + "report.png")[1] == figure
+    finally:
+        server.close()
+    (tmp_path / "d.report.json").write_text("{not json")
+    assert _calibration(tmp_path / "d.yaml") == (None, None)
+    assert _calibration(LAYOUT) == (None, None)

@@ -98,7 +98,8 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
         if view_bind is not None:
             from .view import open_view
 
-            hub, server = open_view(dep, view_bind, source=f"vlpcal track → {out}")
+            hub, server = open_view(dep, view_bind, source=f"vlpcal track → {out}",
+                                    path=deployment_path)
         if spots_url:
             rows = _track_spots(dep, deployment_path, parse_mqtt(spots_url, "--spots"),
                                 ca_file, duration, lag, spots, out, fps, quiet, publisher,

@@ -11,10 +11,12 @@ from .common import Finite, UserError, main
 DEFAULT_BIND = "127.0.0.1:8765"
 
 
-def open_view(dep, bind: str, source: str = "", live: bool = True, site=None):
+def open_view(dep, bind: str, source: str = "", live: bool = True, site=None, path=None):
     """Serve the page of deployment ``dep`` (or of ``site``, a planner's site file, with no
-    cameras) on ``bind``; returns (its hub — None when not ``live`` —, its server). Says
-    where it is on stderr (with the token, when bound off loopback)."""
+    cameras) on ``bind``; returns (its hub — None when not ``live`` —, its server). A
+    calibrated deployment's report (``<path>.report.json`` and its figure ``<path>.png``,
+    as ``survey calibrate`` writes them beside it) is shown too. Says where it is on stderr
+    (with the token, when bound off loopback)."""
     from ..view.scene import scene, site_of
     from ..view.server import ViewError, ViewServer, parse_bind
 
@@ -22,8 +24,10 @@ def open_view(dep, bind: str, source: str = "", live: bool = True, site=None):
         host, port = parse_bind(bind)
     except ViewError as e:
         raise UserError(f"--view/--bind {e}") from None
+    figure = None
     if site is None:
-        drawn = scene(site_of(dep), list(dep.cameras), calibration=_calibration(dep))
+        calibration, figure = _calibration(path) if path else (None, None)
+        drawn = scene(site_of(dep), list(dep.cameras), calibration=calibration)
         cameras = {c.id: (c.width, c.height) for c in dep.cameras}
     else:
         drawn, cameras = scene(site, []), {}
@@ -33,7 +37,7 @@ def open_view(dep, bind: str, source: str = "", live: bool = True, site=None):
 
         hub = ViewHub(cameras, source)
     try:
-        server = ViewServer(drawn, hub, host, port)
+        server = ViewServer(drawn, hub, host, port, figure=figure)
     except ViewError as e:
         raise UserError(f"view: {e}") from None
     line = f"view: {server.url}"
@@ -44,13 +48,35 @@ def open_view(dep, bind: str, source: str = "", live: bool = True, site=None):
     return hub, server
 
 
-def _calibration(dep) -> dict | None:
-    """A calibrated deployment's survey figures, as its provenance holds them."""
-    prov = dep.extra.get("provenance")
-    if not isinstance(prov, dict):
-        return None
-    held = prov.get("held_out") or prov.get("calibration")
-    return held if isinstance(held, dict) else None
+#: a calibration report beside a deployment is read up to this size (it is a few kB)
+REPORT_BYTES = 4 << 20
+
+
+def _calibration(path) -> tuple[dict | None, bytes | None]:
+    """The survey report beside a calibrated deployment (``<path>.report.json``), as the page
+    shows it — per camera how far it moved and turned, its lens model; per comparison the
+    held-out error —, and its figure (``<path>.png``); (None, None) when there is none or it
+    cannot be read (the plan is shown without it)."""
+    import json
+    from pathlib import Path
+
+    report, png = Path(path).with_suffix(".report.json"), Path(path).with_suffix(".png")
+    try:
+        if not report.is_file() or report.stat().st_size > REPORT_BYTES:
+            return None, None
+        doc = json.loads(report.read_text(encoding="utf-8"))
+        cameras = [{"id": str(c["camera"]), "moved_mm": 1000 * float(c["moved_m"]),
+                    "turned_deg": float(c["turned_deg"]), "lens": str(c.get("lens_model", ""))}
+                   for c in doc["cameras"]]
+        held = {str(k): {"mean_m": v.get("mean"), "p95_m": v.get("p95"),
+                         "fixed": v.get("fixed")}
+                for k, v in (doc.get("held_out_m") or {}).items() if isinstance(v, dict)}
+        figure = png.read_bytes() if png.is_file() and png.stat().st_size <= REPORT_BYTES \
+            else None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None, None
+    return {"report": report.name, "cameras": cameras, "held_out": held,
+            "figure": figure is not None}, figure
 
 
 @main.command()
@@ -90,7 +116,8 @@ def view(path, bind, cameras, follow_url, ca_file, duration):
         target = parse_mqtt(follow_url, "--follow")
     source = (f"{path}, {len(cameras)} live camera(s)" if cameras else
               f"{path}, following {target.shown()}" if target else path)
-    hub, server = open_view(dep, bind, source=source, live=bool(cameras or target), site=site)
+    hub, server = open_view(dep, bind, source=source, live=bool(cameras or target), site=site,
+                            path=path)
     t_end = time.monotonic() + duration if duration else None
     try:
         if target is not None:

@@ -3,10 +3,11 @@ one well-kept package, on asyncio, so no separate ASGI server is needed).
 
 It runs in a thread of its own beside the command. ``/`` the page, ``/static/…`` its script
 and style (from the package: no build step, no outside URL), ``/scene`` the room (JSON),
-``/events`` the live stream (server-sent events, :data:`TICK` apart when something changed;
-each camera's latest frame in it, :data:`FRAME_HZ` a second at most), ``/frame/<id>`` a
-camera's latest JPEG. Bound to loopback it is open; bound to any other
-interface every request needs the token printed at start (``?token=`` once, then a cookie)."""
+``/report.png`` a calibrated deployment's report figure, ``/events`` the live stream
+(server-sent events, :data:`TICK` apart when something changed; each camera's latest frame
+in it, :data:`FRAME_HZ` a second at most), ``/frame/<id>`` a camera's latest JPEG. Bound to
+loopback it is open; bound to any other interface every request needs the token printed at
+start (``?token=`` once, then a cookie)."""
 
 from __future__ import annotations
 
@@ -78,8 +79,8 @@ class ViewServer:
     loopback, ``token`` (default: a new random one) is asked of every request."""
 
     def __init__(self, scene: Scene, hub: ViewHub | None, host: str = "127.0.0.1",
-                 port: int = 8765, token: str | None = None):
-        self.scene, self.hub, self.host = scene, hub, host
+                 port: int = 8765, token: str | None = None, figure: bytes | None = None):
+        self.scene, self.hub, self.host, self.figure = scene, hub, host, figure
         self.token = None if is_loopback(host) else (token or secrets.token_urlsafe(16))
         self.refused = 0  #: requests refused for want of the token
         self._scene_json = json.dumps(scene.doc, allow_nan=False).encode()
@@ -118,6 +119,7 @@ class ViewServer:
         app.router.add_get("/scene", self._scene)
         app.router.add_get("/events", self._events)
         app.router.add_get("/frame/{camera}", self._frame)
+        app.router.add_get("/report.png", self._figure)
         app.router.add_static("/static/", STATIC, show_index=False)
         app.router.add_get("/favicon.ico", self._no_icon)
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False,
@@ -164,6 +166,11 @@ class ViewServer:
 
     async def _scene(self, request):
         return web.Response(body=self._scene_json, content_type="application/json")
+
+    async def _figure(self, request):
+        if self.figure is None:
+            raise web.HTTPNotFound()
+        return web.Response(body=self.figure, content_type="image/png")
 
     async def _frame(self, request):
         if self.hub is None:

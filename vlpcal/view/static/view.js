@@ -278,11 +278,38 @@ function frameLoop() {
 }
 
 function layout() {
-  const wrap = $("plan-wrap"), width = Math.max(320, wrap.parentElement.clientWidth - 4);
+  const wrap = $("plan-wrap");
+  let width = Math.max(320, wrap.parentElement.clientWidth - 4);
   state.view = fitView(state.scene, width);
+  const most = 0.8 * window.innerHeight;   // the whole plan in view: no taller than the window
+  if (state.view.height > most) {
+    width = Math.max(320, Math.floor(width * most / state.view.height));
+    state.view = fitView(state.scene, width);
+  }
   for (const id of ["plan", "overlay"]) { $(id).width = width; $(id).height = state.view.height; }
   wrap.style.height = `${state.view.height}px`;
   drawPlan(); state.dirty = true;
+}
+
+// -- a calibrated deployment's report ------------------------------------------------------
+function showCalibration(cal) {
+  if (!cal) return;
+  $("calibration").hidden = false;
+  $("calibration-source").textContent = `from ${cal.report}, beside the deployment`;
+  const mm = v => (v === null || v === undefined) ? "–" : (v * 1000).toFixed(1);
+  const row = (cells) => {
+    const tr = document.createElement("tr");
+    for (const c of cells) { const td = document.createElement("td"); td.textContent = c; tr.appendChild(td); }
+    return tr;
+  };
+  const cams = $("calibration-cameras").querySelector("tbody");
+  for (const c of cal.cameras) cams.appendChild(row([c.id, c.moved_mm.toFixed(1), c.turned_deg.toFixed(2), c.lens]));
+  const held = $("calibration-held").querySelector("tbody");
+  for (const [label, v] of Object.entries(cal.held_out)) {
+    held.appendChild(row([label, mm(v.mean_m), mm(v.p95_m),
+                          v.fixed === null || v.fixed === undefined ? "–" : `${(v.fixed * 100).toFixed(0)} %`]));
+  }
+  if (cal.figure) { const img = $("calibration-figure"); img.src = "report.png"; img.hidden = false; }
 }
 
 async function start() {
@@ -299,6 +326,7 @@ async function start() {
   $("overlay").addEventListener("mouseleave", () => { $("tip").hidden = true; });
   window.addEventListener("resize", layout);
   layout();
+  showCalibration(state.scene.calibration);
   const events = new EventSource("events");
   events.addEventListener("hello", ev => {
     const h = JSON.parse(ev.data);
