@@ -540,3 +540,57 @@ def test_a_wand_survey_captured_live_calibrates_with_no_tape(site, tmp_path):
     o = marks.xyz[0]
     for c, t in zip(cal.cameras, scene.true):  # the marks' frame: O the origin, x along x
         assert np.linalg.norm(np.subtract(c.position, np.subtract(t.position, o))) < 0.02
+
+
+def test_a_free_capture_shows_its_coverage_pairs_and_next_point_live(site, tmp_path):
+    """`survey capture --free --view`: the page's stream carries each camera's frames with
+    their spots, what the LED covered in each image and the camera pairs it linked, then the
+    reference point to capture next."""
+    import json
+    import re
+    import urllib.request
+
+    from vlpcal.sim.writers import free_path
+    from vlpcal.survey import plan_references
+
+    scene, root = site
+    dep = deployment.load(root / "dep.yaml")
+    refs = plan_references(dep)
+    write_truth_csv(tmp_path / "refs.csv", refs.ids, refs.xyz, id_column="point_id")
+    rig = MovingRig(scene, tmp_path, free_path(scene, 400), fps=30.0)
+    cmd = capture_cmd(root, rig, tmp_path / "survey", "--yes", "--free", "--duration", "12",
+                      "--rate", "8", "--delay", "0.1", "--view", "127.0.0.1:0")
+    cmd[cmd.index("--points") + 1] = str(tmp_path / "refs.csv")
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    updates = []
+    try:
+        url = None
+        for _ in range(20):
+            m = re.search(r"view: (http://\S+)", proc.stderr.readline())
+            if m:
+                url = m.group(1)
+                break
+        assert url, "no view address"
+        end = time.monotonic() + 60
+        with urllib.request.urlopen(url + "events", timeout=30) as stream:
+            for line in stream:
+                if line.startswith(b"data: ") and b'"cameras"' in line:
+                    updates.append(json.loads(line[6:]))
+                if any(u.get("survey", {}).get("stop") for u in updates) \
+                        or time.monotonic() > end:
+                    break
+        proc.wait(120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        rig.close()
+    assert proc.returncode == 0, proc.stderr.read()[-2000:]
+    framed = {cid for u in updates for cid, c in u["cameras"].items()
+              if c.get("jpeg") and c.get("jpeg_uv")}
+    assert framed == {c.id for c in dep.cameras}  # each camera's frames, its spot on them
+    covered = [u["survey"]["coverage"] for u in updates if "coverage" in u.get("survey", {})]
+    assert covered and covered[-1]["pairs"]  # the pairs linked so far
+    last = covered[-1]["cameras"]
+    assert all(sum(last[c.id]["counts"]) == last[c.id]["sightings"] > 0 for c in dep.cameras)
+    stop = next(u["survey"]["stop"] for u in updates if u.get("survey", {}).get("stop"))
+    assert stop["id"] == refs.ids[0] and stop["number"] == 1 and stop["total"] == len(refs.ids)

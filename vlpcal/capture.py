@@ -255,8 +255,10 @@ class CaptureSession:
     def __init__(self, dep: Deployment, plan_ids: list, plan_xyz, appender, burst: Burst,
                  ask: Callable, say: Callable, on_point: Callable | None = None,
                  delay: float = 0.0, check_every: int = 5, unattended: bool = False,
-                 final_check: bool = True):
+                 final_check: bool = True, on_stop: Callable | None = None):
         self.dep = dep
+        #: told (point id, xyz, its number from 1, the plan's length) at each point asked for
+        self.on_stop = on_stop
         self.plan = list(zip(plan_ids, np.asarray(plan_xyz, float)))
         self.appender = appender
         self.burst = burst
@@ -319,6 +321,8 @@ class CaptureSession:
                 place = f"on mark {pid} (where survey plan's map shows it)"
             else:
                 place = f"at {pid} ({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f} m)"
+            if self.on_stop is not None:
+                self.on_stop(pid, xyz, i + 1, len(self.plan))
             step = self.ask("place", f"[{i + 1}/{len(self.plan)}] place the LED {place}")
             if step.action == "go":
                 step = self._burst_until_decided(pid, xyz)
@@ -435,8 +439,10 @@ class FreeRecorder:
 
     def __init__(self, dep: Deployment, grouper, appender, rate: float, say: Callable,
                  report_every: float = 5.0, overlapping: set | None = None,
-                 wand: bool = False):
+                 wand: bool = False, on_report: Callable | None = None):
         self.dep, self.grouper, self.appender = dep, grouper, appender
+        #: told every set's spots so far (:meth:`spots`) at each report (a live view's)
+        self.on_report = on_report
         self.rate, self.say, self.report_every = rate, say, report_every
         self.overlapping = overlapping
         self.wand = wand  #: a wand's two LEDs in every frame: up to two spots kept
@@ -458,6 +464,8 @@ class FreeRecorder:
         from .survey.coverage import camera_words, pair_words
 
         uv = self.spots()
+        if self.on_report is not None:
+            self.on_report(uv)
         head = "free survey" if final else "so far"
         pairs = pair_words(self.dep.cameras, uv, self.overlapping)
         self.say(f"{head}: {uv.shape[1]} sets; {pairs}")

@@ -294,6 +294,10 @@ class LiveGrouper:
         self._live: set = set()
         self._said: dict = {}  # camera id → the last stop reason reported
         self.t0 = time.monotonic()
+        #: called with (camera id, arrival time — monotonic s —, frame) for every frame as it
+        #: arrives, in the camera's reader thread (a live view's): it must be quick, and what
+        #: it raises is ignored
+        self.tap: Callable | None = None
 
     def _reader(self, cid: str, factory) -> None:
         why = "stream ended"
@@ -302,6 +306,11 @@ class LiveGrouper:
                 if self._stop.is_set():
                     return
                 item = (time.monotonic(), cid, frame)
+                if self.tap is not None:
+                    try:
+                        self.tap(cid, item[0], frame)
+                    except Exception:  # noqa: BLE001 — a view's trouble never stops a camera
+                        pass
                 try:
                     self._queue.put_nowait(item)
                 except queue.Full:  # the consumer fell behind: drop the oldest, keep up

@@ -17,6 +17,7 @@ from .common import (
     _output_file,
     main,
 )
+from .view import DEFAULT_BIND
 
 #: a free or wand survey's capture: at most this long, this many sets (10 a second)
 CAPTURE_SECONDS = 180.0
@@ -302,8 +303,14 @@ def _echo_free_plan(plan, route, out, wand=None) -> None:
               help="A wand survey (implies --free): two LEDs LENGTH m apart on a rigid bar "
                    "waved through the room, both spots kept per camera; then the LED on each "
                    "frame mark of --points (survey plan --wand's file).")
+@click.option("--view", "view_bind", is_flag=False, flag_value=DEFAULT_BIND, default=None,
+              metavar="[HOST:PORT]",
+              help=f"Show the capture live in the browser (vlpcal view's page; default "
+                   f"{DEFAULT_BIND}): each camera's frames and spots, what a free survey "
+                   "covered in each image and the camera pairs it linked, the point to "
+                   "capture next on the plan.")
 def survey_capture(deployment_path, points_path, survey_path, cameras, yes, delay, on_point,
-                   burst, check_every, free, rate, duration, free_sets, wand):
+                   burst, check_every, free, rate, duration, free_sets, wand, view_bind):
     """Capture a survey live: walk through the points while the cameras stream.
 
     At each point: place the LED, press Enter; a short burst is grabbed from every camera and
@@ -360,6 +367,14 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     for cid, (ok, what) in answers.items():
         click.echo(f"camera {cid}: {what}" + ("" if ok else "; going on without it"),
                    err=True)
+    hub = server = None
+    if view_bind is not None:
+        from ..view.tap import FrameTap
+        from .view import open_view
+
+        hub, server = open_view(dep, view_bind, source=f"vlpcal survey capture → {survey_path}",
+                                path=deployment_path)
+        grouper.tap = FrameTap(hub, dep, spots=2 if wand is not None else 1)
     bundle = Path(survey_path)
     created = not bundle.exists()
     try:
@@ -429,7 +444,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     if free:
         try:
             free_app = _capture_free(dep, grouper, survey_path, rate, duration, free_sets, yes,
-                                     say, wand)
+                                     say, wand, hub)
         except KeyboardInterrupt:
             grouper.stop()
             click.echo(f"\ninterrupted: the free sets so far are safe in {survey_path}; run the "
@@ -439,13 +454,15 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     session = CaptureSession(dep, ids, xyz, appender, frames, ask, say,
                              on_point=move if on_point else None, delay=delay,
                              check_every=0 if free else check_every, unattended=yes,
-                             final_check=not free)
+                             final_check=not free, on_stop=_view_stop(hub))
     try:
         n = session.run()
     except KeyboardInterrupt:
         n = None
     finally:
         grouper.stop()
+        if server is not None:
+            server.close()
         done_ids, skipped = appender.accepted()[0], appender.skipped()
         if created and not done_ids and not skipped and not (free_app and free_app.set_ids):
             import shutil
@@ -468,8 +485,20 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
             + (f"--wand {wand:g} " if wand is not None else "") + "--out calibrated.yaml")
 
 
+def _view_stop(hub):
+    """A capture's ``on_stop`` for the live page: the point to capture next (None: none)."""
+    if hub is None:
+        return None
+
+    def stop(pid, xyz, number, total):
+        hub.survey_update(stop={"id": pid, "xyz": [float(v) if math.isfinite(v) else None
+                                                   for v in xyz],
+                                "number": number, "total": total})
+    return stop
+
+
 def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattended, say,
-                  wand=None):
+                  wand=None, hub=None):
     """The free part of ``survey capture --free`` (``--wand``: a wand's): record until done,
     Enter, or the time is up; the sets are on disk as they come. Returns the appender."""
     import select
@@ -488,8 +517,14 @@ def _capture_free(dep, grouper, survey_path, rate, duration, max_sets, unattende
         overlapping = {p for stop in free_route(dep).pairs for p in stop}
     except SurveyError:
         overlapping = None
+    on_report = None
+    if hub is not None:  # what the LED (or wand) covered, to the live page
+        from ..view.tap import survey_coverage
+
+        def on_report(uv):
+            hub.survey_update(coverage=survey_coverage(dep.cameras, uv))
     recorder = FreeRecorder(dep, grouper, app, rate, say, overlapping=overlapping,
-                            wand=wand is not None)
+                            wand=wand is not None, on_report=on_report)
     have = len(app.set_ids)
     if have >= max_sets:
         say(f"free survey: {have} sets already in {survey_path} (--free-sets {max_sets})")

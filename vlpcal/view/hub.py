@@ -66,6 +66,10 @@ class ViewHub:
         self.n_rows = 0  #: rows ever put: a row's number, from 1
         self.source = source  #: what the command reads, shown on the page
         self.status = ""  #: one line the command says about its run (the page shows it)
+        #: a survey's progress (``survey capture --view``): the point being captured, each
+        #: image's coverage and the camera pairs linked; its version counts its changes
+        self.survey: dict = {}
+        self.survey_version = 0
 
     # -- the command's side: quick, never waiting on a page -----------------------------------
     def frame(self, camera_id: str, t: float, uv, jpeg: bytes | None = None) -> None:
@@ -129,6 +133,13 @@ class ViewHub:
                 self.n_rows += 1
                 r["n"] = self.n_rows
                 self.rows.append(r)
+
+    def survey_update(self, **parts) -> None:
+        """Part of a survey's progress: ``stop`` (id, xyz, number, of how many) or
+        ``coverage`` (:func:`~vlpcal.view.tap.survey_coverage`)."""
+        with self._lock:
+            self.survey = {**self.survey, **parts}
+            self.survey_version += 1
 
     def say(self, line: str) -> None:
         with self._lock:

@@ -192,6 +192,7 @@ class ViewServer:
         if self.hub is None:
             return response
         status, sent = None, {}  # camera → when its last frame went to this page
+        survey_seen = 0
         try:
             while True:
                 cams, rows, missed = self.hub.since(after, seen)
@@ -206,10 +207,16 @@ class ViewServer:
                             cam["jpeg_seq"], cam["jpeg_t"], cam["jpeg_uv"] = seq, t, uv
                             sent[cid] = now
                 said = self.hub.status
-                if cams or rows or missed or said != status:
+                survey = None
+                if self.hub.survey_version != survey_seen:
+                    survey_seen, survey = self.hub.survey_version, self.hub.survey
+                if cams or rows or missed or said != status or survey is not None:
                     status = said
-                    await response.write(_event("update", {
-                        "cameras": cams, "rows": rows, "missed": missed, "status": said}))
+                    update = {"cameras": cams, "rows": rows, "missed": missed,
+                              "status": said}
+                    if survey is not None:
+                        update["survey"] = survey
+                    await response.write(_event("update", update))
                 await asyncio.sleep(TICK)
         except (ConnectionResetError, asyncio.CancelledError):
             pass

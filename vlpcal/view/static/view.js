@@ -9,6 +9,7 @@ const TILE_SCALE = 2;       // a camera's pixels drawn this many screen pixels w
 const state = {
   scene: null, view: null, live: false,
   tracks: {},               // id → {xyz, sigma, status, yaw, t, trail: [[x, y]], rows}
+  survey: {},               // a survey's progress: stop, coverage (survey capture --view)
   tiles: {},                // id → {seq, shownSeq, skipped, spots, t, drawnAt, ...}
   updates: 0, rows: 0, missed: 0, lastUpdate: 0,
   latency: {frame: [], row: []},
@@ -152,9 +153,40 @@ function addRows(rows) {
   state.dirty = true;
 }
 
+function showSurvey(survey) {
+  state.survey = survey;
+  $("survey").hidden = false;
+  const stop = survey.stop;
+  if (stop) {
+    const at = stop.xyz[0] === null ? "on its mark (see the survey plan)"
+      : `at (${stop.xyz.map(v => v.toFixed(2)).join(", ")}) m`;
+    $("survey-stop").textContent = `next: point ${stop.id} (${stop.number} of ${stop.total}) ${at}`;
+  }
+  const cov = survey.coverage;
+  if (cov) {
+    const pairs = cov.pairs.map(([a, b, n]) => `${a}–${b} ${n}`).join(", ");
+    const seen = Object.entries(cov.cameras).map(([id, c]) => `${id} ${c.sightings}`).join(", ");
+    $("survey-pairs").textContent = `sightings: ${seen}. Pairs linked (sets both saw): ${pairs || "none yet"}`;
+  }
+  state.dirty = true;
+}
+
 function drawOverlay() {
   const cv = $("overlay"), ctx = cv.getContext("2d"), view = state.view;
   ctx.clearRect(0, 0, cv.width, cv.height);
+  const stop = state.survey.stop;
+  if (stop && stop.xyz[0] !== null) {   // the point to capture next: a star on the plan
+    const [u, v] = view.px(stop.xyz[0], stop.xyz[1]);
+    ctx.fillStyle = "#d62"; ctx.strokeStyle = "#fff"; ctx.lineWidth = 1.5;
+    ctx.beginPath();
+    for (let k = 0; k < 10; k++) {
+      const r = k % 2 ? 5 : 12, a = -Math.PI / 2 + k * Math.PI / 5;
+      ctx.lineTo(u + r * Math.cos(a), v + r * Math.sin(a));
+    }
+    ctx.closePath(); ctx.fill(); ctx.stroke();
+    ctx.fillStyle = "#111"; ctx.font = "bold 12px system-ui, sans-serif";
+    ctx.fillText(`next: ${stop.id}`, u + 14, v - 8);
+  }
   ctx.font = "12px system-ui, sans-serif";
   const ids = Object.keys(state.tracks);
   ids.forEach((id, n) => {
@@ -217,6 +249,17 @@ function drawTile(t, img, spots) {
   ctx.imageSmoothingEnabled = false;
   if (img) ctx.drawImage(img, 0, 0, t.cv.width, t.cv.height);
   else { ctx.fillStyle = "#000"; ctx.fillRect(0, 0, t.cv.width, t.cv.height); }
+  const cov = state.survey.coverage && state.survey.coverage.cameras[t.el.dataset.camera];
+  if (cov) {   // where the survey's LED has been in this image: red cells still empty
+    const [cols, rows] = state.survey.coverage.grid;
+    const w = t.cv.width / cols, h = t.cv.height / rows;
+    const most = Math.max(1, ...cov.counts);
+    cov.counts.forEach((n, k) => {
+      ctx.fillStyle = n ? `rgba(40,200,80,${0.08 + 0.3 * Math.log1p(n) / Math.log1p(most)})`
+                        : "rgba(230,40,40,0.28)";
+      ctx.fillRect((k % cols) * w, Math.floor(k / cols) * h, w, h);
+    });
+  }
   ctx.strokeStyle = "#0f0"; ctx.lineWidth = 1.5;
   for (const [u, v] of spots) {  // pixel centres run 0 … width − 1
     ctx.beginPath();
@@ -340,6 +383,7 @@ async function start() {
     state.missed += u.missed;
     for (const [id, c] of Object.entries(u.cameras)) updateCamera(id, c);
     if (u.rows.length) addRows(u.rows);
+    if (u.survey) showSurvey(u.survey);
     $("status").textContent = u.status || "";
   });
   events.onerror = () => { $("status").textContent = "the command is not answering (stopped?)"; };
