@@ -439,3 +439,39 @@ def test_a_calibrated_deployment_shows_its_report(tmp_path):
     (tmp_path / "d.report.json").write_text("{not json")
     assert _calibration(tmp_path / "d.yaml") == (None, None)
     assert _calibration(LAYOUT) == (None, None)
+
+
+def test_the_view_tracks_the_spots_cameras_publish(broker, tmp_path):
+    """``vlpcal view D --spots mqtt://…``: the spots a site's cameras publish, on the tiles,
+    and the LED tracked on the plan, nothing written."""
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import write_deployments
+
+    write_deployments(make_scene(get_profile("paper-2024"), 0), tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    proc = subprocess.Popen([sys.executable, "-m", "vlpcal", "view", str(tmp_path / "truth.yaml"),
+                             "--bind", "127.0.0.1:0", "--spots", broker.url("lab"),
+                             "--duration", "20"], stderr=subprocess.PIPE, text=True)
+    try:
+        url = _url_of(proc)
+        pub = subprocess.Popen([sys.executable, "-m", "vlpcal", "simulate", "--profile",
+                                "paper-2024", "--publish", broker.url("lab"), "--seconds", "3",
+                                "--robot-speed", "1"], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+        rows, spots, end = [], set(), time.monotonic() + 30
+        with urllib.request.urlopen(url + "events", timeout=30) as stream:
+            for line in stream:
+                if line.startswith(b"data: ") and b'"rows"' in line:
+                    u = json.loads(line[6:])
+                    rows += [r for r in u["rows"] if r["status"] == "ok"]
+                    spots |= {cid for cid, c in u["cameras"].items() if c["uv"]}
+                if len(rows) > 20 and len(spots) == 3 or time.monotonic() > end:
+                    break
+        pub.wait(60)
+    finally:
+        proc.terminate()
+        proc.wait(20)
+    assert len(rows) > 20 and spots == {"C1", "C2", "C3"}
+    assert all(r["kind"] == "track" and r["xyz"] is not None for r in rows)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written

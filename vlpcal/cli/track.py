@@ -447,14 +447,16 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     from ..mqtt import MqttError, SpotSubscriber
     from ..tracking import Tracker
 
-    out = _output_file(out, inputs=(deployment_path,) + ((ca_file,) if ca_file else ()),
-                       what="the tracks")
+    if out is not None:
+        out = _output_file(out, inputs=(deployment_path,) + ((ca_file,) if ca_file else ()),
+                           what="the tracks")
 
     def say(msg):
         if not quiet:
             click.echo(msg, err=True)
 
-    live = _LiveTracks(out, 0.0, bool(dep.bodies))  # refused at once if the file is there
+    # refused at once if the file is there; no file: the view alone
+    live = _LiveTracks(out, 0.0, bool(dep.bodies)) if out is not None else _NoTracks()
     try:
         sub = SpotSubscriber(target, [c.id for c in dep.cameras], ca_file,
                              sizes={c.id: (c.width, c.height) for c in dep.cameras})
@@ -523,6 +525,15 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         live.remove()
         raise _no_rows(tracker, f"{target.shown()}/spots/+", what="spot message")
     return rows
+
+
+class _NoTracks:
+    """No tracks file (``vlpcal view --spots``: the page alone)."""
+
+    def write(self, rows) -> None:
+        pass
+
+    close = remove = lambda self: None
 
 
 class _LiveTracks:

@@ -87,6 +87,9 @@ def _calibration(path) -> tuple[dict | None, bytes | None]:
 @click.option("--camera", "cameras", multiple=True, metavar="ID=SOURCE",
               help="A live camera (as vlpcal track --camera): its frames, spots and the "
                    "tracks drawn live.")
+@click.option("--spots", "spots_url", default=None, metavar="mqtt://…/PREFIX",
+              help="Spots the cameras publish on PREFIX/spots/<camera> (as vlpcal track "
+                   "--spots): shown on the tiles and tracked on the plan, nothing written.")
 @click.option("--follow", "follow_url", default=None, metavar="mqtt://…/PREFIX",
               help="Follow a running locate or track that publishes on PREFIX (--publish): "
                    "its fixes, tracks and bodies, and the spots cameras publish there.")
@@ -94,7 +97,7 @@ def _calibration(path) -> tuple[dict | None, bytes | None]:
               help="The broker's CA certificate (mqtts:// with a private CA).")
 @click.option("--duration", type=Finite(0, 1e7, min_open=True), default=None,
               help="Stop after this many seconds (default: until Ctrl-C).")
-def view(path, bind, cameras, follow_url, ca_file, duration):
+def view(path, bind, cameras, spots_url, follow_url, ca_file, duration):
     """A deployment (or a planner's site) in the browser: the floor plan to scale, the
     cameras and their footprints at the lowest and highest LED height, the maps of how many
     cameras see each point and its predicted error (hover a point to read them); with
@@ -105,23 +108,31 @@ def view(path, bind, cameras, follow_url, ca_file, duration):
     import time
 
     dep, site = _deployment_or_site(path)
-    if (cameras or follow_url) and dep is None:
+    if (cameras or follow_url or spots_url) and dep is None:
         raise UserError(f"{path}: a site has no cameras to show live; give a deployment")
-    if cameras and follow_url:
-        raise UserError("give --camera … or --follow, not both")
-    target = None
-    if follow_url:
-        from .mqtt import parse_mqtt
+    if sum(map(bool, (cameras, follow_url, spots_url))) > 1:
+        raise UserError("give one of --camera …, --spots or --follow")
+    target = spots = None
+    from .mqtt import parse_mqtt
 
+    if follow_url:
         target = parse_mqtt(follow_url, "--follow")
+    if spots_url:
+        spots = parse_mqtt(spots_url, "--spots")
     source = (f"{path}, {len(cameras)} live camera(s)" if cameras else
-              f"{path}, following {target.shown()}" if target else path)
-    hub, server = open_view(dep, bind, source=source, live=bool(cameras or target), site=site,
-                            path=path)
+              f"{path}, following {target.shown()}" if target else
+              f"{path}, spots on {spots.shown()}" if spots else path)
+    hub, server = open_view(dep, bind, source=source, live=bool(cameras or target or spots),
+                            site=site, path=path)
     t_end = time.monotonic() + duration if duration else None
     try:
         if target is not None:
             _follow(target, ca_file, hub, t_end)
+        elif spots is not None:
+            from .track import _track_spots
+
+            _track_spots(dep, path, spots, ca_file, duration, None, None, None, None, True,
+                         None, lambda watch: None, hub)
         elif cameras:
             from .track import _track_live
 
