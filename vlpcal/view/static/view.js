@@ -222,7 +222,8 @@ function tileOf(id, size) {
   el.className = "tile"; el.dataset.camera = id;
   const cv = document.createElement("canvas");
   cv.width = size[0] * TILE_SCALE; cv.height = size[1] * TILE_SCALE;
-  el.innerHTML = `<div class="name">${id}</div>`;
+  const name = document.createElement("div");   // text, never markup: ids come from files
+  name.className = "name"; name.textContent = id; el.appendChild(name);
   el.appendChild(cv);
   const facts = document.createElement("div"); facts.className = "facts"; el.appendChild(facts);
   $("tiles").appendChild(el);
