@@ -220,7 +220,7 @@ def live_run(tmp_path_factory):
                         tiles[id] = {seq: t.shownSeq, drawn: t.drawn};
                     return {at: Date.now() / 1000, updates: s.updates, tracks: tr, tiles};
                 }"""))
-                for cid in (c.id for c in dep.cameras) if len(samples) % 8 == 0 else ():
+                for cid in (c.id for c in dep.cameras) if len(samples) % 4 == 0 else ():
                     got = page.evaluate("id => window.vlpcalView.tileFrame(id)", cid)
                     if got and got["spots"]:
                         frames.setdefault(cid, []).append(got)

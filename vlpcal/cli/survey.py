@@ -374,6 +374,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
 
         hub, server = open_view(dep, view_bind, source=f"vlpcal survey capture → {survey_path}",
                                 path=deployment_path)
+        hub.tracking = False  # a survey: no tracks to come
         grouper.tap = FrameTap(hub, dep, spots=2 if wand is not None else 1)
     bundle = Path(survey_path)
     created = not bundle.exists()

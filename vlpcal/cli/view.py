@@ -27,7 +27,9 @@ def open_view(dep, bind: str, source: str = "", live: bool = True, site=None, pa
     figure = None
     if site is None:
         calibration, figure = _calibration(path) if path else (None, None)
-        drawn = scene(site_of(dep), list(dep.cameras), calibration=calibration)
+        planned = _planned_for(dep, path)  # the site it was planned for: its LED heights
+        drawn = scene(site_of(dep, requirements=planned.requirements if planned else None),
+                      list(dep.cameras), calibration=calibration, stated=planned is not None)
         cameras = {c.id: (c.width, c.height) for c in dep.cameras}
     else:
         drawn, cameras = scene(site, []), {}
@@ -46,6 +48,28 @@ def open_view(dep, bind: str, source: str = "", live: bool = True, site=None, pa
                  "network who has the address has the view)")
     click.echo(line, err=True)
     return hub, server
+
+
+def _planned_for(dep, path):
+    """The site a deployment was planned for (``vlpcal plan`` names it in the provenance:
+    ``from: {site: …}``, relative to the deployment's folder or the working one), or None
+    when it names none or it cannot be read."""
+    from pathlib import Path
+
+    from ..planning import SiteError, load_site
+
+    prov = dep.extra.get("provenance")
+    named = prov.get("from", {}).get("site") if isinstance(prov, dict) and isinstance(
+        prov.get("from"), dict) else None
+    if not isinstance(named, str) or not named:
+        return None
+    for where in ([Path(path).parent / named] if path else []) + [Path(named)]:
+        try:
+            if where.is_file():
+                return load_site(where)
+        except (SiteError, OSError):
+            return None
+    return None
 
 
 #: a calibration report beside a deployment is read up to this size (it is a few kB)

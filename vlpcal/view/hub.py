@@ -32,6 +32,9 @@ class CameraState:
     uv: list = field(default_factory=list)  #: its spots, px
     jpeg: bytes | None = None  #: the frame itself (None: spots only, as over MQTT)
     clock_offset: float | None = None  #: s: host − the camera's clock, when it stamps frames
+    #: frames a second the camera sends, when the command counts every frame but puts only
+    #: some here (a survey's view); None: from the frames put here
+    sent_rate: float | None = None
     dropped: int = 0  #: frames the command lost (it fell behind), not the page
     stopped: str | None = None  #: why its source ended
     times: deque = field(default_factory=lambda: deque(maxlen=RATE_FRAMES))
@@ -39,6 +42,8 @@ class CameraState:
     @property
     def rate(self) -> float:
         """Frames per second over its latest frames (NaN before two)."""
+        if self.sent_rate is not None:
+            return self.sent_rate
         if len(self.times) < 2 or self.times[-1] <= self.times[0]:
             return math.nan
         return (len(self.times) - 1) / (self.times[-1] - self.times[0])
@@ -70,6 +75,10 @@ class ViewHub:
         #: image's coverage and the camera pairs linked; its version counts its changes
         self.survey: dict = {}
         self.survey_version = 0
+        #: whether rows of tracks or fixes are to come (not during a survey)
+        self.tracking = True
+        #: the command has ended (the page says so, rather than that it stopped answering)
+        self.ended = False
 
     # -- the command's side: quick, never waiting on a page -----------------------------------
     def frame(self, camera_id: str, t: float, uv, jpeg: bytes | None = None) -> None:
@@ -86,11 +95,14 @@ class ViewHub:
             cam.times.append(float(t))
 
     def camera_status(self, camera_id: str, clock_offset: float | None = None,
-                      dropped: int | None = None, stopped: str | None = None) -> None:
+                      dropped: int | None = None, stopped: str | None = None,
+                      rate: float | None = None) -> None:
         with self._lock:
             cam = self.cameras.get(camera_id)
             if cam is None:
                 return
+            if rate is not None:
+                cam.sent_rate = float(rate)
             if clock_offset is not None:
                 cam.clock_offset = float(clock_offset)
             if dropped is not None:

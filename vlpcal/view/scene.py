@@ -29,10 +29,14 @@ class Scene:
     doc: dict
 
 
-def site_of(dep: Deployment, heights=None) -> Site:
-    """A deployment as a site to judge it against: its room and cameras, LED ``heights``
+def site_of(dep: Deployment, heights=None, requirements: Requirements | None = None) -> Site:
+    """A deployment as a site to judge it against: its room and cameras, and the
+    ``requirements`` of the site it was planned for when known; else LED ``heights``
     (default: the floor and :data:`DEFAULT_TOP` of the ceiling height), two cameras per
     point, its spot noise."""
+    if requirements is not None:
+        return Site(dep.name, dep.ceiling_height, dep.room, dep.cameras[0], requirements,
+                    list(dep.keep_out))
     if heights is None:
         heights = (0.0, DEFAULT_TOP * dep.ceiling_height)
     reqs = Requirements(tuple(sorted(float(h) for h in heights)), pixel_noise=dep.pixel_noise)
@@ -40,9 +44,11 @@ def site_of(dep: Deployment, heights=None) -> Site:
                 list(dep.keep_out))
 
 
-def scene(site: Site, cameras: list, calibration: dict | None = None) -> Scene:
+def scene(site: Site, cameras: list, calibration: dict | None = None,
+          stated: bool = True) -> Scene:
     """The page's scene of ``cameras`` in ``site``; ``calibration``: a survey's report block,
-    passed on as it is."""
+    passed on as it is; ``stated``: whether the site's requirements are a site file's (else
+    assumed: the page then judges the error maps by their own spread)."""
     heights = list(site.requirements.heights)
     lo, hi = min(heights), max(heights)
     cams = []
@@ -85,7 +91,8 @@ def scene(site: Site, cameras: list, calibration: dict | None = None) -> Scene:
                     "step": step * thin, "nx": len(xs), "ny": len(ys)},
            "maps": maps, "requirements": {"min_cameras": r.min_cameras,
                                           "max_error_p95": r.max_error_p95,
-                                          "pixel_noise": r.pixel_noise},
+                                          "pixel_noise": r.pixel_noise,
+                                          "stated": stated},
            "calibration": calibration}
     return Scene(doc)
 

@@ -98,9 +98,13 @@ class ViewServer:
 
     @property
     def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        shown = "127.0.0.1" if host in ("0.0.0.0", "[::]") else host
-        return f"http://{shown}:{self.port}/" + (f"?token={self.token}" if self.token else "")
+        """The page's address; bound to every interface, this machine's on its network (the
+        one a tablet on the site's network opens), else the bound host's."""
+        host = self.host
+        if host in ("0.0.0.0", "::", ""):
+            host = _network_address() or "127.0.0.1"
+        host = f"[{host}]" if ":" in host else host
+        return f"http://{host}:{self.port}/" + (f"?token={self.token}" if self.token else "")
 
     def _run(self) -> None:
         asyncio.set_event_loop(self._loop)
@@ -130,8 +134,14 @@ class ViewServer:
         self.port = self._runner.addresses[0][1]
 
     def close(self) -> None:
+        """Stop serving: a page still open is told the command ended (its last rows and this
+        reach it first), then the server goes."""
         if self._runner is None or not self._loop.is_running():
             return
+        if self.hub is not None:
+            self.hub.say("the command has ended")
+            self.hub.ended = True
+            time.sleep(3 * TICK)
         done = asyncio.run_coroutine_threadsafe(self._runner.cleanup(), self._loop)
         try:
             done.result(3)
@@ -187,7 +197,8 @@ class ViewServer:
         response = web.StreamResponse(headers={"Content-Type": "text/event-stream"})
         await response.prepare(request)
         after, seen = 0, {}
-        hello = {"source": self.hub.source if self.hub else "", "live": self.hub is not None}
+        hello = {"source": self.hub.source if self.hub else "", "live": self.hub is not None,
+                 "tracking": bool(self.hub and self.hub.tracking)}
         await response.write(_event("hello", hello))
         if self.hub is None:
             return response
@@ -210,17 +221,33 @@ class ViewServer:
                 survey = None
                 if self.hub.survey_version != survey_seen:
                     survey_seen, survey = self.hub.survey_version, self.hub.survey
-                if cams or rows or missed or said != status or survey is not None:
+                ended = self.hub.ended
+                if cams or rows or missed or said != status or survey is not None or ended:
                     status = said
                     update = {"cameras": cams, "rows": rows, "missed": missed,
-                              "status": said}
+                              "status": said, "ended": ended}
                     if survey is not None:
                         update["survey"] = survey
                     await response.write(_event("update", update))
+                if ended:
+                    break
                 await asyncio.sleep(TICK)
         except (ConnectionResetError, asyncio.CancelledError):
             pass
         return response
+
+
+def _network_address() -> str | None:
+    """This machine's address on its network: the one its route out would use (a UDP socket
+    aimed at a private address sends nothing); None without a network."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.connect(("10.255.255.255", 1))
+            return s.getsockname()[0]
+        except OSError:
+            return None
 
 
 def _event(kind: str, data) -> bytes:

@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 
 import numpy as np
 
 from ..detection import detect_frame
-from .hub import ViewHub
+from .hub import RATE_FRAMES, ViewHub
 
 #: a frame a camera's this often at most goes to the page (detection included)
 TAP_HZ = 10.0
@@ -27,14 +28,19 @@ class FrameTap:
         self.hub, self.dep, self.spots = hub, dep, spots
         self._cams = {c.id: c for c in dep.cameras}
         self._last: dict = {}
+        self._seen: dict = {}  # camera id → its latest arrivals
         self._lock = threading.Lock()
         self._utc = time.time() - time.monotonic()
 
     def __call__(self, camera_id: str, arrival: float, frame) -> None:
         with self._lock:  # each camera's reader thread: one frame a camera per period
+            seen = self._seen.setdefault(camera_id, deque(maxlen=RATE_FRAMES))
+            seen.append(arrival)  # every frame counts for the camera's own rate
             if arrival - self._last.get(camera_id, -np.inf) < 1.0 / TAP_HZ:
                 return
             self._last[camera_id] = arrival
+        if len(seen) > 1 and seen[-1] > seen[0]:
+            self.hub.camera_status(camera_id, rate=(len(seen) - 1) / (seen[-1] - seen[0]))
         cam = self._cams.get(camera_id)
         if cam is None:
             return

@@ -5,6 +5,9 @@
 const TRAIL = 150;          // points of a track's trail kept
 const LATENCIES = 600;      // latency samples kept for p50 / p95
 const TILE_SCALE = 2;       // a camera's pixels drawn this many screen pixels wide
+const GAP_SECONDS = 0.5;    // rows of a track further apart in time: its trail is broken
+const STALE_SECONDS = 1.0;  // a track with no row for this long is drawn faded …
+const GONE_SECONDS = 5.0;   // … and after this long not at all
 
 const state = {
   scene: null, view: null, live: false,
@@ -50,8 +53,12 @@ function colourError(e, top) {
   return `rgb(${r},${g},${b})`;
 }
 
-function errorTop(map) {
-  const v = map.error.filter(e => e !== null).sort((a, b) => a - b);
+function errorTop() {
+  // one scale for every height: the site's requirement when a site file states it, else the
+  // 95th percentile over all the maps
+  const r = state.scene.requirements;
+  if (r.stated) return r.max_error_p95;
+  const v = state.scene.maps.flatMap(m => m.error.filter(e => e !== null)).sort((a, b) => a - b);
   return v.length ? v[Math.floor(0.95 * (v.length - 1))] || 1e-9 : 1e-9;
 }
 
@@ -61,7 +68,7 @@ function drawPlan() {
   ctx.clearRect(0, 0, cv.width, cv.height);
   const layer = $("layer").value, map = s.maps[+$("height").value];
   const g = s.grid, need = s.requirements.min_cameras;
-  const top = map ? errorTop(map) : 1;
+  const top = errorTop();
   if (map && layer !== "none") {
     for (let j = 0; j < g.ny; j++) {
       for (let i = 0; i < g.nx; i++) {
@@ -112,7 +119,8 @@ function legend(layer, top, need) {
   if (layer === "views") {
     el.textContent = `green: ≥ ${need} cameras (darker: more); orange: fewer; grey: none · ${lines}`;
   } else if (layer === "error") {
-    el.textContent = `predicted error: dark 0 → yellow ≥ ${(top * 1000).toFixed(1)} mm (its 95th percentile)`;
+    const what = state.scene.requirements.stated ? "the site's p95 requirement" : "the 95th percentile of every height";
+    el.textContent = `predicted error: dark 0 → yellow ≥ ${(top * 1000).toFixed(1)} mm (${what}); grey: fewer than ${need} cameras`;
   } else el.textContent = "";
 }
 
@@ -127,7 +135,7 @@ function hover(ev) {
     const k = j * g.nx + i;
     if (map.views[k] >= 0) {
       const ids = map.cameras[k].map(c => s.cameras[c].id);
-      text += `\nat ${map.height} m: seen by ${ids.length ? ids.join(", ") : "no camera"}`;
+      text += `\nat ${map.height.toFixed(2)} m: seen by ${ids.length ? ids.join(", ") : "no camera"}`;
       if (map.error[k] !== null) text += `\npredicted error ${(map.error[k] * 1000).toFixed(1)} mm`;
     } else text += "\nnot floor";
   }
@@ -146,9 +154,16 @@ function addRows(rows) {
     Object.assign(tr, {xyz: r.xyz, sigma: r.sigma, status: r.status, yaw: r.yaw, t: r.t,
                        cameras: r.cameras, kind: r.kind});
     tr.rows += 1;
-    tr.trail.push([r.xyz[0], r.xyz[1]]);
+    // a gap in time starts a new stroke: a track that came back is not joined across the room
+    const gap = tr.trail.length && r.t - tr.trail[tr.trail.length - 1][2] > GAP_SECONDS;
+    tr.trail.push([r.xyz[0], r.xyz[1], r.t, gap]);
     if (tr.trail.length > TRAIL) tr.trail.shift();
+    state.newest = Math.max(state.newest || 0, r.t);
     push(state.latency.row, now - r.t);
+  }
+  // a track with no row for a while is gone (its LED dark, out of view, or named anew)
+  for (const [id, tr] of Object.entries(state.tracks)) {
+    if (state.newest - tr.t > GONE_SECONDS) delete state.tracks[id];
   }
   state.dirty = true;
 }
@@ -188,13 +203,18 @@ function drawOverlay() {
     ctx.fillText(`next: ${stop.id}`, u + 14, v - 8);
   }
   ctx.font = "12px system-ui, sans-serif";
-  const ids = Object.keys(state.tracks);
-  ids.forEach((id, n) => {
+  const ids = Object.keys(state.tracks).sort();
+  const labels = [];   // boxes of the labels drawn so far: the next one moves clear of them
+  ids.forEach(id => {
     const tr = state.tracks[id];
-    const col = `hsl(${(n * 97 + 200) % 360},80%,40%)`;
+    const col = colourOf(id);
+    ctx.globalAlpha = state.newest - tr.t > STALE_SECONDS ? 0.35 : 1.0;
     ctx.strokeStyle = col; ctx.lineWidth = 1.5;
     ctx.beginPath();
-    tr.trail.forEach(([x, y], i) => { const [u, v] = view.px(x, y); i ? ctx.lineTo(u, v) : ctx.moveTo(u, v); });
+    tr.trail.forEach(([x, y, , gap], i) => {
+      const [u, v] = view.px(x, y);
+      (i && !gap) ? ctx.lineTo(u, v) : ctx.moveTo(u, v);
+    });
     ctx.stroke();
     const [u, v] = view.px(tr.xyz[0], tr.xyz[1]);
     const rad = Math.max(4, (tr.sigma || 0) * view.scale);
@@ -207,11 +227,29 @@ function drawOverlay() {
       ctx.lineTo(u + L * Math.cos(tr.yaw), v - L * Math.sin(tr.yaw)); ctx.lineWidth = 3; ctx.stroke();
     }
     ctx.fillStyle = "#111";
-    ctx.fillText(`${id} z ${tr.xyz[2].toFixed(3)} m`, u + 8, v + 14);
+    const text = `${id} z ${tr.xyz[2].toFixed(3)} m`, w = ctx.measureText(text).width;
+    let lx = u + 8, ly = v + 14;
+    for (const dy of [0, 14, -28, 28, -42, 42, 56]) {   // the first place clear of the others
+      if (!labels.some(b => lx < b[0] + b[2] && lx + w > b[0] && ly + dy - 11 < b[1] + 14 && ly + dy + 3 > b[1])) {
+        ly += dy; break;
+      }
+    }
+    labels.push([lx, ly - 11, w]);
+    ctx.fillText(text, lx, ly);
+    ctx.globalAlpha = 1.0;
   });
-  const live = ids.map(id => `${id}: ${state.tracks[id].status}, σ ${((state.tracks[id].sigma || 0) * 1000).toFixed(1)} mm`);
-  $("tracks-line").textContent = (live.length ? live.join("; ") : (state.live ? "no track yet" : ""))
+  const live = ids.map(id => {
+    const tr = state.tracks[id], old = state.newest - tr.t > STALE_SECONDS;
+    return `${id}: ${old ? `no row for ${(state.newest - tr.t).toFixed(1)} s` : tr.status}, σ ${((tr.sigma || 0) * 1000).toFixed(1)} mm`;
+  });
+  $("tracks-line").textContent = (live.length ? live.join("; ") : (state.tracking ? "no track yet" : ""))
     + (state.missed ? `; ${state.missed} rows not shown (the page fell behind)` : "");
+}
+
+function colourOf(id) {   // one colour per id, the same whenever it comes back
+  let h = 0;
+  for (const ch of id) h = (h * 31 + ch.charCodeAt(0)) % 360;
+  return `hsl(${h},75%,38%)`;
 }
 
 // -- the cameras ---------------------------------------------------------------------------
@@ -256,8 +294,8 @@ function drawTile(t, img, spots) {
     const w = t.cv.width / cols, h = t.cv.height / rows;
     const most = Math.max(1, ...cov.counts);
     cov.counts.forEach((n, k) => {
-      ctx.fillStyle = n ? `rgba(40,200,80,${0.08 + 0.3 * Math.log1p(n) / Math.log1p(most)})`
-                        : "rgba(230,40,40,0.28)";
+      ctx.fillStyle = n ? `rgba(40,200,80,${0.05 + 0.15 * Math.log1p(n) / Math.log1p(most)})`
+                        : "rgba(230,40,40,0.22)";
       ctx.fillRect((k % cols) * w, Math.floor(k / cols) * h, w, h);
     });
   }
@@ -270,6 +308,8 @@ function drawTile(t, img, spots) {
 }
 
 function updateCamera(id, c) {
+  if (!state.tiles[id] && !c.seq && !c.stopped) return;   // a tile once the camera has data
+  $("no-cameras").hidden = true;
   const t = tileOf(id, [c.width, c.height]);
   t.summary = c; t.seq = c.seq;
   if (c.jpeg) showFrame(t, c);
@@ -282,8 +322,9 @@ function updateCamera(id, c) {
     c.rate !== null ? `${c.rate.toFixed(1)} fps` : "– fps",
     `${c.uv.length} spot${c.uv.length === 1 ? "" : "s"}`,
     c.clock_offset !== null ? `clock ${c.clock_offset >= 0 ? "+" : ""}${c.clock_offset.toFixed(3)} s` : "no clock stamp",
-    `${c.dropped} dropped by the command`, `${t.skipped} skipped by this page`,
+    `${c.dropped} dropped by the command`,
   ];
+  if (c.frame) facts.push(`${t.drawn} shown here (10 a second at most)`);
   if (c.stopped) facts.push(`stopped: ${c.stopped}`);
   t.el.classList.toggle("stopped", !!c.stopped);
   t.facts.textContent = facts.join(" · ");
@@ -374,7 +415,7 @@ async function start() {
   const events = new EventSource("events");
   events.addEventListener("hello", ev => {
     const h = JSON.parse(ev.data);
-    state.live = h.live;
+    state.live = h.live; state.tracking = h.tracking;
     $("source").textContent = h.source || (h.live ? "" : "the plan (no live source)");
     if (!h.live) { events.close(); $("cameras-panel").hidden = true; }
   });
@@ -386,8 +427,12 @@ async function start() {
     if (u.rows.length) addRows(u.rows);
     if (u.survey) showSurvey(u.survey);
     $("status").textContent = u.status || "";
+    if (u.ended) state.ended = true;
   });
-  events.onerror = () => { $("status").textContent = "the command is not answering (stopped?)"; };
+  events.onerror = () => {
+    if (state.ended) { events.close(); return; }
+    $("status").textContent = "the command is not answering (stopped?)";
+  };
   requestAnimationFrame(frameLoop);
   state.ready = true;
 }
