@@ -195,7 +195,8 @@ def survey_plan_figure(path, dep, plan, route=None) -> list:
 MAP_HEIGHTS = 4
 
 
-def calibration_figure(path, stats, per_point, X, cameras, lens_rows=(), rows=()) -> None:
+def calibration_figure(path, stats, per_point, X, cameras, lens_rows=(), rows=(),
+                       title: str = "") -> None:
     """A survey calibration's report as panels that each answer one question: where each
     camera moved from its nominal place (``rows``: the report's per-camera rows, with
     ``nominal_position_m``; arrows drawn to scale, their lengths written), the held-out error
@@ -228,7 +229,7 @@ def calibration_figure(path, stats, per_point, X, cameras, lens_rows=(), rows=()
         cdf.legend(fontsize=7, loc="lower right")
     if lens_rows:
         _lens_panel(fig.add_subplot(grid[0, 2]), lens_rows)
-    for r, (err, title) in enumerate(((cal, "calibrated"), (nom, "nominal cameras")), start=1):
+    for r, (err, which) in enumerate(((cal, "calibrated"), (nom, "nominal cameras")), start=1):
         ok = np.isfinite(err)
         vmax = float(np.nanpercentile(err, 95)) if ok.any() else 1.0  # its own scale
         axes = [fig.add_subplot(grid[r, k]) for k in range(n_maps)]
@@ -240,16 +241,18 @@ def calibration_figure(path, stats, per_point, X, cameras, lens_rows=(), rows=()
             for c in cameras:
                 ax.plot(*c.position[:2], "s", color="0.3", ms=4)
             mean = f"mean {np.mean(err[here & ok]):.2g} cm" if (here & ok).any() else "no fix"
-            ax.set_title(f"{title}, {names[k]}: {mean}", fontsize=9)
+            ax.set_title(f"{which}, {names[k]}: {mean}", fontsize=9)
             ax.set_aspect("equal")
             ax.set_xlabel("x (m)", fontsize=8)
             ax.tick_params(labelsize=7)
         axes[0].set_ylabel("y (m)", fontsize=8)
-        fig.colorbar(sc, ax=axes, label=f"held-out 3D error, {title} (cm)", shrink=0.85)
+        fig.colorbar(sc, ax=axes, label=f"held-out 3D error, {which} (cm)", shrink=0.85)
         if (~ok).any():
             axes[-1].scatter([], [], marker="x", c="0.55", label="no fix (one camera, or refused)")
             axes[-1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0),
                             borderaxespad=0)
+    if title:
+        fig.suptitle(title, fontsize=11)
     fig.canvas.draw()
     _movement_labels(moved, cameras, rows)
     save_figure(fig, path, dpi=100)
@@ -351,9 +354,15 @@ def _lens_panel(ax, rows) -> None:
                edgecolor=colour, label=model)
     ax.set_xticks(range(len(rows)), [r["camera"] for r in rows], fontsize=7)
     ax.set_ylabel("held-out 3D error (cm; the other cameras as chosen)" if in_3d
-                  else "held-out reprojection error (px)")
-    ax.set_title("lens model per camera (filled: chosen)", fontsize=9)
-    ax.legend(fontsize=6, ncol=2)
+                  else "held-out reprojection error (px)", fontsize=8)
+    heights = [b.get_height() for b in ax.patches if np.isfinite(b.get_height())]
+    if heights and min(heights) > 0:  # the models differ by little: the axis from near the
+        lo, hi = min(heights), max(heights)  # least, said in the title
+        ax.set_ylim(max(0.0, lo - 0.15 * (hi - lo + 1e-12)), hi + 0.1 * (hi - lo + 1e-12))
+    note = f" (axis from {ax.get_ylim()[0]:.3g})" if ax.get_ylim()[0] > 0 else ""
+    ax.set_title(f"lens model per camera (filled: chosen){note}", fontsize=9)
+    ax.legend(fontsize=6, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.08),
+              frameon=False)
     ax.grid(alpha=0.3, axis="y")
 
 
@@ -482,7 +491,8 @@ def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Pa
             calibration_figure(png, result.stats, result.per_point, result.points,
                                result.deployment.cameras,
                                [r for r in result.cameras if r.get("lens_candidates")],
-                               result.cameras)
+                               result.cameras, f"{out.name}: survey calibration of "
+                               f"{result.deployment.name}, held-out error")
     return paths[2], paths[0], paths[1]
 
 
