@@ -152,6 +152,15 @@ def _browser(pw):
     return pw.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
 
 
+def _ready(page, timeout=30.0):
+    """Wait for the page to have drawn its plan — polled from here: Playwright's own waiting
+    evaluates strings, which the page's Content-Security-Policy forbids."""
+    end = time.monotonic() + timeout
+    while not page.evaluate("!!(window.vlpcalView && window.vlpcalView.ready)"):
+        assert time.monotonic() < end, "the page never became ready"
+        time.sleep(0.05)
+
+
 def _url_of(proc, timeout=60):
     """The page's address, from the command's first lines on stderr."""
     end = time.monotonic() + timeout
@@ -208,7 +217,7 @@ def live_run(tmp_path_factory):
             browser = _browser(pw)
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             page.goto(url)
-            page.wait_for_function("window.vlpcalView && window.vlpcalView.ready", timeout=30000)
+            _ready(page)
             t0 = time.monotonic()
             shot = False
             while proc.poll() is None and time.monotonic() - t0 < seconds + 20:
@@ -307,10 +316,10 @@ def test_a_browser_without_the_token_is_refused_off_loopback(tmp_path):
             res = page.goto(bare)
             assert res.status == 403 and "token" in page.content()
             page.goto(url)
-            page.wait_for_function("window.vlpcalView && window.vlpcalView.ready", timeout=30000)
+            _ready(page)
             assert page.evaluate("window.vlpcalView.scene.cameras.length") == 3
             page.goto(bare)  # the token given once is kept by this browser (a cookie)
-            page.wait_for_function("window.vlpcalView && window.vlpcalView.ready", timeout=30000)
+            _ready(page)
             browser.close()
         assert token
     finally:
@@ -475,3 +484,94 @@ def test_the_view_tracks_the_spots_cameras_publish(broker, tmp_path):
     assert len(rows) > 20 and spots == {"C1", "C2", "C3"}
     assert all(r["kind"] == "track" and r["xyz"] is not None for r in rows)
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written
+
+
+def test_a_loopback_view_refuses_a_page_of_another_host(tmp_path):
+    """From a hostile probe: bound to loopback the view answered any Host — a page of another
+    site whose name a DNS rebinding points at 127.0.0.1 could read the cameras and tracks.
+    Off loopback a token that is not ASCII was a 500 and a traceback, not a refusal."""
+    dep = load(LAYOUT)
+    server = ViewServer(scene(site_of(dep), dep.cameras), None, "127.0.0.1", 0)
+    try:
+        url = f"http://127.0.0.1:{server.port}/scene"
+        for host, status in (("evil.example", 403), (f"evil.example:{server.port}", 403),
+                             (f"localhost:{server.port}", 200), (f"127.0.0.1:{server.port}", 200),
+                             (f"[::1]:{server.port}", 200)):
+            req = urllib.request.Request(url, headers={"Host": host})
+            try:
+                with urllib.request.urlopen(req, timeout=5) as r:
+                    got = r.status
+            except urllib.error.HTTPError as e:
+                got = e.code
+            assert got == status, host
+    finally:
+        server.close()
+    server = ViewServer(scene(site_of(dep), dep.cameras), None, "0.0.0.0", 0)
+    try:
+        assert _get(f"http://127.0.0.1:{server.port}/scene?token=%C3%A9")[0] == 403
+    finally:
+        server.close()
+
+
+def test_a_plot_through_a_link_to_the_rows_is_refused(tmp_path):
+    """From a hostile probe: ``--plot`` a link to the ``--out`` file wrote the figure over
+    the rows, exit 0."""
+    (tmp_path / "link.png").symlink_to(tmp_path / "f.csv")
+    (tmp_path / "frames").mkdir()
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "locate", "-d", str(LAYOUT),
+                          "--frames", str(tmp_path / "frames"), "--out", str(tmp_path / "f.csv"),
+                          "--plot", str(tmp_path / "link.png")], capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 2 and "same file as --out" in res.stderr, res.stderr
+
+
+@needs_browser
+def test_ids_that_name_javascript_builtins_are_ids_like_any_other(broker, tmp_path):
+    """From a hostile probe: a camera called ``toString`` (or a track ``__proto__``) found a
+    built-in where the page kept its tiles and tracks: every update threw, nothing drawn."""
+    import paho.mqtt.client as mqtt
+    from playwright.sync_api import sync_playwright
+
+    text = LAYOUT.read_text().replace("id: C2", "id: toString")
+    (tmp_path / "d.yaml").write_text(text)
+    proc = subprocess.Popen([sys.executable, "-m", "vlpcal", "view", str(tmp_path / "d.yaml"),
+                             "--bind", "127.0.0.1:0", "--follow", broker.url("lab"),
+                             "--duration", "40"], stderr=subprocess.PIPE, text=True)
+    try:
+        url = _url_of(proc)
+        with sync_playwright() as pw:
+            browser = _browser(pw)
+            page = browser.new_page()
+            errors = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(url)
+            _ready(page)
+            time.sleep(0.5)
+            c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+            c.connect("127.0.0.1", broker.port)
+            c.loop_start()
+            now = time.time()
+            for k in range(5):
+                c.publish("lab/spots/toString", json.dumps({"t": now + k / 10, "u": 80.0,
+                                                            "v": 60.0})).wait_for_publish()
+                for led in ("__proto__", "constructor", "L1"):
+                    c.publish(f"lab/fixes/{led}", json.dumps({
+                        "t": now + k / 10, "led": led, "x": 1.0 + k / 10, "y": 0.9, "z": 0.1,
+                        "vx": 1.0, "vy": 0.0, "vz": 0.0, "sigma_m": 0.002, "cameras": "C1+C3",
+                        "status": "ok"})).wait_for_publish()
+            c.disconnect()
+            c.loop_stop()
+            end = time.monotonic() + 10  # (polled from here: the page's policy forbids eval)
+            while page.evaluate("Object.keys(window.vlpcalView.tracks).length") < 3:
+                assert time.monotonic() < end, "the tracks never came"
+                time.sleep(0.1)
+            got = page.evaluate("""() => ({tracks: Object.keys(window.vlpcalView.tracks).sort(),
+                tile: !!window.vlpcalView.tiles["toString"].cv,
+                leaked: ({}).xyz !== undefined})""")
+            browser.close()
+        assert not errors, errors
+        assert got == {"tracks": ["L1", "__proto__", "constructor"], "tile": True,
+                       "leaked": False}
+    finally:
+        proc.terminate()
+        proc.wait(20)

@@ -130,6 +130,14 @@ def _load_deployment(path):
         raise UserError(str(e)) from None
 
 
+def _same_file(a, b) -> bool:
+    """Whether two paths name one file, links and ``..`` followed (a figure written through
+    a link to the rows' file would replace them)."""
+    from pathlib import Path
+
+    return Path(a).resolve() == Path(b).resolve()
+
+
 def _output_file(path, inputs=(), beside=(), what: str = ""):
     """``path`` as a file to write, checked before any work (:mod:`vlpcal.writing` does the
     writing): a regular file or a new name in a folder that takes a new file, none of the

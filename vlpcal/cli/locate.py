@@ -14,6 +14,7 @@ from .common import (
     _camera_sources,
     _load_deployment,
     _output_file,
+    _same_file,
     main,
 )
 from .mqtt import (
@@ -105,7 +106,7 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
         plot = _output_file(plot, inputs=[p for p in (deployment_path, frames_dir,
                                                       observations, ca_file) if p],
                             what="the figure")
-        if out != "-" and str(plot) == str(out):
+        if out != "-" and _same_file(plot, out):
             raise UserError(f"--plot {plot}: the same file as --out")
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
     live = bool(cameras) or bool(spots_url)

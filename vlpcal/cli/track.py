@@ -7,7 +7,7 @@ import re
 
 import click
 
-from .common import Finite, FitCheck, UserError, _load_deployment, _output_file, main
+from .common import Finite, FitCheck, UserError, _load_deployment, _output_file, _same_file, main
 from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary, subscriber_notes
 from .view import DEFAULT_BIND
 
@@ -85,7 +85,7 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
             raise UserError(f"--plot {plot}: the figure is a PNG picture (.png)")
         plot = _output_file(plot, inputs=(deployment_path,) + ((frames_dir,) if frames_dir
                                                                else ()), what="the figure")
-        if str(plot) == str(_output_file(out, inputs=(deployment_path,), what="the tracks")):
+        if _same_file(plot, _output_file(out, inputs=(deployment_path,), what="the tracks")):
             raise UserError(f"--plot {plot}: the same file as --out")
     if view_bind is not None and frames_dir:
         raise UserError("--view shows a live run (--camera or --spots); a folder of frames is "

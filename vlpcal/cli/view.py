@@ -80,24 +80,32 @@ def _calibration(path) -> tuple[dict | None, bytes | None]:
     """The survey report beside a calibrated deployment (``<path>.report.json``), as the page
     shows it — per camera how far it moved and turned, its lens model; per comparison the
     held-out error —, and its figure (``<path>.png``); (None, None) when there is none or it
-    cannot be read (the plan is shown without it)."""
+    cannot be read (said in a note; the plan is shown without it)."""
     import json
+    import math
     from pathlib import Path
 
     report, png = Path(path).with_suffix(".report.json"), Path(path).with_suffix(".png")
+    def number(v):  # a finite number, or None
+        v = float(v)
+        return v if math.isfinite(v) else None
+
     try:
         if not report.is_file() or report.stat().st_size > REPORT_BYTES:
             return None, None
         doc = json.loads(report.read_text(encoding="utf-8"))
-        cameras = [{"id": str(c["camera"]), "moved_mm": 1000 * float(c["moved_m"]),
-                    "turned_deg": float(c["turned_deg"]), "lens": str(c.get("lens_model", ""))}
+        cameras = [{"id": str(c["camera"]), "moved_mm": 1000 * number(c["moved_m"]),
+                    "turned_deg": number(c["turned_deg"]), "lens": str(c.get("lens_model", ""))}
                    for c in doc["cameras"]]
-        held = {str(k): {"mean_m": v.get("mean"), "p95_m": v.get("p95"),
-                         "fixed": v.get("fixed")}
+        held = {str(k): {"mean_m": number(v["mean"]) if v.get("mean") is not None else None,
+                         "p95_m": number(v["p95"]) if v.get("p95") is not None else None,
+                         "fixed": number(v["fixed"]) if v.get("fixed") is not None else None}
                 for k, v in (doc.get("held_out_m") or {}).items() if isinstance(v, dict)}
         figure = png.read_bytes() if png.is_file() and png.stat().st_size <= REPORT_BYTES \
             else None
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, OverflowError):
+        click.echo(f"note: {report}: not a calibration report that can be read; the plan is "
+                   "shown without it", err=True)
         return None, None
     return {"report": report.name, "cameras": cameras, "held_out": held,
             "figure": figure is not None}, figure

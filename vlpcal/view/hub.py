@@ -15,7 +15,10 @@ import numpy as np
 #: rows held for pages that read behind the command (minutes of a busy site's tracks)
 ROWS_KEPT = 100_000
 #: rows sent to a page at once (the rest at its next update)
-ROWS_AT_ONCE = 5000
+ROWS_AT_ONCE = 1000
+#: a page opened mid-run starts from this many of the latest rows (not the whole history:
+#: pages joining late would each cost the command the encoding of all of it)
+CATCH_UP = 2000
 #: a camera's rate: over its latest frames
 RATE_FRAMES = 30
 
@@ -158,6 +161,12 @@ class ViewHub:
             self.status = line
 
     # -- the server's side ------------------------------------------------------------------------
+    def start(self) -> int:
+        """Where a page that opens now starts reading rows: :data:`CATCH_UP` before the
+        newest."""
+        with self._lock:
+            return max(0, self.n_rows - CATCH_UP)
+
     def since(self, after: int, seen: dict) -> tuple[dict, list, int]:
         """What is new for a page that has read rows up to number ``after`` and camera frames
         ``seen`` (id → seq): (cameras changed → their summary, rows — at most

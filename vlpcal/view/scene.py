@@ -5,13 +5,12 @@ predicted error — so a person can hover a point and read them."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..deployment import Deployment
-from ..planning.reference import sample_grid, seen_by
+from ..planning.reference import sample_grid, sample_step, seen_by
 from ..planning.site import Requirements, Site
 from ..triangulation import predicted_rms_error
 
@@ -56,10 +55,12 @@ def scene(site: Site, cameras: list, calibration: dict | None = None,
         cams.append({"id": c.id, "xyz": [float(v) for v in c.position], "yaw": float(c.yaw),
                      "tilt": float(c.tilt), "size": [c.width, c.height],
                      "footprints": [_points(c.footprint(lo)), _points(c.footprint(hi))]})
-    xs, ys, inside = sample_grid(site)
-    step = float(xs[1] - xs[0]) if len(xs) > 1 else 0.1
-    thin = max(1, math.ceil(max(len(xs), len(ys)) / MAP_CELLS))  # a big hall: coarser cells
-    xs, ys, inside = xs[::thin], ys[::thin], inside[::thin, ::thin]
+    room = np.asarray(site.room, float)
+    extent = float(np.ptp(room, axis=0).max()) if len(room) else 1.0
+    # the reference model's step, coarser for a big hall: at most MAP_CELLS a side (the grid
+    # is made at that step, never at the fine one first)
+    step = max(sample_step(site), extent / MAP_CELLS)
+    xs, ys, inside = sample_grid(site, step)
     gx, gy = np.meshgrid(xs, ys)
     maps = []
     for h in sorted({lo, hi}):
@@ -88,7 +89,7 @@ def scene(site: Site, cameras: list, calibration: dict | None = None,
            "heights": [float(lo), float(hi)], "cameras": cams,
            "grid": {"x0": float(xs[0]) if len(xs) else 0.0,
                     "y0": float(ys[0]) if len(ys) else 0.0,
-                    "step": step * thin, "nx": len(xs), "ny": len(ys)},
+                    "step": step, "nx": len(xs), "ny": len(ys)},
            "maps": maps, "requirements": {"min_cameras": r.min_cameras,
                                           "max_error_p95": r.max_error_p95,
                                           "pixel_noise": r.pixel_noise,

@@ -37,6 +37,10 @@ STATIC = Path(__file__).with_name("static")
 POLICY = ("default-src 'self'; img-src 'self' blob: data:; style-src 'self'; "
           "script-src 'self'; connect-src 'self'; frame-ancestors 'none'")
 COOKIE = "vlpcal_view"
+#: the names a page on this machine reaches a loopback-bound view by
+LOOPBACK_NAMES = frozenset(("127.0.0.1", "localhost", "::1"))
+#: s a connection may stay idle (a client that opens connections and sends nothing)
+IDLE_SECONDS = 15.0
 
 
 class ViewError(ValueError):
@@ -127,7 +131,7 @@ class ViewServer:
         app.router.add_static("/static/", STATIC, show_index=False)
         app.router.add_get("/favicon.ico", self._no_icon)
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False,
-                                     shutdown_timeout=0.5)
+                                     shutdown_timeout=0.5, keepalive_timeout=IDLE_SECONDS)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port)
         await site.start()
@@ -151,21 +155,40 @@ class ViewServer:
         self._thread.join(3)
 
     # -- handlers -------------------------------------------------------------------------------
+    @property
+    def _cookie(self) -> str:
+        """The token's cookie, one per port (a cookie is the host's, whatever its port)."""
+        return f"{COOKIE}_{self.port}"
+
+    def _allowed(self, request) -> bool:
+        """Whether a request may be served: off loopback, with the token; on loopback, named
+        by a loopback host (a page of another site that a DNS rebinding points at 127.0.0.1
+        names its own host, and is refused)."""
+        if self.token is None:
+            named = (request.host or "").lower()
+            if named.startswith("["):  # [::1]:8765
+                named = named[1:].split("]", 1)[0]
+            elif named.count(":") == 1:  # host:port
+                named = named.split(":", 1)[0]
+            return named in LOOPBACK_NAMES or named == self.host.lower()
+        given = request.query.get("token") or request.cookies.get(self._cookie) or ""
+        return hmac.compare_digest(given.encode("utf-8", "replace"),
+                                   self.token.encode("utf-8"))
+
     @web.middleware
     async def _guard(self, request, handler):
-        given = None
-        if self.token is not None:
-            given = request.query.get("token") or request.cookies.get(COOKIE)
-            if not (given and hmac.compare_digest(given, self.token)):
-                self.refused += 1
-                return web.Response(status=403, text="this view asks for the token its "
-                                    "command printed when it started (…/?token=…)\n")
+        if not self._allowed(request):
+            self.refused += 1
+            return web.Response(status=403, text="this view asks for the token its command "
+                                "printed when it started (…/?token=…), at the address it "
+                                "printed\n")
+        given = request.query.get("token") if self.token is not None else None
         response = await handler(request)
         response.headers["Content-Security-Policy"] = POLICY
         response.headers["X-Content-Type-Options"] = "nosniff"
         response.headers["Cache-Control"] = "no-store"
-        if given and request.query.get("token"):
-            response.set_cookie(COOKIE, self.token, httponly=True, samesite="Strict")
+        if given:
+            response.set_cookie(self._cookie, self.token, httponly=True, samesite="Strict")
         return response
 
     async def _page(self, request):
@@ -196,7 +219,7 @@ class ViewServer:
     async def _events(self, request):
         response = web.StreamResponse(headers={"Content-Type": "text/event-stream"})
         await response.prepare(request)
-        after, seen = 0, {}
+        after, seen = (self.hub.start() if self.hub else 0), {}
         hello = {"source": self.hub.source if self.hub else "", "live": self.hub is not None,
                  "tracking": bool(self.hub and self.hub.tracking)}
         await response.write(_event("hello", hello))

@@ -11,9 +11,11 @@ const GONE_SECONDS = 5.0;   // … and after this long not at all
 
 const state = {
   scene: null, view: null, live: false,
-  tracks: {},               // id → {xyz, sigma, status, yaw, t, trail: [[x, y]], rows}
+  // keyed by ids from files and messages: no prototype, so an id such as "toString" or
+  // "__proto__" is an id like any other
+  tracks: Object.create(null),  // id → {xyz, sigma, status, yaw, t, trail: [[x, y]], rows}
   survey: {},               // a survey's progress: stop, coverage (survey capture --view)
-  tiles: {},                // id → {seq, shownSeq, skipped, spots, t, drawnAt, ...}
+  tiles: Object.create(null),   // id → {seq, shownSeq, skipped, spots, t, drawnAt, ...}
   updates: 0, rows: 0, missed: 0, lastUpdate: 0,
   latency: {frame: [], row: []},
   dirty: true,
@@ -151,7 +153,8 @@ function addRows(rows) {
     if (!r.xyz || r.xyz[0] === null) continue;
     const id = r.id || (r.kind === "fix" ? "fix" : "?");
     const tr = state.tracks[id] || (state.tracks[id] = {trail: [], rows: 0});
-    Object.assign(tr, {xyz: r.xyz, sigma: r.sigma, status: r.status, yaw: r.yaw, t: r.t,
+    Object.assign(tr, {xyz: r.xyz, sigma: r.sigma, status: r.status, t: r.t,
+                       yaw: Object.hasOwn(r, "yaw") ? r.yaw : null,
                        cameras: r.cameras, kind: r.kind});
     tr.rows += 1;
     // a gap in time starts a new stroke: a track that came back is not joined across the room
@@ -288,7 +291,8 @@ function drawTile(t, img, spots) {
   ctx.imageSmoothingEnabled = false;
   if (img) ctx.drawImage(img, 0, 0, t.cv.width, t.cv.height);
   else { ctx.fillStyle = "#000"; ctx.fillRect(0, 0, t.cv.width, t.cv.height); }
-  const cov = state.survey.coverage && state.survey.coverage.cameras[t.el.dataset.camera];
+  const all = state.survey.coverage && state.survey.coverage.cameras;
+  const cov = all && Object.hasOwn(all, t.el.dataset.camera) ? all[t.el.dataset.camera] : null;
   if (cov) {   // where the survey's LED has been in this image: red cells still empty
     const [cols, rows] = state.survey.coverage.grid;
     const w = t.cv.width / cols, h = t.cv.height / rows;
