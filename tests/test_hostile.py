@@ -864,3 +864,41 @@ def test_planted_leftovers_are_ignored_without_a_hang_or_a_traceback(tmp_path, p
                                 tmp_path / "x.yaml", timeout=30)
     assert code == 0 and "Traceback" not in " ".join(err), err
     assert rss is not None and rss < 500
+
+
+def test_locate_interrupted_offline_keeps_the_previous_fixes(tmp_path):
+    """From a hostile probe (issue 31): SIGTERM during an offline locate wrote the sets done
+    so far over the previous fixes.csv and exited 0. It now keeps that file as it was and
+    exits 1, as track, survey calibrate and plan do (a live run keeps its rows)."""
+    import signal
+    import time
+
+    import numpy as np
+
+    from vlpcal.deployment import load
+
+    dep = load(DEPLOYMENT)
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.uniform(1.2, 2.4, 150_000), rng.uniform(0.5, 1.3, 150_000),
+                         np.full(150_000, 0.1)])
+    with open(tmp_path / "obs.csv", "w") as f:
+        f.write("frame_id,camera_id,u,v\n")
+        for c in dep.cameras:
+            uv, _, ok = c.project(X)
+            f.writelines(f"{i},{c.id},{uv[i, 0]:.3f},{uv[i, 1]:.3f}\n"
+                         for i in np.flatnonzero(ok))
+    (tmp_path / "fixes.csv").write_text("the previous fixes\n")
+    proc = subprocess.Popen([sys.executable, "-m", "vlpcal", "locate", "-d", DEPLOYMENT,
+                             "--observations", str(tmp_path / "obs.csv"), "--out",
+                             str(tmp_path / "fixes.csv"), "-q"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not [p for p in tmp_path.iterdir() if ".vlpcal-" in p.name]:  # writing has begun
+        assert time.monotonic() < deadline and proc.poll() is None
+        time.sleep(0.02)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1 and "Traceback" not in err and "as it was" in err, err
+    assert (tmp_path / "fixes.csv").read_text() == "the previous fixes\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fixes.csv", "obs.csv"]

@@ -146,6 +146,11 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
             n = _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses,
                              notes, say)
     except KeyboardInterrupt:
+        if not sent:  # an offline run into a file: the previous file stays, as it was
+            writer.abort()
+            click.echo(f"interrupted (Ctrl-C or a signal): nothing was written; {out} is as "
+                       "it was", err=True)
+            raise SystemExit(1) from None
         notes.append("interrupted: the fixes so far are kept")
         n = sum(statuses.values())
     except Misfit:  # stopped: an offline run writes nothing, a live one keeps its rows
