@@ -48,10 +48,18 @@ def test_urls_are_read_and_wrong_ones_are_one_line(monkeypatch):
     assert "pa:ss" not in t.shown() and parse_url("mqtts://h/p").port == 8883
     monkeypatch.setenv("VLPCAL_MQTT_PASSWORD", "fromenv")
     assert parse_url("mqtt://u@h/p").password == "fromenv"
+    # a password is what stands between the first : and the last @, whatever its characters
+    # (issue 31: one with # / ? was cut by the URL parser, its first part printed)
+    for url, secret in (("mqtt://al:se/cret@h/p", "se/cret"), ("mqtt://al:se#cret@h/p",
+                                                               "se#cret"),
+                        ("mqtt://al:p@ss:w/secret@h/p", "p@ss:w/secret"),
+                        ("mqtt://al:s3cr?t@h:1884/p", "s3cr?t")):
+        t = parse_url(url)
+        assert (t.user, t.password, t.host, t.prefix) == ("al", secret, "h", "p"), url
     for bad in ("http://h/p", "mqtt:///p", "mqtt://h", "mqtt://h/", "mqtt://h/a b",
                 "mqtt://h:99999/p", "mqtt://u:secret@h:x/p", "mqtt://h:0/p", "mqtt://h/p#",
-                "mqtt://h/p?x=1", "mqtt://al:se/cret@h/p", "mqtt://al:se#cret@h/p",
-                "mqtt://al:p@ss:w/secret@h/p", "mqtt://al:secret@[::1/p"):
+                "mqtt://h/p?x=1", "mqtt://al:se#cret@h:9x/p", "mqtt://al:s/ecret@h/p?q",
+                "mqtt://al:secret@[::1/p", "mqtt://al:se/cret@"):
         with pytest.raises(MqttError) as e:
             parse_url(bad)
         assert "secret" not in str(e.value) and "cret" not in str(e.value), e.value

@@ -66,15 +66,24 @@ def parse_url(url: str) -> Target:
     password may instead be in :data:`PASSWORD_ENV`. A wrong URL is an :class:`MqttError`."""
     from .reading import is_id
 
+    # who (and a password, whatever its characters: / ? # @ : included) is what stands
+    # before the last @ — a prefix has none; it is read apart, so no part of a password
+    # ever reaches the URL parser or its messages
+    scheme, sep, rest = url.partition("://")
+    user = secret = None
+    if sep and "@" in rest:
+        who, rest = rest.rsplit("@", 1)
+        user, colon, secret = who.partition(":")
+        user, secret = unquote(user) or None, (unquote(secret) if colon else None)
     try:
-        parts = urlsplit(url)
+        parts = urlsplit(f"{scheme}{sep}{rest}")
         port = parts.port
-    except ValueError as e:
-        raise MqttError(f"{_safe(url)}: not an MQTT URL ({e}); expected "
-                        "mqtt://[user[:password]@]host[:port]/prefix") from None
-    if parts.query or parts.fragment or "#" in url or "?" in url:
-        raise MqttError(f"{_safe(url)}: expected no query or fragment (? #) in an MQTT URL; a "
-                        "password with such characters goes in VLPCAL_MQTT_PASSWORD")
+    except ValueError:
+        raise MqttError(f"{_safe(url)}: not an MQTT URL (its host and port cannot be read); "
+                        "expected mqtt://[user[:password]@]host[:port]/prefix") from None
+    if parts.query or parts.fragment or "#" in rest or "?" in rest:
+        raise MqttError(f"{_safe(url)}: expected no query or fragment (? #) in an MQTT URL's "
+                        "host or prefix")
     if port is not None and not 1 <= port <= 65535:
         raise MqttError(f"{_safe(url)}: expected a port from 1 to 65535")
     if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
@@ -85,10 +94,8 @@ def parse_url(url: str) -> Target:
         raise MqttError(f"{_safe(url)}: expected a topic prefix after the host (letters, digits, "
                         "_ - . between slashes, e.g. mqtt://broker/site1)")
     tls = parts.scheme == "mqtts"
-    password = unquote(parts.password) if parts.password is not None else \
-        os.environ.get(PASSWORD_ENV)
-    return Target(parts.hostname, port or (8883 if tls else 1883), prefix, tls,
-                  unquote(parts.username) if parts.username else None, password)
+    password = secret if secret is not None else os.environ.get(PASSWORD_ENV)
+    return Target(parts.hostname, port or (8883 if tls else 1883), prefix, tls, user, password)
 
 
 def _safe(url: str) -> str:
