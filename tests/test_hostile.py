@@ -902,3 +902,25 @@ def test_locate_interrupted_offline_keeps_the_previous_fixes(tmp_path):
     assert proc.returncode == 1 and "Traceback" not in err and "as it was" in err, err
     assert (tmp_path / "fixes.csv").read_text() == "the previous fixes\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fixes.csv", "obs.csv"]
+
+
+@pytest.mark.parametrize("provenance", [
+    {"predicted": "good"}, {"predicted": {"p95_error_m": "good"}}, {"from": [1, 2]},
+    {"lens": {"C1": ["k1"]}, "point_sigma_m": "1 mm"}, {"held_out_mean_m": {"x": "big"}},
+    {"wand_error_m": {"mean": "x"}, "wand_m": 1},
+    {"command": "\x1b]0;pwned\x07\x1b[2J", "from": {"site": "s\rforged line"}}])
+def test_show_reads_any_provenance_and_prints_nothing_raw(provenance, tmp_path):
+    """From a hostile probe (issue 31): seven wrongly typed provenance values were
+    tracebacks in ``vlpcal show``; strings with terminal escapes reached the terminal raw (a
+    new window title, a cleared screen, forged lines)."""
+    import yaml
+
+    doc = yaml.safe_load(DEPLOYMENT.read_text())
+    doc["provenance"] = provenance
+    doc["site"]["name"] = "lab\x1b[31m red"
+    (tmp_path / "d.yaml").write_text(yaml.safe_dump(doc))
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "show", str(tmp_path / "d.yaml")],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    assert not any(ch in res.stdout for ch in "\x1b\x07\r"), repr(res.stdout)
+    assert "lab\\x1b[31m red" in res.stdout

@@ -234,3 +234,17 @@ def shown(value) -> str:
     r.maxlevel, r.maxlist, r.maxtuple, r.maxdict, r.maxset = 3, 6, 6, 4, 6
     r.maxstring, r.maxother, r.maxlong = 60, 60, 40
     return r.repr(value)
+
+
+def printable(text: str) -> str:
+    """``text`` safe to print on a terminal: control characters (escape sequences, carriage
+    returns, bells, C1 controls, bidirectional overrides) written as escapes, so a name or a
+    string from a file cannot retitle a window, clear a screen or forge a line."""
+    import unicodedata
+
+    def safe(ch: str) -> str:
+        if ch == "\n" or ch == " " or not unicodedata.category(ch).startswith("C"):
+            return ch
+        return ch.encode("unicode_escape").decode("ascii")
+
+    return "".join(map(safe, str(text)))
