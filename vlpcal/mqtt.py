@@ -371,6 +371,18 @@ def track_message(t: float, update) -> dict:
     return message
 
 
+def _subscribe(sub, client, reason_code, topics) -> None:
+    """A subscriber's connection answered: refused (said by :func:`_connect` when it is the
+    first), or ``topics`` subscribed and the subscriber connected."""
+    if reason_code.is_failure:
+        if not sub._ever:
+            sub._refused.append(str(reason_code).lower())
+        return
+    sub._ever = True
+    client.subscribe(topics)
+    sub._connected.set()
+
+
 class SpotSubscriber:
     """Spots cameras publish on ``prefix/spots/<camera_id>``: ``{"t": capture time (UTC s),
     "u": px, "v": px}``, a list of such (several spots of one frame), or ``{"t": …}`` alone (the
@@ -406,15 +418,9 @@ class SpotSubscriber:
         _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
 
     def _on_connect(self, client, userdata, flags, reason_code, properties=None):
-        if reason_code.is_failure:
-            if not self._ever:
-                self._refused.append(str(reason_code).lower())
-            return
-        self._ever = True
         # its cameras' topics only: a zone's locator hears its zone (a site's broker carries all)
-        client.subscribe([(f"{self.target.prefix}/spots/{c}", self._qos)
-                          for c in sorted(self.camera_ids)])
-        self._connected.set()
+        _subscribe(self, client, reason_code, [(f"{self.target.prefix}/spots/{c}", self._qos)
+                                               for c in sorted(self.camera_ids)])
 
     def _on_message(self, client, userdata, msg):
         try:
@@ -521,14 +527,8 @@ class RowSubscriber:
         _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
 
     def _on_connect(self, client, userdata, flags, reason_code, properties=None):
-        if reason_code.is_failure:
-            if not self._ever:
-                self._refused.append(str(reason_code).lower())
-            return
-        self._ever = True
-        client.subscribe([(f"{self.target.prefix}/{kind}/+", 0)
-                          for kind in ("fixes", "bodies", "spots")])
-        self._connected.set()
+        _subscribe(self, client, reason_code, [(f"{self.target.prefix}/{kind}/+", 0)
+                                               for kind in ("fixes", "bodies", "spots")])
 
     def _on_message(self, client, userdata, msg):
         try:
