@@ -358,13 +358,12 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     layouts = _Layouts(tracker)
     utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
     # row by row, flushed: a reader follows
-    live = _LiveTracks(out, utc, bool(dep.bodies)) if out is not None else None
+    live = _LiveTracks(out, utc, bool(dep.bodies)) if out is not None else _NoTracks()
     rows: list = []
     n = 0
 
     def put(made):
-        if live is not None:
-            live.write(made)
+        live.write(made)
         if hub is not None:
             hub.track_rows(made, utc)
 
@@ -393,14 +392,12 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
         made = _published(publisher, tracker.finish(), utc)
         put(made)
         rows += made
-        if live is not None:
-            live.close()
+        live.close()
         if hub is not None:
             _camera_facts(hub, frames)
     st = frames.stats
     if not n:
-        if live is not None:
-            live.remove()
+        live.remove()
         why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)
         raise UserError(f"no frames from any camera, nothing tracked ({why})")
     for cid in sources:
@@ -417,7 +414,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     say(f"{n} camera frames → {_summary(rows)}" + (f" → {out}" if out is not None else "")
         + _lag_said(tracker))
     layouts(end=True)
-    if not rows and live is not None:
+    if not rows and out is not None:
         live.remove()
         raise _no_rows(tracker, "the cameras")
     return rows
