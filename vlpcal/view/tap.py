@@ -35,12 +35,13 @@ class FrameTap:
     def __call__(self, camera_id: str, arrival: float, frame) -> None:
         with self._lock:  # each camera's reader thread: one frame a camera per period
             seen = self._seen.setdefault(camera_id, deque(maxlen=RATE_FRAMES))
-            seen.append(arrival)  # every frame counts for the camera's own rate
+            seen.append(arrival)  # every frame counts for the camera's own rate …
             if arrival - self._last.get(camera_id, -np.inf) < 1.0 / TAP_HZ:
                 return
             self._last[camera_id] = arrival
-        if len(seen) > 1 and seen[-1] > seen[0]:
-            self.hub.camera_status(camera_id, rate=(len(seen) - 1) / (seen[-1] - seen[0]))
+            rate = (len(seen) - 1) / (seen[-1] - seen[0]) if seen[-1] > seen[0] else None
+        if rate is not None:  # … said with the frames that go to the page
+            self.hub.camera_status(camera_id, rate=rate)
         cam = self._cams.get(camera_id)
         if cam is None:
             return
