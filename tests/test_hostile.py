@@ -125,12 +125,63 @@ def test_an_error_quotes_a_huge_value_briefly(tmp_path):
 
 
 def test_reader_limits_are_what_the_module_says():
-    from vlpcal.reading import MAX_ALIASES, MAX_DEPTH, nesting_depth, shown
+    from vlpcal.reading import MAX_DEPTH, MAX_NODES, nesting_depth, shown
 
     assert 5 <= nesting_depth("a:\n  b:\n    - [1, [2, 3]]\n") <= 6  # an upper estimate
     assert nesting_depth("s: '[[[['\n") == 1  # brackets inside quotes do not count
-    assert MAX_DEPTH >= 8 and MAX_ALIASES >= 1
+    assert MAX_DEPTH >= 8 and MAX_NODES >= 100_000
     assert len(shown(list(range(10 ** 6)))) < 100
+
+
+def _shared_deployment(cameras: int = 40) -> dict:
+    """The paper's deployment with ``cameras`` cameras whose lens lists are one list object
+    each (a script's deployment): yaml.safe_dump writes them as an anchor and aliases."""
+    import yaml
+
+    doc = yaml.safe_load(DEPLOYMENT.read_text())
+    first = doc["cameras"][0]
+    dist, rotation = first["dist"], first["rotation"]
+    doc["cameras"] = [dict(first, id=f"C{i + 1}", dist=dist, rotation=rotation,
+                           position=[0.1 + 3.4 * i / cameras, 0.9, 2.3]) for i in range(cameras)]
+    return doc
+
+
+def test_a_deployment_written_by_pyyaml_with_aliases_is_read(tmp_path):
+    """PyYAML writes a list shared by 40 cameras as &id001 once and *id001 79 times: read as
+    the document it stands for (issue 31), as a command reads it too."""
+    import yaml
+
+    from vlpcal.deployment import load
+
+    path = tmp_path / "shared.yaml"
+    path.write_text(yaml.safe_dump(_shared_deployment(40)))
+    assert path.read_text().count("*id00") >= 78  # aliases, as PyYAML writes them
+    dep = load(path)
+    assert len(dep.cameras) == 40 and dep.cameras[39].id == "C40"
+    assert all(c.dist == dep.cameras[0].dist for c in dep.cameras)
+    code, out, err, _ = _vlpcal("show", path)
+    assert code == 0 and "C40" in out, (out, err)
+
+
+@pytest.mark.parametrize("case", ["bomb", "deep through aliases", "holds itself"])
+def test_aliases_that_multiply_deepen_or_loop_are_refused(case):
+    """Aliases are counted as what they expand to: a bomb whose document is 30 lines, a
+    value nested 20 deep named inside 20 levels, a value that holds itself: one line each."""
+    from vlpcal.reading import MAX_DEPTH, MAX_NODES, ReadError, load_yaml
+
+    if case.startswith("bomb"):  # 100 × 100 × 100 × 100 = 10⁸ values from 4 lines
+        text = _bomb(levels=4, width=100).replace('"lol", ' * 8, '"lol", ' * 99)
+        fragment = f"more than {MAX_NODES} values with its aliases"
+    elif case.startswith("deep"):
+        half = MAX_DEPTH // 2 + 2
+        text = "a: &a " + "[" * half + "]" * half + "\nb: " + "[" * half + "*a" + "]" * half
+        fragment = "nested deeper than"
+    else:
+        text = "a: &a [1, *a]\n"
+        fragment = "inside the value it names"
+    with pytest.raises(ReadError, match=fragment) as e:
+        load_yaml("x.yaml", text=text)
+    assert "\n" not in str(e.value) and str(e.value).startswith("x.yaml: line ")
 
 
 @pytest.mark.parametrize("command", ["locate", "export", "import", "survey plan",

@@ -1,7 +1,9 @@
 """Bounded reading of the text files a user hands to vlpcal (deployments, sites, camera
 files): a regular file of bounded size, UTF-8, and YAML whose every key appears once, whose
-nesting and aliases stay within small budgets — checked while the document is composed,
-before anything recurses into it or prints it. Errors are :class:`ReadError`, one line
+nesting and size stay within budgets — counted as the document reads with its aliases
+expanded (PyYAML writes ``&id001`` and ``*id001`` for a list shared by several cameras: those
+are fine; a "billion laughs" is not), checked while the document is composed, before
+anything recurses into it or prints it. Errors are :class:`ReadError`, one line
 naming the file, the line and what was expected.
 """
 
@@ -14,11 +16,11 @@ from pathlib import Path
 
 #: bytes: a deployment of a thousand cameras is well under 1 MB
 MAX_BYTES = 16 * 2 ** 20
-#: nesting levels of a YAML document (a deployment needs 5)
+#: nesting levels of a YAML document (a deployment needs 5), its aliases expanded
 MAX_DEPTH = 32
-#: YAML aliases (``*name``) in a document: deployments need none
-MAX_ALIASES = 16
-#: YAML nodes in a document
+#: YAML nodes (values, keys, lists, mappings) in a document, each alias (``*name``) counted
+#: as the nodes of what it names: aliases may share a value, never make a document larger
+#: than one written out in full may be
 MAX_NODES = 2_000_000
 #: characters of a number (a double has 17 significant digits; Python refuses 4300+)
 MAX_NUMBER_CHARS = 400
@@ -97,30 +99,59 @@ def _loader():
     import yaml
 
     class BoundedLoader(yaml.SafeLoader):
-        """SafeLoader that refuses duplicate keys and counts depth, aliases and nodes while
-        composing (the composer is where PyYAML recurses)."""
+        """SafeLoader that refuses duplicate keys and counts depth and nodes while composing
+        (the composer is where PyYAML recurses), an alias as the nodes of what it names."""
 
         def __init__(self, stream):
             super().__init__(stream)
-            self._depth = self._aliases = self._nodes = 0
+            self._depth = self._nodes = 0
+            #: per collection being composed: [its nodes so far, its height]
+            self._open: list = []
+            #: anchor → (nodes, height) of the value it names, once that value is composed
+            self._named: dict = {}
 
         def compose_node(self, parent, index):
             if self.check_event(yaml.AliasEvent):
-                self._aliases += 1
-                if self._aliases > MAX_ALIASES:
-                    raise _Refused(self.peek_event().start_mark,
-                                   f"more than {MAX_ALIASES} aliases (*name)")
+                event = self.peek_event()
+                node = super().compose_node(parent, index)  # an undefined one: PyYAML's error
+                if event.anchor not in self._named:  # named by a value it stands inside
+                    raise _Refused(event.start_mark, f"an alias (*{event.anchor[:40]}) inside "
+                                   "the value it names (a value that holds itself)")
+                size, height = self._named[event.anchor]
+                if self._depth + height > MAX_DEPTH:
+                    raise _Refused(event.start_mark, f"nested deeper than {MAX_DEPTH} levels "
+                                   "with its aliases (*name) expanded")
+                self._count(size, height, event.start_mark)
+                return node
+            event = self.peek_event()
             self._nodes += 1
             if self._nodes > MAX_NODES:
-                raise _Refused(self.peek_event().start_mark, f"more than {MAX_NODES} values")
+                raise _Refused(event.start_mark, f"more than {MAX_NODES} values")
             self._depth += 1
             if self._depth > MAX_DEPTH:
-                raise _Refused(self.peek_event().start_mark,
-                               f"nested deeper than {MAX_DEPTH} levels")
+                raise _Refused(event.start_mark, f"nested deeper than {MAX_DEPTH} levels")
+            self._open.append([1, 1])
             try:
-                return super().compose_node(parent, index)
+                node = super().compose_node(parent, index)
             finally:
                 self._depth -= 1
+            size, height = self._open.pop()
+            if event.anchor is not None:
+                self._named[event.anchor] = (size, height)
+            self._count(size, height, event.start_mark)
+            return node
+
+        def _count(self, size: int, height: int, mark) -> None:
+            """A value of ``size`` nodes (its aliases expanded) and ``height`` levels composed
+            into the collection being composed; that collection refused past the budget."""
+            if not self._open:
+                return
+            into = self._open[-1]
+            into[0] += size
+            into[1] = max(into[1], height + 1)
+            if into[0] > MAX_NODES:
+                raise _Refused(mark, f"more than {MAX_NODES} values with its aliases (*name) "
+                               "expanded (aliases may share a value, not multiply it)")
 
         def construct_mapping(self, node, deep=False):
             seen = {}
