@@ -64,6 +64,51 @@ def test_urls_are_read_and_wrong_ones_are_one_line(monkeypatch):
             parse_url(bad)
         assert "secret" not in str(e.value) and "cret" not in str(e.value), e.value
         assert "\n" not in str(e.value)
+    # the URL parser drops line breaks and tabs: "site\n1" was read as the prefix site1
+    # (issue 31); a space, a tab or a line break anywhere but in the password is refused
+    for bad in ("mqtt://h/site\n1", "mqtt://h/site\r\n", "mqtt://h/si\tte", "mqtt://h\n/p",
+                "mqtt://h:18\n83/p", "mq\ntt://h/p", "mqtt://u:secret@h/si\nte",
+                "mqtt://h/p\x7f"):
+        with pytest.raises(MqttError, match="spaces, tabs or line breaks") as e:
+            parse_url(bad)
+        assert "\n" not in str(e.value) and "secret" not in str(e.value), e.value
+    assert parse_url("mqtt://u:se\ncret@h/p").password == "se\ncret"  # read apart: any
+
+
+def test_a_ca_file_that_is_not_a_regular_file_is_refused_at_once(tmp_path):
+    """--ca-file naming a FIFO waited forever for a writer while the TLS setup read it
+    (issue 31): refused by its type before anything opens it, one line, exit 2, for the
+    publisher and the spots' subscriber alike."""
+    import os
+    import subprocess
+    import sys
+
+    from vlpcal.mqtt import check_ca_file
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import write_deployments
+
+    fifo = tmp_path / "ca.pem"
+    os.mkfifo(fifo)
+    write_deployments(make_scene(get_profile("paper-2024"), 0), tmp_path)
+    obs = tmp_path / "obs.csv"
+    obs.write_text("frame_id,camera_id,u,v\nf1,C1,80,60\nf1,C2,70,60\nf1,C3,60,60\n")
+    dep = str(tmp_path / "truth.yaml")
+    for cmd in (["locate", "-d", dep, "--observations", str(obs), "--publish",
+                 "mqtts://127.0.0.1:1/lab"],
+                ["track", "-d", dep, "--spots", "mqtts://127.0.0.1:1/lab"]):
+        t0 = time.monotonic()
+        res = subprocess.run([sys.executable, "-m", "vlpcal", *cmd, "--ca-file", str(fifo),
+                              "--out", str(tmp_path / "out.csv")], capture_output=True,
+                             text=True, timeout=30)
+        lines = res.stderr.strip().splitlines()
+        assert res.returncode == 2 and len(lines) == 1, res.stderr
+        assert "a FIFO" in lines[0] and str(fifo) in lines[0], lines
+        assert time.monotonic() - t0 < 15 and not (tmp_path / "out.csv").exists()
+    for bad, kind in ((tmp_path, "a folder"), ("/dev/zero", "not a regular file"),
+                      (tmp_path / "absent.pem", "cannot read")):
+        with pytest.raises(MqttError, match=kind):
+            check_ca_file(bad)
 
 
 def test_spot_messages_are_read_or_counted_bad():
@@ -488,7 +533,7 @@ def test_fixes_over_tls_with_the_brokers_ca_and_refused_with_another(tls_broker,
                                 "--publish", url, "--ca-file", str(other)],
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
-    assert "certificate does not pass --ca-file" in res.stderr
+    assert "certificate does not pass the CA file" in res.stderr
     assert not (tmp_path / "g.csv").exists()
 
 

@@ -75,6 +75,10 @@ def parse_url(url: str) -> Target:
         who, rest = rest.rsplit("@", 1)
         user, colon, secret = who.partition(":")
         user, secret = unquote(user) or None, (unquote(secret) if colon else None)
+    odd = [ch for ch in scheme + sep + rest if ord(ch) <= 32 or ord(ch) == 127]
+    if odd:  # the URL parser drops line breaks and tabs: site\n1 would be the prefix site1
+        raise MqttError(f"{_safe(url)}: expected no spaces, tabs or line breaks in an MQTT URL's "
+                        f"host or prefix (found {odd[0]!r})")
     try:
         parts = urlsplit(f"{scheme}{sep}{rest}")
         port = parts.port
@@ -109,8 +113,33 @@ def _safe(url: str) -> str:
                            + "***@", url, flags=re.S), 120)
 
 
+def check_ca_file(ca_file) -> None:
+    """A CA file must be a regular file of a CA's size: a FIFO would hold the TLS setup
+    forever, a device or a folder is no certificate (refused before anything opens it)."""
+    import stat
+
+    from .reading import MAX_BYTES, one_line
+
+    try:
+        st = os.stat(ca_file)
+    except OSError as e:
+        raise MqttError(f"CA file {one_line(str(ca_file), 200)}: cannot read it "
+                        f"({e.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "a FIFO" if \
+            stat.S_ISFIFO(st.st_mode) else "not a regular file"
+        raise MqttError(f"CA file {one_line(str(ca_file), 200)}: {kind} (expected a PEM file "
+                        "of CA certificates)")
+    if st.st_size > MAX_BYTES:
+        raise MqttError(f"CA file {one_line(str(ca_file), 200)}: {st.st_size} bytes (expected a "
+                        f"PEM file of CA certificates, at most {MAX_BYTES})")
+
+
 def _client(target: Target, client_id: str, ca_file=None):
     import paho.mqtt.client as mqtt
+
+    if ca_file is not None:
+        check_ca_file(ca_file)
 
     c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
                     protocol=mqtt.MQTTv311)
@@ -122,7 +151,7 @@ def _client(target: Target, client_id: str, ca_file=None):
         try:
             c.tls_set(ca_certs=ca_file)
         except (ssl.SSLError, OSError, ValueError) as e:
-            raise MqttError(f"--ca-file {ca_file}: not a CA certificate OpenSSL can read "
+            raise MqttError(f"CA file {ca_file}: not a CA certificate OpenSSL can read "
                             f"({getattr(e, 'reason', None) or e})") from None
     c.reconnect_delay_set(min_delay=1, max_delay=30)
     return c
@@ -141,7 +170,7 @@ def _check_tls(target: Target, ca_file, timeout: float) -> None:
                 pass
     except ssl.SSLCertVerificationError as e:
         raise MqttError(f"{target.shown()}: the broker's certificate does not pass "
-                        f"{'--ca-file ' + str(ca_file) if ca_file else 'the system CAs'} "
+                        f"{'the CA file ' + str(ca_file) if ca_file else 'the system CAs'} "
                         f"({e.verify_message})") from None
     except ssl.SSLError as e:
         raise MqttError(f"{target.shown()}: no TLS handshake ({e.reason or e}): does the "
@@ -179,7 +208,7 @@ def _connect(client, target: Target, connected: threading.Event, refused: list,
         client.loop_stop()
         raise MqttError(f"{target.shown()}: no answer from the broker in {timeout:g} s (is it "
                         "running, are the host and port right, and does it speak TLS when the "
-                        "URL is mqtts:// — and its certificate pass --ca-file?)")
+                        "URL is mqtts:// — and its certificate pass the CA file?)")
 
 
 class Publisher:
