@@ -1,6 +1,7 @@
 """Cameras to and from aniposelib TOML and OpenCV FileStorage YAML."""
 
 import math
+import re
 from pathlib import Path
 
 import cv2
@@ -175,13 +176,59 @@ def test_opencv_import_refuses_other_yaml_in_one_line():
         from_opencv_yaml(bad, "c.yaml")
 
 
-def test_opencv_export_refuses_ids_that_do_not_survive_it():
+ODD_IDS = ("true", "null", "false", "nan", "1", "01", "1.0", "1e3", "0x1F", "inf", "yes", "Null")
+
+
+def _renamed(cams, ids):
+    keys = ("width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
+    return [Camera(i, **{k: getattr(c, k) for k in keys}) for i, c in zip(ids, cams)]
+
+
+def test_opencv_export_keeps_ids_yaml_would_read_as_other_values(tmp_path):
+    """An id true or null was a traceback (FileStorage writes it unquoted and reads it back
+    as 1 or nothing, issue 31): every id is written quoted and comes back as it was, through
+    the command line too."""
+    cams = _renamed(twelve_cameras(), ODD_IDS)
+    text = to_opencv_yaml(cams)
+    assert 'id: "true"' in text and 'id: "null"' in text
+    assert_same(from_opencv_yaml(text), cams)
+    dep = Deployment("hall", 3.0, [[0, 0], [5, 0], [5, 3.5], [0, 3.5]], cams)
+    save(dep, tmp_path / "dep.yaml")
+    run = CliRunner().invoke
+    out = run(main, ["export", "-d", str(tmp_path / "dep.yaml"), "--to", "opencv", "-o",
+                     str(tmp_path / "c.yaml")])
+    assert out.exit_code == 0 and out.exception is None, out.output
+    out = run(main, ["import", "--cameras", str(tmp_path / "c.yaml"), "-b",
+                     str(tmp_path / "dep.yaml"), "-o", str(tmp_path / "back.yaml")])
+    assert out.exit_code == 0, out.output
+    assert [c.id for c in load(tmp_path / "back.yaml").cameras] == list(ODD_IDS)
+
+
+@pytest.mark.parametrize("written, outcome", [
+    ("true", "true unquoted, which OpenCV reads as a number"),
+    ("false", "false unquoted, which OpenCV reads as a number"),
+    ("null", "null unquoted, which OpenCV reads as nothing"),
+    ("01", "01"), ("1.0", "1.0"), ("7", "7"), ("'true'", "true"), ('"null"', "null"),
+])
+def test_an_unquoted_id_opencv_reads_as_another_value_is_not_renamed(tmp_path, written,
+                                                                      outcome):
+    """A hand-written camera file with id: true was imported as camera 1 (issue 31): an id
+    OpenCV cannot read as text is one line naming it; one it reads as a number keeps the
+    digits as written (01 stays 01)."""
     cams = twelve_cameras()[:2]
-    cams[1] = Camera("true", **{k: getattr(cams[1], k) for k in
-                               ("width", "height", "fx", "fy", "cx", "cy", "dist", "position",
-                                "rotation")})
-    with pytest.raises(InterchangeError, match="'true' does not survive"):
-        to_opencv_yaml(cams)
+    text = re.sub(r'id: "?C2"?\n', f"id: {written}\n", to_opencv_yaml(cams))
+    assert f"id: {written}\n" in text
+    if "unquoted" in outcome:
+        with pytest.raises(InterchangeError, match=r"c\.yaml: cameras\[1\]\.id: " + outcome):
+            from_opencv_yaml(text, "c.yaml")
+        (tmp_path / "c.yaml").write_text(text)
+        out = CliRunner().invoke(main, ["import", "--cameras", str(tmp_path / "c.yaml"), "-b",
+                                        "layouts/paper-linear.site.yaml", "-o",
+                                        str(tmp_path / "out.yaml")])
+        assert out.exit_code == 2 and len(out.output.strip().splitlines()) == 1, out.output
+        assert outcome in out.output and not (tmp_path / "out.yaml").exists()
+    else:
+        assert [c.id for c in from_opencv_yaml(text)] == ["C1", outcome]
 
 
 def test_import_drops_what_was_learned_for_other_cameras(tmp_path):

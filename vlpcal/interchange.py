@@ -190,13 +190,25 @@ def to_opencv_yaml(cameras: list[Camera]) -> str:
         fs.write("position", np.asarray(c.position, float).reshape(3, 1))
         fs.endWriteStruct()
     fs.endWriteStruct()
-    text = fs.releaseAndGetString()
-    back = [c.id for c in from_opencv_yaml(text)]
-    for c, b in zip(cameras, back):
-        if c.id != b:  # FileStorage writes strings unquoted: true, null, 1e3 come back changed
-            raise InterchangeError(f"camera id {shown(c.id)} does not survive OpenCV's YAML (it "
-                                   f"reads back as {shown(b)}): rename the camera")
+    # every id quoted: FileStorage writes a text id unquoted when it can (true, null, nan),
+    # and its reader takes true for the number 1 and null for nothing
+    text = re.sub(r'(?m)^( +id: )"?([^"\n]*)"?$', r'\1"\2"', fs.releaseAndGetString())
+    try:
+        back = [c.id for c in from_opencv_yaml(text)]
+    except InterchangeError:
+        back = None
+    if back != [c.id for c in cameras]:
+        bad = next((c.id for c, b in zip(cameras, back or [None] * len(cameras)) if c.id != b),
+                   cameras[0].id)
+        raise InterchangeError(f"camera id {shown(bad)} does not survive OpenCV's YAML: "
+                               "rename the camera")
     return text
+
+
+#: what OpenCV's FileStorage reads as a number or as nothing when a YAML value is unquoted
+_OPENCV_NOT_TEXT = ("true", "false", "null")
+#: an ``id:`` key's value as written in a FileStorage YAML (block or flow style)
+_ID_VALUE = re.compile(r"""(?:^|[{,\s])id\s*:[ \t]*("[^"\n]*"|'[^'\n]*'|[^\s,}#]*)""", re.M)
 
 
 def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
@@ -225,6 +237,10 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
     unit = fs.getNode("units").string() or "m"
     if unit not in UNITS:
         raise InterchangeError(f"{source}: units: expected m, cm or mm, got {shown(unit)}")
+    # each camera's id as the file writes it: FileStorage reads an unquoted true as 1 and
+    # 01 as 1, which would rename the camera silently
+    raw_all = [None if v[:1] in "\"'" else v for v in _ID_VALUE.findall(text)]  # quoted: text
+    raw = raw_all if len(raw_all) == node.size() else None
     cams = []
     for i in range(node.size()):
         n, where = node.at(i), f"{source}: cameras[{i}]"
@@ -242,8 +258,21 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
         K, dist = mat("camera_matrix", (3, 3)), mat("distortion_coefficients", (5,))
         rvec, tvec = mat("rvec", (3,)), mat("tvec", (3,)) * UNITS[unit]
         cid = n.getNode("id")
-        name = cid.string() if cid.isString() else (
-            f"{cid.real():g}" if cid.isInt() or cid.isReal() else "")
+        written = raw[i] if raw is not None else None
+        if cid.empty():
+            raise InterchangeError(f"{where}.id: missing (expected a camera id, {ID_RULE})")
+        if (written in _OPENCV_NOT_TEXT or cid.isNone()
+                or (raw is None and cid.isInt() and any(v in _OPENCV_NOT_TEXT for v in raw_all))):
+            said = written or ("null" if cid.isNone() else "true or false")
+            reads = "nothing" if cid.isNone() else "a number"
+            raise InterchangeError(f"{where}.id: {said} unquoted, which OpenCV reads as {reads} "
+                                   f"(expected a camera id; quote it: id: \"{said}\")")
+        if cid.isString():
+            name = cid.string()
+        elif written is not None and (cid.isInt() or cid.isReal()):
+            name = written  # as written: 01 or 1.0 read back as 1 would rename the camera
+        else:
+            name = f"{cid.real():g}" if cid.isInt() or cid.isReal() else ""
         w, h = n.getNode("image_width").real(), n.getNode("image_height").real()
         if not is_id(name):
             raise InterchangeError(f"{where}.id: expected a camera id ({ID_RULE}), got "
