@@ -537,6 +537,23 @@ def test_fixes_over_tls_with_the_brokers_ca_and_refused_with_another(tls_broker,
     assert not (tmp_path / "g.csv").exists()
 
 
+@pytest.mark.parametrize("option", [["--out", "sim"], ["--free-sets", "10"],
+                                    ["--survey-heights", "0,0.5"], ["--overwrite"]])
+def test_simulate_publish_refuses_the_folder_options_it_would_ignore(tmp_path, option):
+    """simulate --publish … --out sim wrote nothing and said nothing (issue 31): a folder's
+    option with --publish is one line naming it, exit 2, before any broker is tried."""
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "simulate", "--publish",
+                          "mqtt://127.0.0.1:1/lab", "--seconds", "1", *option],
+                         capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(lines) == 1, res.stderr
+    assert lines[0].startswith(f"Error: {option[0]}: ") and "writes no files" in lines[0]
+    assert "cannot connect" not in lines[0] and not list(tmp_path.iterdir())
+
+
 def test_a_port_nobody_listens_on_is_one_line_at_once(tmp_path):
     """A broker that is not there (connection refused) is said at once, not after the
     connect timeout; one line, exit 2, nothing written."""

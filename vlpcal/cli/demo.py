@@ -98,6 +98,13 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
             click.echo(f"  {key}: {text}")
         return
     if publish:
+        ctx = click.get_current_context()
+        given = [p.opts[0] for p in ctx.command.params if p.name in _FOLDER_ONLY and
+                 ctx.get_parameter_source(p.name) == click.core.ParameterSource.COMMANDLINE]
+        if given:  # said, not ignored: --out with --publish wrote nothing
+            raise UserError(f"{given[0]}: is for a simulated folder; --publish sends spots to "
+                            "the broker and writes no files (run simulate --out FOLDER, same "
+                            "--profile and --seed, for the deployments)")
         _publish_spots(profile, seed, publish, robot_speed or 1.0, seconds, body)
         return
     if not out:
@@ -249,6 +256,11 @@ def _check_wand(profile, length: float, free_height) -> None:
         raise click.BadParameter(f"a wand {length:g} m long cannot be waved in this room "
                                  f"without its ends crossing a wall or keep-out; at most "
                                  f"{longest_wand(profile):.2f} m here", param_hint="--wand")
+
+
+#: simulate's options that shape the folder it writes, which --publish does not write
+_FOLDER_ONLY = ("out", "overwrite", "survey_step", "survey_heights", "test_points", "trajectory",
+                "free_sets", "free_height", "references", "wand")
 
 
 def _publish_spots(profile, seed, url, speed, seconds, body=None) -> None:
