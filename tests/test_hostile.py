@@ -697,6 +697,46 @@ def test_locate_live_from_a_trickling_or_endless_camera_ends(tmp_path, hostile_c
     assert not out.exists() and rss is not None and rss < 500, rss
 
 
+@pytest.mark.parametrize("kind", ["wrong_size", "corrupt_frame"])
+def test_live_track_whose_every_frame_is_unusable_names_the_frames(tmp_path, kind):
+    """Live track of cameras sending only frames of another size (or cut short) said "no
+    frame had a spot" where --frames names the frames (issue 31): the same reason, exit 2,
+    no file; the summary counts them too."""
+    import cv2
+    import numpy as np
+    from test_live import Streams
+
+    from vlpcal import deployment
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import deployment_of
+
+    dep = tmp_path / "truth.yaml"
+    deployment.save(deployment_of(make_scene(get_profile("paper-2024"), seed=5), "true"), dep)
+    h, w = (240, 320) if kind == "wrong_size" else (120, 160)
+    img = np.zeros((h, w), np.uint8)
+    img[h // 2 - 5:h // 2 + 5, w // 2 - 5:w // 2 + 5] = 255
+    jpg = cv2.imencode(".jpg", img)[1].tobytes()
+    jpg = jpg if kind == "wrong_size" else jpg[:len(jpg) // 2]
+    streams = Streams({c: [jpg] * 10 for c in ("C1", "C2", "C3")})
+    try:
+        args = ["track", "-d", dep, "--out", tmp_path / "tracks.csv"]
+        for cid in ("C1", "C2", "C3"):
+            args += ["--camera", f"{cid}={streams.url(cid)}"]
+        code, out, err, _ = _vlpcal(*args, timeout=60)
+    finally:
+        streams.close()
+    import re
+
+    # every frame the run took (a frame later than the hold allows is dropped, counted apart)
+    said = {"wrong_size": r"\d+ frames of another size than their camera's",
+            "corrupt_frame": r"\d+ frames not whole JPEGs"}[kind]
+    assert code == 2 and re.match("Error: the cameras: no rows: " + said, err[-1]), err
+    assert "had a spot" not in err[-1] and "Traceback" not in "".join(err)
+    assert any(re.search(said + r" \(not used\)", line) for line in err[:-1]), err
+    assert not (tmp_path / "tracks.csv").exists()
+
+
 def test_survey_capture_refuses_a_trickling_camera_before_the_walk(tmp_path, hostile_camera):
     points = ROOT / "surveys" / "paper-2024" / "survey" / "points.csv"
     code, out, err, _ = _vlpcal("survey", "capture", "-d", DEPLOYMENT, "--points", points,

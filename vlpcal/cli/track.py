@@ -243,7 +243,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                     unreadable[w] += 1
         for t, cid, no, _ in block:
             rows.extend(_published(publisher, tracker.update_spots(cid, t, found_at[(cid, no)])))
-            check(tracker.fit)
+            check(tracker)
 
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
@@ -361,19 +361,33 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     live = _LiveTracks(out, utc, bool(dep.bodies)) if out is not None else _NoTracks()
     rows: list = []
     n = 0
+    from collections import Counter
+
+    from ..detection import detect_frame
+
+    cams = {c.id: c for c in dep.cameras}
+    unreadable: Counter = Counter()  # frames not measured, by reason (as --frames counts)
 
     def put(made):
         live.write(made)
         if hub is not None:
             hub.track_rows(made, utc)
 
+    def detect(cid, frame):
+        """The frame's spots as :meth:`~vlpcal.tracking.Tracker.detect` finds them, and
+        why it could not be measured counted."""
+        cam = cams[cid]
+        uv, why = detect_frame(frame, tracker.spots, dep.detector, dep.detector_settings,
+                               shape=(cam.height, cam.width))
+        if why is not None:
+            unreadable[why] += 1
+        return uv
+
     try:
         for t, cid, frame in frames:
-            if hub is None:
-                made = tracker.update(cid, t, frame)
-            else:  # its spots shown with the frame
-                uv = tracker.detect(cid, frame)
-                made = tracker.update_spots(cid, t, uv)
+            uv = detect(cid, frame)
+            made = tracker.update_spots(cid, t, uv)
+            if hub is not None:  # its spots shown with the frame
                 hub.frame(cid, t + utc, uv, frame if isinstance(frame, bytes) else None)
                 if n % 30 == 0:
                     _camera_facts(hub, frames)
@@ -381,7 +395,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
             put(made)
             rows += made
             n += 1
-            check(tracker.fit)
+            check(tracker)
             layouts()
             if fps is None and n % 100 == 0:  # the cameras' own rate, once it shows
                 tracker.period = frames.period()
@@ -411,12 +425,13 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
                if frames.stamped[cid] else ", no X-Timestamp (arrival times used)")
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
+    bad = "; ".join(f"{k} frames {_UNREADABLE.get(w, w)}" for w, k in unreadable.items())
     say(f"{n} camera frames → {_summary(rows)}" + (f" → {out}" if out is not None else "")
-        + _lag_said(tracker))
+        + _lag_said(tracker) + (f"; {bad} (not used)" if bad else ""))
     layouts(end=True)
     if not rows and out is not None:
         live.remove()
-        raise _no_rows(tracker, "the cameras")
+        raise _no_rows(tracker, "the cameras", unreadable)
     return rows
 
 
@@ -487,7 +502,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
                 hub.track_rows(made)
             rows += made
             n += 1
-            check(tracker.fit)
+            check(tracker)
             layouts()
             intervals.add(cid, t)
             if fps is None and n % 50 == 0:  # the slowest camera's, once it shows
