@@ -48,6 +48,79 @@ def test_malformed_site_names_the_key(path, value, fragment):
     assert str(err.value).startswith("s.yaml: ") and fragment in str(err.value)
 
 
+CM_ROOM = [[0, 0], [360, 0], [360, 180], [0, 180]]
+MM_ROOM = [[0, 0], [3600, 0], [3600, 1800], [0, 1800]]
+
+
+@pytest.mark.parametrize("path,value,fragment", [
+    # a new user's slips (issue 31), each judged against the rest of the scene
+    (["site", "ceiling_height"], 280,
+     "site.ceiling_height: 280 m over a room 3.6 × 1.8 m (a ceiling 78 times the room's size): "
+     "centimetres? millimetres? (metres expected)"),
+    (["site", "ceiling_height"], 2300, "site.ceiling_height: 2300 m over a room 3.6 × 1.8 m"),
+    (["site", "room"], MM_ROOM, "site.room: 3600 × 1800 m under a 2.3 m ceiling (a room 783 "
+                                "times wider than high): centimetres? millimetres?"),
+    (["requirements", "max_error_p95"], 2,
+     "requirements.max_error_p95: 2 m in a room 3.6 × 1.8 m under a 2.3 m ceiling (an error "
+     "87% of its size): centimetres? millimetres? (metres expected)"),
+    (["requirements", "max_error_p95"], 0.8, "max_error_p95: 0.8 m in a room"),
+    (["requirements", "heights"], [0, 70], "got [0, 70]; centimetres? millimetres?"),
+    (["site", "keep_out"], [{"polygon": [[1, 0.5], [2, 0.5], [2, 1]], "height": 180}],
+     "site.keep_out[0].height: 180 m, above the 2.3 m ceiling: centimetres? millimetres?"),
+    (["mounting"], {"wall_clearance": 30}, "mounting.wall_clearance: 30 m from every wall leaves "
+                                           "no ceiling to hang a camera from: centimetres? "
+                                           "millimetres?"),
+])
+def test_a_value_in_another_unit_is_named_as_a_unit_slip(path, value, fragment):
+    """A ceiling of 280 (cm meant) was planned as a 280 m hall ("relax the requirements"),
+    max_error_p95: 2 taken as 2 m: a value the rest of the scene says is in another unit
+    is one line naming it and the units that would fit."""
+    import copy
+
+    doc = copy.deepcopy(SITE)
+    node = doc
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    with pytest.raises(SiteError) as err:
+        site_from_dict(doc, "s.yaml")
+    assert str(err.value).startswith("s.yaml: ") and fragment in str(err.value), err.value
+    assert "\n" not in str(err.value) and "--" not in str(err.value)
+
+
+@pytest.mark.parametrize("ceiling, room, p95", [
+    (12.0, [[0, 0], [120, 0], [120, 60], [0, 60]], 0.5),  # a warehouse, a coarse need
+    (2.2, [[0, 0], [100, 0], [100, 80], [0, 80]], 0.05),  # a car park: wide and low
+    (20.0, [[0, 0], [4, 0], [4, 3], [0, 3]], 0.02),  # a stairwell, 5 × taller than wide
+    (0.3, [[0, 0], [0.3, 0], [0.3, 0.2], [0, 0.2]], 0.0026),  # a bench-top rig
+    (2.3, [[0, 0], [10, 0], [10, 0.05], [0, 0.05]], 0.02),  # a 5 cm strip, asked to 2 cm
+])
+def test_unusual_but_real_scenes_are_not_called_slips(ceiling, room, p95):
+    doc = dict(SITE, site={**SITE["site"], "ceiling_height": ceiling, "room": room},
+               requirements={**SITE["requirements"], "heights": [0.0, 0.1 * ceiling],
+                             "max_error_p95": p95})
+    site = site_from_dict(doc)
+    assert site.ceiling_height == ceiling and site.requirements.max_error_p95 == p95
+
+
+def test_a_plan_that_fails_in_a_room_far_wider_than_high_asks_about_its_unit(tmp_path):
+    """A room in centimetres under a ceiling in metres got "raise --max-cameras": a room 78
+    times wider than high may be a car park, so it is not refused, but the failure asks."""
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main
+
+    doc = dict(SITE, site={**SITE["site"], "room": CM_ROOM})
+    (tmp_path / "cm.site.yaml").write_text(yaml.safe_dump(doc))
+    out = CliRunner().invoke(main, ["plan", "--site", str(tmp_path / "cm.site.yaml"), "--out",
+                                    str(tmp_path / "p.yaml"), "-q"])
+    lines = out.output.strip().splitlines()
+    assert out.exit_code == 1 and len(lines) == 1, out.output
+    assert lines[0].endswith("or is site.room (360 × 180 m, 78 times wider than the 2.3 m "
+                             "ceiling is high) in centimetres or millimetres?"), lines
+    assert not (tmp_path / "p.yaml").exists()
+
+
 def test_sample_points_follow_the_contract():
     doc = dict(SITE, site={**SITE["site"], "keep_out": [[[1, 0.5], [2, 0.5], [2, 1], [1, 1]]]},
                requirements={**SITE["requirements"], "heights": [0.0, 0.3, 0.5, 0.7]})

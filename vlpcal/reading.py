@@ -279,3 +279,49 @@ def printable(text: str) -> str:
         return ch.encode("unicode_escape").decode("ascii")
 
     return "".join(map(safe, str(text)))
+
+
+# -- unit slips: a length that fits the scene only in another unit ------------------------------
+
+#: a ceiling more than this many times the room's largest side is no room's (a shaft at most)
+CEILING_PER_SIDE = 10.0
+#: a room's narrow side more than this many times its ceiling height is no room's
+SIDE_PER_CEILING = 100.0
+#: the units a length meant in is likely written in, when metres were expected
+SLIP_UNITS = (("centimetres", 0.01), ("millimetres", 0.001))
+
+
+def slipped_units(value, fits) -> str:
+    """The units in which ``value`` (written as metres) would fit the scene — ``fits(metres)``
+    says whether a length does — as a message names them: ``"centimetres? millimetres?"``."""
+    named = [f"{name}?" for name, scale in SLIP_UNITS if fits(value * scale)]
+    return " ".join(named) or "another unit?"
+
+
+def room_sides(room) -> tuple[float, float]:
+    """A floor polygon's bounding box: (its longer side, its shorter side), m."""
+    xs, ys = [p[0] for p in room], [p[1] for p in room]
+    a, b = max(xs) - min(xs), max(ys) - min(ys)
+    return max(a, b), min(a, b)
+
+
+def room_slip(ceiling: float, room, where: str = "site") -> str | None:
+    """A ceiling height and a room that cannot both be metres — judged against each other,
+    not against any absolute size: a ceiling more than :data:`CEILING_PER_SIDE` times the
+    room's longer side (``ceiling_height: 280`` over a 3.6 m room: centimetres), or a room
+    whose shorter side is more than :data:`SIDE_PER_CEILING` times the ceiling (a room
+    written in millimetres under a ceiling in metres). The one-line message, or None."""
+    longer, shorter = room_sides(room)
+    if ceiling > CEILING_PER_SIDE * longer:
+        units = slipped_units(ceiling, lambda c: shorter <= SIDE_PER_CEILING * c
+                              and c <= CEILING_PER_SIDE * longer)
+        return (f"{where}.ceiling_height: {ceiling:g} m over a room {longer:g} × {shorter:g} m "
+                f"(a ceiling {ceiling / longer:.0f} times the room's size): {units} (metres "
+                "expected)")
+    if shorter > SIDE_PER_CEILING * ceiling:
+        units = slipped_units(1.0, lambda k: k * shorter <= SIDE_PER_CEILING * ceiling
+                              and ceiling <= CEILING_PER_SIDE * k * longer)
+        return (f"{where}.room: {longer:g} × {shorter:g} m under a {ceiling:g} m ceiling (a "
+                f"room {shorter / ceiling:.0f} times wider than high): {units} (metres "
+                "expected)")
+    return None

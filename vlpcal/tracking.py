@@ -50,6 +50,7 @@ from .bodies import angles, fit_pose, gives_full_pose, pose_from_points, rotatio
 from .deployment import Body, Deployment
 from .detection import detect_frame
 from .fit_watch import LEAST, FitWatch
+from .latency import PRIOR_PERIODS, LatencyEstimate, camera_latencies, pair_skew
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -107,6 +108,13 @@ PIXEL_SIGMA = 0.15
 #: predicted there and not found was dark)
 VIEW_MARGIN_PX = 4.0
 
+#: each camera's latest frames with one spot kept, to search the cameras' times by when the
+#: frames do not fit (:meth:`Tracker.misfit`)
+SKEW_FRAMES = 150
+#: … and a verdict that the frames do not fit waits for half as many in two cameras, or for this
+#: many times the moments a verdict takes
+SKEW_WAIT = 4
+
 #: a row whose predicted error passes this share of the room's size is ``degenerate``
 DEGENERATE_SHARE = 0.1
 
@@ -158,6 +166,7 @@ class _Ray:
     #: seen while another camera saw a spot, and no track took it: judged for the fit watch
     #: when it leaves the spots waiting for a partner (:meth:`Tracker._expire`)
     judged: bool = False
+    shift: float = 0.0  #: s: its camera's latency its time was corrected by
 
 
 @dataclass
@@ -188,6 +197,9 @@ class _Track:
     #: (the body's LED its place beside the body's named LEDs points to, placements running)
     shape_votes: tuple = (None, 0)
     held_since: float = np.inf  #: when it ended (held: its id waits for a track continuing it)
+    #: the newest ray time of its last window that told the cameras' latencies (windows that
+    #: share no ray each tell them once)
+    timed_until: float = -np.inf
 
 
 @dataclass(frozen=True)
@@ -261,6 +273,12 @@ class Tracker:
         self._C = np.stack([c.center for c in self.cameras])
         self._f = np.array([0.5 * (c.fx + c.fy) for c in self.cameras])
         self._axis_c = np.einsum("ij,ij->i", self._R[:, 2], self._C)  #: R₂·C per camera
+        #: how late each camera's capture times run behind the others' (:mod:`vlpcal.latency`):
+        #: its frames are placed at their times less this
+        self.latency = LatencyEstimate(len(self.cameras), PRIOR_PERIODS * period, period)
+        #: camera → its latest frames with one spot: (time, the spot's world direction)
+        self._one_spot: dict = {}
+        self._searched = False
         self.tracks: list[_Track] = []
         self.held: list[_Track] = []  #: ended tracks whose ids wait (:data:`HOLD_SECONDS`)
         #: rigid bodies (``bodies:``): each placed from its LEDs' rays (:mod:`vlpcal.bodies`)
@@ -332,10 +350,11 @@ class Tracker:
         k = self._camera(camera_id)
         if not math.isfinite(t):
             raise ValueError(f"t: expected a capture time in seconds, got {t!r}")
+        stated, t = t, t - float(self.latency.applied[k])
         # the camera's newest time counts even for a late frame: a camera whose clock runs
         # ahead, heard first, must not make the others' frames late before they are heard
         self._latest[k] = max(self._latest.get(k, -np.inf), t)
-        if t < self._present() - self.half:
+        if t < self._present() - self.half - self._wait:
             self.late += 1
             return []
         out = self._due(t)
@@ -346,6 +365,9 @@ class Tracker:
             & (uvs[:, 1] <= cam.height - 0.5)
         uvs = uvs[inside][:self.spots] - self._offset[k]
         rays = self._rays(k, t, uvs)
+        if len(rays) == 1:
+            self._one_spot.setdefault(k, deque(maxlen=SKEW_FRAMES)).append(
+                (stated, np.r_[rays[0].xy, 1.0] @ self._R[k]))
         together = any(c != k and t - u <= START_WINDOW * self.period
                        for c, u in self._spotted.items())
         if len(rays):
@@ -387,6 +409,49 @@ class Tracker:
             out += self._due(t)
         return out
 
+    def misfit(self):
+        """Whether the frames do not fit the deployment (:meth:`FitWatch.misfit`) — unless a
+        camera's times do not fit the others': the first time they seem not to, the cameras'
+        times are searched (:func:`~vlpcal.latency.pair_skew` on their latest spots) and a
+        skew found is applied, the tracks started again and the frames judged anew."""
+        misfit = self.fit.misfit()
+        if misfit is None or self._searched:
+            return misfit
+        full = sum(len(q) >= SKEW_FRAMES // 2 for q in self._one_spot.values()) >= 2
+        if not full and self.fit.moments < SKEW_WAIT * self.fit.least:
+            return None  # (too few spots to search the times by yet)
+        self._searched = True
+        skews = self._skews()
+        if not skews:
+            return misfit
+        self.latency.restart(camera_latencies(len(self.cameras), skews))
+        self.tracks, self.held, self._pending = [], [], []
+        self.fit = FitWatch(self.fit.deployment, self.fit.what, least=self.fit.least)
+        self._one_spot.clear()
+        return None
+
+    def latencies(self) -> dict:
+        """Camera id → how late its capture times were found to run behind the others' (s),
+        for the cameras whose times are corrected."""
+        return {c.id: float(v) for c, v in zip(self.cameras, self.latency.applied) if v}
+
+    def _skews(self) -> list:
+        """(a, b, how much later b's stated times run than a's) for pairs of cameras whose
+        latest one-spot frames tell it."""
+        gate = 2 * GATE_SIGMAS * self.pixel_sigma
+        logs = {k: (np.array([t for t, _ in q]), np.array([d for _, d in q]))
+                for k, q in self._one_spot.items() if len(q) >= 2}
+        out = []
+        for a, (ta, da) in logs.items():
+            for b, (tb, db) in logs.items():
+                if b <= a:
+                    continue
+                skew = pair_skew(ta, da, tb, db, self._C[b] - self._C[a], float(self._f[b]),
+                                 gate, self.period)
+                if skew is not None:
+                    out.append((a, b, skew))
+        return out
+
     def _camera(self, camera_id: str) -> int:
         try:
             return self._index[camera_id]
@@ -409,7 +474,8 @@ class Tracker:
         eq[:, :, 5:8] = R[2]
         eq[:, :, 8] = self._axis_c[k]
         eq[:, :, 9] = self._f[k] / self.pixel_sigma
-        return [_Ray(t, k, xy[j], eq[j]) for j in range(len(xy))]
+        shift = float(self.latency.applied[k])
+        return [_Ray(t, k, xy[j], eq[j], shift=shift) for j in range(len(xy))]
 
     def finish(self) -> list[TrackUpdate]:
         """The rows still waiting for the rest of their window (the stream ended)."""
@@ -443,12 +509,19 @@ class Tracker:
 
     @property
     def _lag(self) -> float:
-        return self.half if self.lag is None else min(self.lag, self.half)
+        return self.half + self._wait if self.lag is None else min(self.lag, self.half)
+
+    @property
+    def _wait(self) -> float:
+        """s: how much later than the others the latest camera's frames come, for the times
+        they were captured (its latency): rows wait for them."""
+        v = self.latency.applied
+        return float(v.max() - v.min()) if len(v) else 0.0
 
     def _due(self, now: float) -> list[TrackUpdate]:
         """Rows whose window has passed by ``now``."""
         out = []
-        cut, kept = now - self._lag, now - 4 * self.half
+        cut, kept = now - self._lag, now - 4 * self.half - self._wait
         for state in self.bodies:  # (before the tracks' old rays are dropped)
             if state.due and state.due[0] <= cut:
                 ready = [t for t in state.due if t <= cut]
@@ -1173,6 +1246,9 @@ class Tracker:
                 break
             fit = cov = None
         fit_ok = fit is not None
+        if fit_ok and rays[0].t > tr.timed_until:  # a window that shares no ray with the last
+            self._time(rays, t, fit, cov)  # one that told the latencies
+            tr.timed_until = rays[-1].t
         if fit is None:  # one camera (or none that fits): the motion places it on a ray
             pos, vel, s_pos, _ = self._extrapolated(tr, t)
             if rays:
@@ -1182,13 +1258,55 @@ class Tracker:
                 d = d / np.linalg.norm(d)
                 pos = cam.center + d * float((pos - cam.center) @ d)
             fit, cov = np.r_[pos, vel, np.zeros(3)], np.eye(9) * s_pos ** 2
-        sigma = float(np.sqrt(max(np.trace(cov[:3, :3]), 0.0)))
+        variance = np.trace(cov[:3, :3])
+        if fit_ok:
+            variance += self._timing_variance(rays, t, fit, cov)
+        sigma = float(np.sqrt(max(variance, 0.0)))
         status = "ok" if fit_ok else "one_camera"
         if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name: none
             status = "degenerate"  # given (as the locator's degenerate fixes), so no robot
             fit = np.full(9, np.nan)  # steers by it
         return TrackUpdate(t, tr.led, fit[:3].copy(), fit[3:6].copy(), sigma,
                            "+".join(self.cameras[k].id for k in cams), status)
+
+    def _time(self, rays, t0: float, fit, cov) -> None:
+        """What a window the track's fit placed says about its cameras' latencies
+        (:mod:`vlpcal.latency`): the information on them once the path is free, and the pull
+        of the residuals."""
+        A, G, e, cams = self._timed_design(rays, t0, fit)
+        if len(cams) < 2:
+            return
+        AG = A.T @ G
+        S = G.T @ G - AG.T @ cov @ AG  # (cov's weights were its guess's: kept ≥ 0)
+        vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
+        placed = np.array([np.mean([r.shift for r in rays if r.camera == c]) for c in cams])
+        self.latency.add(cams, (vecs * np.maximum(vals, 0.0)) @ vecs.T, G.T @ e, placed)
+        n = len(self.cameras)
+        if self.latency.windows % max(1, n // 32) == 0:  # (an n × n solve: not every window
+            self.latency.solve()  # of a large site's)
+
+    def _timed_design(self, rays, t0: float, fit):
+        """A window's equations at the fit ``fit`` (9), each in its spot sigmas: on the path
+        (2m × 9), on the latencies of its cameras ``cams`` (2m × C: a later time places the LED
+        back along its velocity), and their residuals (2m)."""
+        eq = np.concatenate([r.eq for r in rays])
+        rows, y, tt = eq[:, :3], eq[:, 3], eq[:, 4] - t0
+        P = tt[:, None] ** _POWERS * _HALF_SQUARE
+        A = (P[:, :, None] * rows[:, None, :]).reshape(-1, 9)
+        f = fit.reshape(3, 3)
+        depth = np.einsum("ij,ij->i", eq[:, 5:8], P @ f) - eq[:, 8]
+        w = eq[:, 9] / np.maximum(depth, 1e-9)
+        cams, col = np.unique(np.repeat([r.camera for r in rays], 2), return_inverse=True)
+        G = np.zeros((len(eq), len(cams)))
+        G[np.arange(len(eq)), col] = -np.einsum("ij,ij->i", rows, f[1] + tt[:, None] * f[2]) * w
+        return A * w[:, None], G, (y - A @ fit) * w, cams
+
+    def _timing_variance(self, rays, t0: float, fit, cov) -> float:
+        """m²: what the cameras' latencies, as uncertain as they still are, add to a row's
+        position variance (its window's fit moves with them)."""
+        A, G, _, cams = self._timed_design(rays, t0, fit)
+        J = -(cov @ (A.T @ G))[:3]
+        return float(np.einsum("ij,jk,ik->", J, self.latency.relative(cams), J))
 
     def _metres_per_px(self, X, cams) -> float:
         if not cams:

@@ -38,6 +38,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
 
     from ..deployment import dumps
     from ..planning import SiteError, load_site, plan_site, planned_deployment
+    from ..planning.site import unit_doubt
     from ..reports import plan_maps
     from ..writing import OutputSet
 
@@ -56,7 +57,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         raise click.ClickException(f"{site_path}: no layout of up to {max_cameras} cameras "
                                    f"can meet the requirements: {result.missing['all']}; "
                                    "raise --max-cameras, relax the requirements or use a "
-                                   "camera with a wider view")
+                                   "camera with a wider view" + unit_doubt(site))
     if not result.candidates:
         m = result.mended
         kind = "tilted" if site.mounting and site.mounting.max_tilt > 0 else "level"
@@ -75,7 +76,8 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         raise click.ClickException(
             f"{site_path}: no layout of up to {max_cameras} cameras meets coverage "
             f"{r.coverage:.0%} with p95 ≤ {r.max_error_p95 * 100:g} cm ({best}{tried}); relax the "
-            "requirements, lower the LED heights or use a camera with more pixels")
+            "requirements, lower the LED heights or use a camera with more pixels"
+            + unit_doubt(site))
     k = len(result.candidates)
     click.echo(f"{site.name}: {result.candidates[0].count} cameras meet the requirements "
                f"({k} candidate{'s' if k > 1 else ''}; {result.tried} layouts judged, "

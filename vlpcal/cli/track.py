@@ -226,6 +226,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     from collections import Counter
 
     unreadable: Counter = Counter()
+    spotted: list = []  # (time, camera, spots) of every frame: a second pass's, when needed
 
     def track_block(block):
         """Each camera's frames of the block detected as one batch (a tenth of the cost of
@@ -243,6 +244,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                     unreadable[w] += 1
         for t, cid, no, _ in block:
             rows.extend(_published(publisher, tracker.update_spots(cid, t, found_at[(cid, no)])))
+            spotted.append((t, cid, found_at[(cid, no)]))
             check(tracker)
 
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
@@ -264,6 +266,9 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     rows += _published(publisher, tracker.finish())
+    if tracker.latencies() and publisher is None:  # rows from the first frame at the
+        tracker, rows = _retracked(tracker, spotted, check)  # times the run found
+    _said_latencies(tracker)
     _Layouts(tracker)(end=True)
     wrong = {m.body for m in tracker.layout_misfits()}
     if wrong:  # its rows before the verdict were skewed by the layout too: none written
@@ -282,6 +287,31 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                    + (f"; {missing} listed frames missing" if missing else "")
                    + (f"; {bad} (not used)" if bad else ""), err=True)
     return rows
+
+
+def _retracked(first, spotted, check) -> tuple:
+    """The frames' spots tracked again with the cameras' latencies the first pass found
+    (its rows before it found them had those cameras' times off): (the tracker, its rows)."""
+    from ..tracking import Tracker
+
+    tracker = Tracker(first.deployment, period=first.period, spots=first.spots, lag=first.lag)
+    tracker.latency.restart(first.latency.applied)
+    rows = []
+    for t, cid, uv in spotted:
+        rows += tracker.update_spots(cid, t, uv)
+        check(tracker)
+    return tracker, rows + tracker.finish()
+
+
+def _said_latencies(tracker) -> None:
+    """Cameras whose capture times the run found to run late or early, said (a warning: a
+    camera's clock or link to see to)."""
+    for cid, late in sorted(tracker.latencies().items()):
+        if abs(late) < 0.1 * tracker.period:  # (within a tenth of a frame: nothing to see to)
+            continue
+        click.echo(f"warning: camera {cid}'s capture times run {abs(late):.3f} s "
+                   f"{'behind' if late > 0 else 'ahead of'} the others' (seen in the LED's "
+                   "motion; its frames were placed at the times corrected)", err=True)
 
 
 def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False) -> None:
@@ -428,6 +458,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     bad = "; ".join(f"{k} frames {_UNREADABLE.get(w, w)}" for w, k in unreadable.items())
     say(f"{n} camera frames → {_summary(rows)}" + (f" → {out}" if out is not None else "")
         + _lag_said(tracker) + (f"; {bad} (not used)" if bad else ""))
+    _said_latencies(tracker)
     layouts(end=True)
     if not rows and out is not None:
         live.remove()
@@ -532,6 +563,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     if sub.disconnects:
         said.append(f"the broker went away {sub.disconnects} time(s)")
     say("; ".join(said) + f" → {_summary(rows)} → {out}" + _lag_said(tracker))
+    _said_latencies(tracker)
     layouts(end=True)
     if not rows:
         live.remove()

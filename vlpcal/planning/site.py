@@ -16,7 +16,7 @@ from ..deployment import (
     check_intrinsics,
 )
 from ..geometry import NADIR, Camera
-from ..reading import shown
+from ..reading import SLIP_UNITS, room_sides, room_slip, shown, slipped_units
 
 FORMAT, VERSION = "vlpcal-site", 1
 FAMILIES = ("linear", "triangular", "square", "free")
@@ -101,6 +101,9 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         ceiling = _number(site["ceiling_height"], "site.ceiling_height", positive=True,
                           within=(0, MAX_LENGTH), unit=" m")
         room = _polygon(site["room"], "site.room")
+        slip = room_slip(float(ceiling), room)
+        if slip:  # a ceiling of 280 (cm meant) planned a 280 m hall: "relax the requirements"
+            raise SiteError(slip)
         items = site.get("keep_out") or []
         if not isinstance(items, list):
             raise SiteError("site.keep_out: expected a list of polygons or {polygon, height} "
@@ -129,8 +132,10 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
             raise SiteError("requirements.heights: expected a list of LED heights, m")
         heights = [_number(h, f"requirements.heights[{i}]") for i, h in enumerate(heights)]
         if any(not 0 <= h < ceiling for h in heights):
+            slip = "" if min(heights) < 0 else "; " + slipped_units(
+                max(heights), lambda m: m < ceiling)
             raise SiteError(f"requirements.heights: expected heights from 0 to below the "
-                            f"ceiling ({ceiling:g} m), got {heights}")
+                            f"ceiling ({ceiling:g} m), got {shown(heights)}{slip}")
         min_cams = int(_number(req["min_cameras"], "requirements.min_cameras", positive=True,
                                integer=True))
         if min_cams < 2:
@@ -148,6 +153,13 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
         extent = max(max(p[k] for p in room) - min(p[k] for p in room) for k in (0, 1))
         p95 = float(_number(req["max_error_p95"], "requirements.max_error_p95", positive=True,
                             within=(0, extent), unit=" m (the room's size)"))
+        longer, shorter = room_sides(room)
+        scale = min(longer, float(ceiling))  # the room's size, along or up
+        if p95 > scale / 4:  # an error a quarter of the room's size places nothing in it
+            raise SiteError(f"requirements.max_error_p95: {p95:g} m in a room {longer:g} × "
+                            f"{shorter:g} m under a {ceiling:g} m ceiling (an error "
+                            f"{p95 / scale:.0%} of its size): "
+                            f"{slipped_units(p95, lambda m: m <= scale / 4)} (metres expected)")
         noise = float(_number(req["pixel_noise"], "requirements.pixel_noise", positive=True))
         if not 1e-6 <= noise <= min(cam["width"], cam["height"]):
             raise SiteError(f"requirements.pixel_noise: expected a spot noise in px between "
@@ -163,6 +175,24 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
                 tuple(families), mounting, obstacles)
 
 
+#: a room whose narrow side is this many times its ceiling may be real (a car park), but where
+#: no plan fits it, a room written in centimetres under a ceiling in metres is worth asking
+SIDE_PER_CEILING_DOUBT = 20.0
+
+
+def unit_doubt(site: Site) -> str:
+    """What a failed plan adds when the site's room is far wider than high (empty when it is
+    not): the room may be in centimetres under a ceiling in metres."""
+    longer, shorter = room_sides(site.room)
+    ceiling = site.ceiling_height
+    if shorter <= SIDE_PER_CEILING_DOUBT * ceiling:
+        return ""
+    units = " or ".join(name for name, k in SLIP_UNITS
+                        if k * shorter <= SIDE_PER_CEILING_DOUBT * ceiling) or "another unit"
+    return (f"; or is site.room ({longer:g} × {shorter:g} m, {shorter / ceiling:.0f} times "
+            f"wider than the {ceiling:g} m ceiling is high) in {units}?")
+
+
 def _obstacle(item, where: str, ceiling: float) -> Obstacle:
     """A keep-out item: a polygon (a floor area, height 0) or ``{polygon, height}``."""
     if not isinstance(item, dict):
@@ -170,7 +200,12 @@ def _obstacle(item, where: str, ceiling: float) -> Obstacle:
     _only(item, OBSTACLE_KEYS, where)
     if "polygon" not in item:
         raise SiteError(f"{where}.polygon: missing")
-    height = _number(item.get("height", 0.0), f"{where}.height", within=(0, ceiling),
+    height = item.get("height", 0.0)
+    if isinstance(height, (int, float)) and not isinstance(height, bool) and \
+            ceiling < height <= MAX_LENGTH:
+        raise SiteError(f"{where}.height: {height:g} m, above the {ceiling:g} m ceiling: "
+                        f"{slipped_units(height, lambda m: m <= ceiling)} (metres expected)")
+    height = _number(height, f"{where}.height", within=(0, ceiling),
                      unit=f" m (from the floor to the ceiling, {ceiling:g} m)")
     return Obstacle(_polygon(item["polygon"], f"{where}.polygon"), float(height))
 
@@ -187,8 +222,9 @@ def _mounting(block, room) -> CameraMounting:
     clearance = _number(block.get("wall_clearance", 0.0), "mounting.wall_clearance",
                         within=(0, MAX_LENGTH), unit=" m")
     if clearance and Polygon(room).buffer(-clearance).is_empty:
+        units = slipped_units(clearance, lambda m: not Polygon(room).buffer(-m).is_empty)
         raise SiteError(f"mounting.wall_clearance: {clearance:g} m from every wall leaves no "
-                        "ceiling to hang a camera from")
+                        f"ceiling to hang a camera from: {units} (metres expected)")
     return CameraMounting(math.radians(float(tilt)), float(clearance))
 
 

@@ -32,12 +32,13 @@ def mjpeg_part(jpg: bytes, stamp: str | None = None) -> bytes:
 
 
 class StreamServer:
-    """Serve the frames folder ``root`` live. ``latency``: s, the smallest network delay;
+    """Serve the frames folder ``root`` live. ``latency``: s, the smallest network delay (or
+    camera id → it, 4 ms for one not named: a camera on a slower link);
     ``latency_jitter``: s, the mean of an exponential delay on top (per frame); ``start``: s
     from now at which capture time 0 is played (all cameras on one schedule, whenever their
     clients connect)."""
 
-    def __init__(self, root, latency: float = 0.004, latency_jitter: float = 0.003,
+    def __init__(self, root, latency: float | dict = 0.004, latency_jitter: float = 0.003,
                  start: float = 0.5, seed: int = 0):
         root = Path(root)
         stamps: dict = {}
@@ -52,8 +53,9 @@ class StreamServer:
         self.frames: dict = {}  # camera id → [(send at, stamp text, path)] in time order
         for cid, nos in true.items():
             items = sorted((t, no) for no, t in nos.items())
-            delay = latency + rng.exponential(latency_jitter, len(items)) if latency_jitter \
-                else np.full(len(items), latency)
+            least = latency.get(cid, 0.004) if isinstance(latency, dict) else latency
+            delay = least + rng.exponential(latency_jitter, len(items)) if latency_jitter \
+                else np.full(len(items), least)
             self.frames[cid] = [(t + d, stamps[(cid, no)], root / cid / f"{no}.jpg")
                                 for (t, no), d in zip(items, delay)]
         self.t0 = time.monotonic() + start

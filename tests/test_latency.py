@@ -1,0 +1,125 @@
+"""Cameras whose capture times run late (issue 31): the tracker finds each camera's latency
+from the LED's motion — its rays disagree with the others' along the path — corrects it and
+says so, and no row is `ok` farther from the LED than its sigma allows."""
+
+import csv
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from vlpcal.latency import camera_latencies
+
+RUN = [sys.executable, "-m", "vlpcal"]
+
+
+@pytest.fixture(scope="module")
+def robot(tmp_path_factory):
+    """A simulated robot at 1.5 m/s under the paper's three cameras in a line."""
+    root = tmp_path_factory.mktemp("late")
+    res = subprocess.run(RUN + ["simulate", "--profile", "paper-2024", "--out",
+                                str(root / "sim"), "--test-points", "0", "--robot-speed", "1.5"],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    return root / "sim"
+
+
+def _late_copy(sim, dst, camera, late):
+    """The robot's frames folder with ``camera``'s stated times ``late`` s later."""
+    import shutil
+
+    shutil.copytree(sim / "streams", dst)
+    with open(sim / "streams/times.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    with open(dst / "times.csv", "w", newline="") as f:
+        csv.writer(f).writerows([rows[0]] + [[c, n, f"{float(t) + late:.6f}" if c == camera
+                                               else t] for c, n, t in rows[1:]])
+    return dst
+
+
+def _judged(sim, tracks):
+    """Each ok row's error from the LED's true path (at the row's time) and its sigma."""
+    truth = np.genfromtxt(sim / "streams.truth.csv", delimiter=",", names=True, dtype=None,
+                          encoding="utf-8")
+    order = np.argsort(truth["t"])
+    rows = [r for r in csv.DictReader(open(tracks)) if r["status"] == "ok"]
+    t = np.array([float(r["t"]) for r in rows])
+    X = np.array([[float(r[c]) for c in "xyz"] for r in rows])
+    true = np.stack([np.interp(t, truth["t"][order], truth[c][order]) for c in "xyz"], -1)
+    return np.linalg.norm(X - true, axis=1), np.array([float(r["sigma_m"]) for r in rows])
+
+
+def _track(sim, frames, out):
+    return subprocess.run(RUN + ["track", "-d", str(sim / "truth.yaml"), "--frames", str(frames),
+                                 "--out", str(out)], capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize("late", [0.03, 0.25])
+def test_a_camera_whose_times_run_late_is_found_corrected_and_named(robot, tmp_path, late):
+    """One camera's times.csv a frame (30 ms) or 0.25 s late: every ok row lay 40 sigma off
+    at 30 ms (height), and at 0.25 s the run was refused as a wrong deployment. Now the
+    camera is named with its latency, and the rows are within 3 sigma and about as accurate as
+    with the camera on time."""
+    on_time = _track(robot, robot / "streams", tmp_path / "on.csv")
+    assert on_time.returncode == 0, on_time.stderr
+    assert "capture times run" not in on_time.stderr  # nothing said of cameras on time
+    base, _ = _judged(robot, tmp_path / "on.csv")
+    res = _track(robot, _late_copy(robot, tmp_path / "late", "C2", late), tmp_path / "t.csv")
+    assert res.returncode == 0, res.stderr
+    said = [line for line in res.stderr.splitlines() if "capture times run" in line]
+    assert len(said) == 1 and "camera C2's" in said[0] and "behind" in said[0], res.stderr
+    assert abs(float(said[0].split(" run ")[1].split(" s ")[0]) - late) <= 0.002, said
+    err, sigma = _judged(robot, tmp_path / "t.csv")
+    assert len(err) > 0.8 * len(base)
+    assert (err <= 3 * sigma).all(), (err / sigma).max()
+    assert np.median(err) <= 3 * np.median(base), (np.median(err), np.median(base))
+
+
+def test_a_camera_on_a_slower_link_live_is_found_and_its_rows_stay_honest(robot, tmp_path):
+    """Live, one camera's frames 100 ms slower on the network than the others' (its
+    X-Timestamp right): the delay went into its clock estimate and 35 of 186 ok rows were
+    10-41 cm off at sigmas of millimetres. Now its latency is found from the LED's motion and
+    named, and the rows after are within their sigmas."""
+    from vlpcal.sim.mjpeg import StreamServer
+
+    server = StreamServer(robot / "streams", latency={"C2": 0.104}, latency_jitter=0.002,
+                          start=1.5)
+    cmd = RUN + ["track", "-d", str(robot / "truth.yaml"), "--out", str(tmp_path / "t.csv"),
+                 "--duration", "11.5"]
+    for cid in ("C1", "C2", "C3"):
+        cmd += ["--camera", f"{cid}={server.url(cid)}"]
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    finally:
+        server.close()
+    assert res.returncode == 0, res.stderr
+    said = [line for line in res.stderr.splitlines() if "capture times run" in line]
+    assert len(said) == 1 and "camera C2's" in said[0], res.stderr
+    assert abs(float(said[0].split(" run ")[1].split(" s ")[0]) - 0.1) <= 0.01, said
+    import time
+
+    utc = time.time() - time.monotonic()
+    truth = np.genfromtxt(robot / "streams.truth.csv", delimiter=",", names=True, dtype=None,
+                          encoding="utf-8")
+    order = np.argsort(truth["t"])
+    rows = [r for r in csv.DictReader(open(tmp_path / "t.csv")) if r["status"] == "ok"]
+    t = np.array([float(r["t"]) for r in rows]) - utc - server.host_offset
+    X = np.array([[float(r[c]) for c in "xyz"] for r in rows])
+    true = np.stack([np.interp(t, truth["t"][order], truth[c][order]) for c in "xyz"], -1)
+    err = np.linalg.norm(X - true, axis=1)
+    sigma = np.array([float(r["sigma_m"]) for r in rows])
+    assert len(rows) > 150
+    # the common least latency (4 ms) stays in every camera's offset: rows that much late
+    bad = err > 3 * sigma + 1.5 * 0.004
+    # once the cameras' times are searched (the first seconds' spots), no ok row is off; in
+    # those first seconds a few may be (the note of issue 31 says so)
+    assert not bad[t > 4.0].any(), np.c_[t[bad], err[bad], sigma[bad]]
+    assert bad.mean() < 0.05, bad.mean()
+
+
+def test_latencies_from_pairs_are_told_against_the_cameras_middle_one():
+    """Three cameras, the second 0.25 s late: the pairs' skews give it 0.25, the others 0."""
+    value = camera_latencies(3, [(0, 1, 0.25), (1, 2, -0.25), (0, 2, 0.0)])
+    assert np.allclose(value, [0.0, 0.25, 0.0])
+    assert np.allclose(camera_latencies(4, []), 0.0)
