@@ -257,6 +257,65 @@ def test_a_small_jpeg_declaring_a_huge_image_is_not_decoded(tmp_path):
     assert rss is not None and rss < 500, f"{rss:.0f} MB"
 
 
+def _jpeg_bomb(frame: bytes) -> bytes:
+    """``frame`` with its header declaring 32000 × 32000 (a gigabyte to decode)."""
+    bomb = bytearray(frame)
+    at = bomb.find(b"\xff\xc0")
+    bomb[at + 5:at + 9] = (32000).to_bytes(2, "big") * 2
+    return bytes(bomb)
+
+
+def test_a_cameras_usual_size_is_judged_from_its_frames_not_its_first():
+    import cv2
+    import numpy as np
+
+    from vlpcal.detection import spread, usual_size
+
+    frame = cv2.imencode(".jpg", np.zeros((120, 160), np.uint8))[1].tobytes()
+    bomb = _jpeg_bomb(frame)
+    assert usual_size([bomb, frame, frame]) == (120, 160)  # one damaged set: not the size
+    assert usual_size([bomb, bomb, frame]) == (32000, 32000)  # most frames: the size
+    assert usual_size([bomb, frame]) is None  # no majority: nothing to judge by
+    assert usual_size([None, b"", b"not a jpeg"]) is None
+    assert spread(range(100), 5) == [0, 25, 50, 74, 99] and spread([1, 2], 9) == [1, 2]
+
+
+@pytest.mark.xfail(strict=True, reason="needs vlpcal/cli/locate.py's size check to use "
+                                       "detection.usual_size (issue 31, see the report)")
+def test_one_frame_set_of_huge_jpegs_is_its_rows_status_not_the_runs_refusal(tmp_path):
+    """A folder whose first frame set is three 2 kB JPEGs declaring 32000 × 32000 refused the
+    whole run ("frames of another size", judged from each camera's first frame): the set's
+    row says wrong_size, the other sets are located, memory stays small."""
+    import csv
+
+    import cv2
+    import numpy as np
+
+    img = np.zeros((120, 160), np.uint8)
+    img[55:65, 75:85] = 255
+    frame = cv2.imencode(".jpg", img)[1].tobytes()
+    for fid in ("f1", "f2", "f3"):
+        (tmp_path / "frames" / fid).mkdir(parents=True)
+        for cid in ("C1", "C2", "C3"):
+            (tmp_path / "frames" / fid / f"{cid}.jpg").write_bytes(
+                _jpeg_bomb(frame) if fid == "f1" else frame)
+    out = tmp_path / "fixes.csv"
+    code, _, err, rss = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", tmp_path / "frames",
+                                "--out", out)
+    assert code == 0, err
+    rows = {r["frame_id"]: r for r in csv.DictReader(out.open())}
+    assert sorted(rows) == ["f1", "f2", "f3"] and rows["f1"]["status"] != "ok"
+    assert "wrong_size" in "".join(rows["f1"].values())
+    assert rss is not None and rss < 500, f"{rss:.0f} MB"
+    # a folder whose every set is of another size is still the wrong deployment's
+    for fid in ("f2", "f3"):
+        for cid in ("C1", "C2", "C3"):
+            (tmp_path / "frames" / fid / f"{cid}.jpg").write_bytes(_jpeg_bomb(frame))
+    code, _, err, _ = _vlpcal("locate", "-d", DEPLOYMENT, "--frames", tmp_path / "frames",
+                              "--out", out)
+    assert code == 2 and "frames of another size" in err[-1], err
+
+
 # -- the output discipline: full disks, special targets, killed runs (vlpcal.writing) ----------
 
 #: a child whose files may not grow past 100 bytes: what a full disk looks like to a writer

@@ -178,6 +178,33 @@ def jpeg_size(buf: bytes) -> tuple[int, int] | None:
     return None
 
 
+#: frames of one camera whose headers :func:`usual_size` reads, spread over its frames
+SIZE_SAMPLE = 9
+
+
+def spread(items, most: int = SIZE_SAMPLE) -> list:
+    """Up to ``most`` of ``items`` spread evenly from the first to the last (all when fewer)."""
+    items = list(items)
+    if len(items) <= most:
+        return items
+    return [items[round(k * (len(items) - 1) / (most - 1))] for k in range(most)]
+
+
+def usual_size(frames) -> tuple[int, int] | None:
+    """(height, width) that more than half of ``frames`` (JPEG bytes; None or unreadable ones
+    not counted) declare in their headers, or None when no size is: a camera's size judged
+    from its frames, not from its first one — one damaged frame set (a 1 kB JPEG declaring
+    32000 × 32000) is its own rows' status, not the camera's size."""
+    from collections import Counter
+
+    sizes = Counter(size for size in (jpeg_size(f) if isinstance(f, (bytes, bytearray))
+                                      else None for f in frames) if size is not None)
+    if not sizes:
+        return None
+    size, count = sizes.most_common(1)[0]
+    return size if count > sum(sizes.values()) / 2 else None
+
+
 class _QuietStderr:
     """libjpeg writes its warnings about damaged data ("Corrupt JPEG data: 9 extraneous
     bytes") straight to file descriptor 2, past Python: a damaged frame gets a status, not a
