@@ -291,26 +291,64 @@ def test_spots_published_by_simulated_cameras_are_located(broker, tmp_path):
     scene = make_scene(get_profile("paper-2024"), 0)
     write_deployments(scene, tmp_path)
     run = [sys.executable, "-m", "vlpcal"]
+    # no step waits a guessed time (issue 31: a loaded machine made the run miss its window):
+    # locate listens until stopped, the spots are played once it says it is subscribed (the
+    # broker acknowledged it), and it is stopped as a service manager would, once its rows are
+    # there; --duration bounds a test that went wrong
     loc = subprocess.Popen(run + ["locate", "-d", str(tmp_path / "truth.yaml"), "--spots",
                                   broker.url("lab"), "--out", str(tmp_path / "f.csv"),
-                                  "--duration", "6", "--publish", broker.url("out")],
+                                  "--duration", "300", "--publish", broker.url("out")],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(1.5)  # subscribed
+    said, listening = [], threading.Event()
+
+    def read_stderr():
+        for line in loc.stderr:
+            said.append(line)
+            listening.set() if line.startswith("listening for spots") else None
+
+    reader = threading.Thread(target=read_stderr, daemon=True)
+    reader.start()
+    assert listening.wait(120), "".join(said)  # subscribed
     follow = subprocess.Popen(["tail", "-n", "+1", "-F", str(tmp_path / "f.csv")],
                               stdout=open(tmp_path / "followed.txt", "w"),
                               stderr=subprocess.DEVNULL)
+    spots = Listener(broker.url("lab"))  # what the cameras publish: its last capture time
     res = subprocess.run(run + ["simulate", "--profile", "paper-2024", "--publish",
                                 broker.url("lab"), "--seconds", "3", "--robot-speed", "0.1"],
-                         capture_output=True, text=True, timeout=60)
+                         capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
-    time.sleep(0.5)
+    import re
+
+    sent = int(re.search(r"published (\d+) spot messages", res.stderr).group(1))
+    deadline = time.monotonic() + 120
+    while len(spots.messages) < sent and time.monotonic() < deadline:  # all heard
+        time.sleep(0.05)
+    spots.close()
+    assert len(spots.messages) == sent
+    last = max(m["t"] if isinstance(m, dict) else m[0]["t"] for _, m, _ in spots.messages)
+
+    def located_to_the_end():  # the set of the last frame published is a row
+        rows = csv.DictReader((tmp_path / "f.csv").read_text().splitlines())
+        times = [float(r["t_s"]) for r in rows if (r.get("t_s") or "").strip()]
+        return bool(times) and max(times) >= last - 0.2
+
+    deadline = time.monotonic() + 120
+    while not located_to_the_end() and time.monotonic() < deadline and loc.poll() is None:
+        time.sleep(0.05)
     # the live --out is followed while the run goes on: tail -F has its rows already
-    assert loc.poll() is None
+    while len((tmp_path / "followed.txt").read_text().splitlines()) <= 30 \
+            and time.monotonic() < deadline and loc.poll() is None:
+        time.sleep(0.05)
+    assert loc.poll() is None and located_to_the_end(), "".join(said)
     followed = (tmp_path / "followed.txt").read_text().splitlines()
     assert followed[0].startswith("frame_id,") and len(followed) > 30
-    _, err = loc.communicate(timeout=60)
+    loc.terminate()  # SIGTERM: stopped as Ctrl-C stops it, the fixes so far kept
+    loc.wait(timeout=60)
+    reader.join(timeout=60)
     follow.terminate()
+    err = "".join(said)
     assert loc.returncode == 0, err
+    assert "interrupted: the fixes so far are kept" in err, err
     rows = [r for r in csv.DictReader(open(tmp_path / "f.csv")) if r["status"] == "ok"]
     assert len(rows) > 30, err
     t = np.array([float(r["t_s"]) for r in rows])

@@ -402,14 +402,16 @@ def track_message(t: float, update) -> dict:
 
 def _subscribe(sub, client, reason_code, topics) -> None:
     """A subscriber's connection answered: refused (said by :func:`_connect` when it is the
-    first), or ``topics`` subscribed and the subscriber connected."""
+    first), or ``topics`` subscribed — the subscriber connected once the broker acknowledges
+    the subscription (from then on every message published is heard: a caller that says it
+    listens, listens)."""
     if reason_code.is_failure:
         if not sub._ever:
             sub._refused.append(str(reason_code).lower())
         return
     sub._ever = True
+    client.on_subscribe = lambda *a, **k: sub._connected.set()
     client.subscribe(topics)
-    sub._connected.set()
 
 
 class SpotSubscriber:
