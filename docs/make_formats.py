@@ -235,10 +235,17 @@ plain OpenCV could not fit or put past it, and
 cost and the `cost_ratio` between them; `null` when the lens was forced as `pose`),
 `precision` (`point_sigma_m`, whether it was `estimated`, `pixel_sigma_px`),
 `fusion` (the one chosen; its region map and residual limit are in the deployment's `fusion`
-block), `mismeasured` (`point_id`, `moved_m`) and `notes`; with `--test-points`,
-`test_points` (`points`, `mean`, `median`, `p90`, `p95`, `max` in m, `fixed`, and `per_point`
-errors). A free survey's report holds `free_survey` (`sets`, `used`, `dropped_sets`,
-`free_height_m`), `references` (each one's `left_out_error_m`), `datum_floor_m`, `cameras`
+block), `mismeasured` (`point_id`, `moved_m`), `suspects` (each point whose held-out error
+stands far beyond the other points', more than 6 × their median, and whose record two of the
+cameras that saw it reject: `point_id`, `left_out_error_m`, `others_median_m`,
+`named_beyond_m`, and the others' held-out mean with it, `others_mean_with_m`, and with the
+k-fold check run again without it, `others_mean_without_m`) and `notes`; with `--test-points`, `test_points` (`points`, `mean`,
+`median`, `p90`, `p95`, `max` in m, `fixed`, `statuses`: how many points got each status
+other than `ok`, and `per_point` errors and statuses — located as `locate` locates with the
+calibrated file, so a point it would refuse as `outside_room` is not fixed here either). A
+free survey's report holds `free_survey` (`sets`, `used`, `dropped_sets`, `free_height_m`),
+`references` (each one's `left_out_error_m`), `suspects` (as above, the others each left out
+in turn, with `cameras_moved_m`, the largest camera move without it), `datum_floor_m`, `cameras`
 (per camera `spread_px`, `free_sets_seen`, `rejected_spots`, `coverage` in words and
 `quarter_sightings`, 2 × 2 [row][column], moved, turned and the lens), `lens`, `precision`
 and `notes`.

@@ -159,6 +159,7 @@ def test_cli_calibrates_from_observations_alone_and_refuses_clearly(tmp_path, rn
     assert cal.fusion in ("mean", "nearest", "region", "robust") and cal.region_map is not None
     assert out.with_suffix(".png").is_file()
     assert cal.extra["provenance"]["command"] == "vlpcal survey calibrate"
+    assert report["suspects"] == [] and "warning: point" not in res.output  # no false alarm
     # a floor-only survey cannot fit the lens: a refusal, not a bad calibration, no file
     write_survey_bundle(tmp_path / "floor", ids[:len(X) // 3], X[:len(X) // 3],
                         observations={c.id: uv[k, :len(X) // 3] for k, c in enumerate(true)})
@@ -285,3 +286,31 @@ def test_the_schur_step_is_the_sparse_solve_step(rng, wand):
     got = _SchurSolver(sum(npars), n_pts, pairs)(A, g, damping)
     assert got is not None
     np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-9 * np.abs(want).max())
+
+
+def test_a_tape_point_30_cm_off_is_named_with_what_leaving_it_out_gives(rng):
+    """Issue 31, a tape survey's point read 0.30 m off in x: named with its held-out error
+    against the other points' and their held-out mean with it and without it; the survey
+    without the misreading names none."""
+    from vlpcal.survey import calibrate_survey
+
+    true = [look_at(f"C{k + 1}", (x, 0.9, 2.3), (x, 0.9, 0.0)) for k, x in
+            enumerate((1.2, 1.8, 2.4))]
+    nominal = [nudge(c, rng, 0.02, 1 * DEG) for c in true]
+    dep = deployment.Deployment("lab", 2.3, [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]], nominal)
+    X = survey_grid(step=0.3)
+    ids = [f"P{i:03d}" for i in range(len(X))]
+    uv = observe(true, X, rng)
+    measured = X + rng.normal(0, 0.002, X.shape)
+    clean = calibrate_survey(dep, measured, uv, ids, lens="pose")
+    assert clean.suspects == [] and clean.report()["suspects"] == []
+    seen3 = np.flatnonzero(np.isfinite(uv).all(axis=2).sum(axis=0) == 3)
+    wrong = int(seen3[len(seen3) // 2])
+    measured[wrong, 0] += 0.30
+    result = calibrate_survey(dep, measured, uv, ids, lens="pose")
+    assert [s.point_id for s in result.suspects] == [ids[wrong]], result.suspects
+    s = result.suspects[0]
+    assert s.residual == pytest.approx(0.30, abs=0.02) and s.residual > s.limit
+    assert s.limit > 5 * s.typical and s.typical < 0.01, s
+    assert np.isfinite(s.others_with) and s.others_without <= 1.05 * s.others_with, s
+    assert result.report()["suspects"][0]["point_id"] == ids[wrong]

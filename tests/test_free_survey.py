@@ -79,6 +79,7 @@ def test_cameras_10_cm_and_5_degrees_off_are_found(free_case):
         assert np.linalg.norm(np.subtract(c.position, t.position)) < 0.01
     assert cal.used_sets > 1000 and sum(cal.rejected.values()) <= 5
     assert np.nanmax(cal.leave_one_out) < 0.01 and 0.0003 < cal.datum_floor < 0.003
+    assert cal.suspects == []  # no reference named where none is wrong (issue 31)
 
 
 def test_a_reflection_in_5_percent_of_one_cameras_frames_is_rejected(free_case):
@@ -94,6 +95,7 @@ def test_a_reflection_in_5_percent_of_one_cameras_frames_is_rejected(free_case):
     assert cal.rejected["C2"] >= 0.5 * len(hit), cal.rejected
     assert max(cal.rejected["C1"], cal.rejected["C3"], cal.rejected["C4"]) <= 3, cal.rejected
     assert _error(cal.cameras, true, np.random.default_rng(2)) < 0.003
+    assert cal.suspects == []  # wrong spots are not a wrong reference
 
 
 def test_refusals_are_one_sentence_naming_what_is_missing(free_case):
@@ -142,6 +144,7 @@ def test_a_robot_at_a_known_height_needs_two_references(free_case):
     cal = calibrate_free(nominal, measured[:4], uv_r[:, :4], ["R0", "R1", "R2", "R3"],
                          uv_robot, lens="pose", free_height=0.15)
     assert np.isfinite(cal.leave_one_out).all() and cal.leave_one_out.max() < 0.01
+    assert cal.suspects == []
 
 
 def test_survey_calibrate_on_a_simulated_free_survey_end_to_end(tmp_path):
@@ -169,6 +172,7 @@ def test_survey_calibrate_on_a_simulated_free_survey_end_to_end(tmp_path):
     assert "test points (never used by the calibration)" in res.stdout
     report = json.loads((tmp_path / "cal.report.json").read_text())
     assert report["datum_floor_m"] > 0 and len(report["references"]) >= 4
+    assert report["suspects"] == [] and "warning: reference" not in res.stdout
     # the tape survey's points as test points: fixed, and as close as their tape allows
     tp = report["test_points"]
     assert tp["points"] > 50 and tp["fixed"] > 0.5
@@ -416,6 +420,8 @@ def test_a_weak_survey_is_called_weak_and_its_error_predicted(n_refs):
     assert cal.weakly_fixed == (n_refs == 4), (cal.predicted_error, cal.exact_error,
                                                cal.datum_floor, actual)
     assert actual / 3 < cal.predicted_error < actual * 3, (cal.predicted_error, actual)
+    # loose cameras spread the references' left-out residuals, none far beyond the rest
+    assert cal.suspects == [], cal.leave_one_out
 
 
 def test_a_free_survey_that_contradicts_itself_is_refused(free_case, tmp_path):
@@ -475,3 +481,62 @@ def test_references_left_out_far_beyond_their_noise_call_the_survey_weak(
                           floor_mm / 1000, predicted_error=predicted_mm / 1000,
                           exact_error=exact_mm / 1000)
     assert cal.references_disagree is weak and cal.weakly_fixed is weak
+
+
+def test_a_reference_30_cm_off_is_named_with_what_leaving_it_out_gives(free_case):
+    """Issue 31: one reference's x misread by 0.30 m calibrated silently (the left-out
+    figures showed only a "max" among means). It is named, with its left-out residual, the
+    others', and what the survey gives without it; the same survey without the misreading
+    names none."""
+    true, refs, measured, free, uv_r, uv_f = free_case
+    ids = [f"R{i}" for i in range(len(refs))]
+    wrong = measured.copy()
+    wrong[4, 0] += 0.30
+    cal = calibrate_free(true, wrong, uv_r, ids, uv_f, lens="pose")
+    assert [s.point_id for s in cal.suspects] == ["R4"], cal.leave_one_out
+    s = cal.suspects[0]
+    others = np.delete(cal.leave_one_out, 4)
+    assert s.residual > 0.2 and s.residual > s.limit > 5 * np.median(others), (s, others)
+    assert s.typical == pytest.approx(np.median(others))
+    # without it the others land nearer their records (3.8 → 2.2 mm), the cameras moved by
+    # the refit as far as the misreading had dragged them (8.6 mm)
+    assert s.others_without < 0.75 * s.others_with, s
+    assert 0.002 < s.cameras_moved < 0.05, s
+    assert not cal.references_disagree  # one bad reference is named, the cameras not blamed
+    clean = calibrate_free(true, measured, uv_r, ids, uv_f, lens="pose")
+    assert clean.suspects == [] and np.isfinite(clean.leave_one_out).all()
+
+
+def test_test_points_are_judged_as_locate_judges_them():
+    """Issue 31: the report listed a test point 75 cm off that `locate` with the same file
+    refuses as outside_room (a floor reflection taken for the LED). The report's test points
+    are located by the calibrated file's own locator: that point is not fixed, its status
+    said, and every point's status is the one `locate` gives."""
+    from vlpcal.locator import Locator
+    from vlpcal.reports import test_point_errors
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import deployment_of
+
+    dep = deployment_of(make_scene(get_profile("paper-2024"), 0), "true")
+    offsets = {"C1": (1.5, -0.5), "C2": (0.0, 0.0), "C3": (-1.0, 2.0)}
+    dep.extra["corrections"] = {c: {"pixel_offset": list(o)} for c, o in offsets.items()}
+    rng = np.random.default_rng(3)
+    X = _wave(200, (0.6, 0.2), (3.0, 1.6), rng, top=0.8)
+    uv = _spots(dep.cameras, X, rng, 0.02)  # the spots as survey_spots gives them
+    two = np.flatnonzero(np.isfinite(uv).all(axis=2).sum(axis=0) >= 2)[:40]
+    X, uv = X[two], uv[:, two]
+    # the first point's spots are its floor reflection: the LED mirrored under the floor
+    X[0, 2] = 0.375
+    bad = X[0] * [1, 1, -1]  # 0.75 m from the record
+    uv[:, 0] = _spots(dep.cameras, bad[None], rng, 0.02)[:, 0]
+    assert np.isfinite(uv[:, 0]).all(axis=1).sum() >= 2
+    ids = [f"T{i}" for i in range(len(X))]
+    tp = test_point_errors(dep, X, uv, ids)
+    raw = uv + np.array([offsets[c.id] for c in dep.cameras])[:, None, :]
+    said = Locator(dep).locate_pixels(raw).status
+    assert [p["status"] for p in tp["per_point"]] == list(said)
+    assert tp["per_point"][0] == {"point_id": "T0", "error_m": None, "status": "outside_room"}
+    assert tp["statuses"] == {"outside_room": 1}
+    assert tp["fixed"] == pytest.approx((len(X) - 1) / len(X))
+    assert tp["max"] < 0.02, tp["max"]  # the corrections applied once, as locate applies them

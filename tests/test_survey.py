@@ -37,3 +37,59 @@ def test_survey_plan_walks_a_serpentine_without_crossing_the_room():
     width = np.ptp(np.array(dep.room)[:, 0])
     assert steps.max() < width / 2
     assert len(set(map(tuple, plan.xyz.round(6)))) == len(plan.ids)
+
+
+def test_capture_exits_1_when_every_camera_sends_too_slowly(tmp_path):
+    """Issue 31: cameras that send, but too slowly to make a frame, stopped `survey capture`
+    with exit 2 (a user's mistake) where the README documents 1, as a live `locate` without
+    frames exits: each camera named with why, nothing written."""
+    import subprocess
+    import sys
+    import threading
+    import time
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    from vlpcal import deployment
+    from vlpcal.sim.profiles import get_profile
+    from vlpcal.sim.scene import make_scene
+    from vlpcal.sim.writers import deployment_of
+
+    stop = threading.Event()
+
+    class Trickle(BaseHTTPRequestHandler):
+        def do_GET(self):
+            self.send_response(200)
+            self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=frame")
+            self.end_headers()
+            try:  # a byte every half second: never a whole frame within the read timeout
+                while not stop.is_set():
+                    self.wfile.write(b"-")
+                    self.wfile.flush()
+                    time.sleep(0.5)
+            except OSError:
+                pass
+
+        def log_message(self, *args):
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Trickle)
+    server.daemon_threads = True
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}/stream"
+    dep = deployment_of(make_scene(get_profile("paper-2024"), 0), "true")
+    deployment.save(dep, tmp_path / "dep.yaml")
+    (tmp_path / "points.csv").write_text("point_id,x,y,z\nS1,1.0,0.8,0.0\n")
+    try:
+        res = subprocess.run(
+            [sys.executable, "-m", "vlpcal", "survey", "capture", "-d", str(tmp_path / "dep.yaml"),
+             "--points", str(tmp_path / "points.csv"), "--survey", str(tmp_path / "s"), "--yes",
+             "--camera", f"C1={url}", "--camera", f"C2={url}", "--camera", f"C3={url}"],
+            capture_output=True, text=True, timeout=120)
+    finally:
+        stop.set()
+        server.shutdown()
+        server.server_close()
+    assert res.returncode == 1, (res.returncode, res.stderr)
+    assert "no camera answered (C1: " in res.stderr and "sends too slowly" in res.stderr, \
+        res.stderr
+    assert "Traceback" not in res.stderr and not (tmp_path / "s").exists()

@@ -32,7 +32,13 @@ from .datasets import read_frames_folder, read_survey_bundle, write_truth_csv
 from .deployment import Deployment, save
 from .locator import FixWriter, Locator
 from .planning import plan_site, planned_deployment, site_from_dict
-from .reports import demo_figure, plan_maps, survey_plan_figure, write_calibration
+from .reports import (
+    demo_figure,
+    plan_maps,
+    survey_plan_figure,
+    test_point_errors,
+    write_calibration,
+)
 from .sim.profiles import get_profile
 from .sim.scene import InstallErrors, make_scene
 from .sim.writers import (
@@ -51,7 +57,6 @@ from .survey import (
     plan_references,
     plan_survey,
     survey_spots,
-    test_point_errors,
 )
 from .writing import OutputSet, write_text
 

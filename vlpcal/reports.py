@@ -29,6 +29,35 @@ def save_figure(fig, path, dpi: int = 110) -> None:
         plt.close(fig)
 
 
+def test_point_errors(dep, X, uv, ids) -> dict:
+    """Held-out evidence a calibration never saw (issue 15): measured test points ``X`` (N×3)
+    and their spots ``uv`` (C×N×2, as :func:`~vlpcal.survey.survey_spots` gives them: the
+    deployment's pixel corrections applied) located with the calibrated deployment ``dep`` by
+    its :class:`~vlpcal.locator.Locator` — its fusion, region map, residual limit and its
+    judgement of what is no position in the room (``outside_room``, ``degenerate``), so that a
+    point counts as fixed exactly when ``locate`` with the same file would fix it (issue 31);
+    the errors of the fixed ones against the measured positions, whose own tape is in them.
+    Returns the report's ``test_points`` entry (``statuses``: how many points got each status
+    other than ``ok``)."""
+    from collections import Counter
+
+    from .locator import Locator
+    from .survey import error_stats
+
+    X = np.asarray(X, float)
+    uv = np.asarray(uv, float)
+    offsets = dep.pixel_offsets  # the locator applies them itself, to the spots as detected
+    raw = uv + np.array([offsets.get(c.id, (0.0, 0.0)) for c in dep.cameras])[:, None, :]
+    fixes = Locator(dep).locate_pixels(raw)
+    err = np.linalg.norm(fixes.X - X, axis=1)
+    views = np.isfinite(uv).all(axis=2).sum(axis=0)
+    status = [str(s) for s in fixes.status]
+    return {"points": len(X), **error_stats(err), "seen_by_fewer_than_two": int((views < 2).sum()),
+            "statuses": dict(Counter(s for s in status if s != "ok")),
+            "per_point": [{"point_id": p, "error_m": float(e) if np.isfinite(e) else None,
+                           "status": st} for p, e, st in zip(ids, err, status)]}
+
+
 #: a survey map's panel numbers its points up to this many
 LABELLED_POINTS = 150
 

@@ -24,6 +24,13 @@ CAPTURE_SECONDS = 180.0
 CAPTURE_SETS = 1800
 
 
+class NoCameraAnswered(UserError):
+    """No camera sent a frame (off, unreachable, or too slow): one line naming each and why,
+    exit 1 as a live ``locate`` without frames — not a mistake in the command's inputs."""
+
+    exit_code = 1
+
+
 @main.group()
 def survey():
     """Survey calibration: cameras (and region maps) from LED measurements at known points.
@@ -362,8 +369,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     if not any(ok for ok, _ in answers.values()):
         grouper.stop()
         said = "; ".join(f"{cid}: {what}" for cid, (_, what) in answers.items())
-        raise UserError(f"no camera answered ({said}): check their power, network and the "
-                        "--camera URLs before the walk; nothing was written")
+        raise NoCameraAnswered(f"no camera answered ({said}): check their power, network and "
+                               "the --camera URLs before the walk; nothing was written")
     for cid, (ok, what) in answers.items():
         click.echo(f"camera {cid}: {what}" + ("" if ok else "; going on without it"),
                    err=True)
@@ -748,18 +755,18 @@ def _report_test_points(result, test) -> None:
     """Fix the test points with the calibrated cameras: print and keep for the report."""
     if test is None:
         return
-    from ..survey import test_point_errors
+    from ..reports import test_point_errors
     from ..survey.calibration import format_length
 
     ids, X, uv = test
     result.test_points = tp = test_point_errors(result.deployment, X, uv, ids)
     fixed = round(tp["fixed"] * tp["points"])
-    few = tp["seen_by_fewer_than_two"]
-    why = []
-    if few:
-        why.append(f"{few} seen by fewer than two cameras")
-    if tp["points"] - fixed - few > 0:
-        why.append(f"{tp['points'] - fixed - few} whose spots no camera pair agreed on")
+    said = {"no_spot": "seen by no camera", "one_camera": "seen by one camera only",
+            "inconsistent": "whose spots no camera pair agreed on",
+            "degenerate": "whose rays barely meet",
+            "outside_room": "that locate would refuse as outside_room (the fix beyond the "
+                            "room by more than its predicted error)"}
+    why = [f"{n} {said.get(status, status)}" for status, n in tp["statuses"].items()]
     unfixed = f" ({'; '.join(why)})" if why else ""
     if not fixed:
         click.echo(f"\ntest points: none of {tp['points']} was fixed{unfixed}")
@@ -873,6 +880,7 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                    f"{loo.max() * 1000:.1f} mm over {len(loo)} of them ({own})")
     else:
         click.echo(f"\n{refs}: too few to leave one out (the rest must still fix the room)")
+    _print_suspects(cal.suspects, bundle.root / "points.csv", held_out=False)
     click.echo(f"your {n_ref} "
                + ("marks" if marks_only else "reference points and marks" if marks else
                   "reference points")
@@ -1053,6 +1061,17 @@ def _print_calibration(result, folds: int) -> None:
                    "from its record the calibrated cameras put the LED):")
         for pid, off in result.mismeasured:
             click.echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
+    _print_suspects(result.suspects, "points.csv", held_out=True)
+
+
+def _print_suspects(suspects, points, held_out: bool) -> None:
+    """A warning per survey point whose left-out (or held-out) error stands far beyond the
+    others' (:mod:`vlpcal.survey.suspects`), with what leaving it out gives."""
+    from ..survey.suspects import suspect_words
+
+    for s in suspects:
+        click.echo(f"warning: {suspect_words(s, held_out)} Check it and correct it in {points} "
+                   "(or delete its line), then calibrate again.")
 
 
 def _check_wand_fits(wand, dep, to_wave: bool = False) -> None:

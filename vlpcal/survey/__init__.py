@@ -32,7 +32,6 @@ from .pipeline import (
     SurveyResult,
     calibrate_free_survey,
     calibrate_survey,
-    test_point_errors,
 )
 from .plan import (
     MIN_POINTS_PLANNED,
@@ -52,6 +51,6 @@ __all__ = [
     "fit_camera", "fold_of", "held_out", "learn_region_map", "lens_params", "lens_support",
     "plan_survey", "plan_references", "free_route", "FreeRoute", "refine_jointly", "region_cell",
     "survey_spots",
-    "free_spots", "test_point_errors", "wand_spots", "WandSpots",
+    "free_spots", "wand_spots", "WandSpots",
     "calibrate_free_survey", "FreeSurveyResult",
 ]

@@ -26,6 +26,7 @@ from .calibration import estimate_precision, format_length, refine_jointly
 from .datum import check_datum, datum_floor, is_mark, references_named, unfixed_motions
 from .errors import SurveyError
 from .lens import LENS_MODELS
+from .suspects import far_beyond, suspects_of
 
 #: free sets two cameras must share to count as linked (a relative pose needs five)
 MIN_SHARED = 8
@@ -38,6 +39,9 @@ MAX_FREE_SETS = 5000
 MIN_REDUNDANT = 6
 #: references left out in turn, at most (an even sample of more)
 MAX_LEFT_OUT = 24
+#: joint-fit iterations from the calibration to its refit without the references named as
+#: suspect (:mod:`.suspects`)
+WITHOUT_ITERATIONS = 15
 #: a survey whose cameras are predicted to place fixes this many times worse than its references
 #: and spots allow is weak (the free LED cannot fix the lens across pair overlaps alone)
 WEAK_FACTOR = 2.0
@@ -157,6 +161,10 @@ class FreeCalibration:
     room: list | None = None
     #: the frame is the marks' (a reference has an empty cell), not the plan's
     in_marks_frame: bool = False
+    #: references whose left-out residual stands far beyond the others'
+    #: (:class:`~.suspects.Suspect`, with what the survey gives without them)
+    suspects: list = field(default_factory=list)
+    reference_ids: list = field(default_factory=list)  #: as given, one per reference
 
     @property
     def weakly_fixed(self) -> bool:
@@ -172,8 +180,13 @@ class FreeCalibration:
         """Whether the references, each left out in turn, land farther from their records
         than their own noise and the predicted error of fixes together allow, by more than
         :data:`WEAK_FACTOR` on average: the survey's own check on a prediction that cannot see
-        a lens and a pose trading off where the free LED could not tell them apart."""
-        loo = self.leave_one_out[np.isfinite(self.leave_one_out)]
+        a lens and a pose trading off where the free LED could not tell them apart. The
+        references named as suspect (:attr:`suspects`) are not counted: one reference far off
+        its record says that reference is wrong, not the cameras."""
+        named = {s.point_id for s in self.suspects}
+        ids = self.reference_ids or [str(i) for i in range(len(self.leave_one_out))]
+        mine = np.array([i not in named for i in ids], bool)
+        loo = self.leave_one_out[np.isfinite(self.leave_one_out) & mine]
         if len(loo) < 3 or not np.isfinite(self.predicted_error):
             return False
         return bool(loo.mean() > WEAK_FACTOR * self.left_out_allowed)
@@ -181,8 +194,10 @@ class FreeCalibration:
     @property
     def left_out_allowed(self) -> float:
         """m: how far a reference left out may land from its record, by its own noise (3D)
-        and the predicted error of fixes together."""
-        return float(np.hypot(np.sqrt(3) * self.point_sigma, self.predicted_error))
+        and the predicted error of fixes together (its noise alone where nothing predicts
+        the fixes, as with a wand)."""
+        predicted = self.predicted_error if np.isfinite(self.predicted_error) else 0.0
+        return float(np.hypot(np.sqrt(3) * self.point_sigma, predicted))
 
 
 def _linkage(camera_ids, seen) -> None:
@@ -726,28 +741,39 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
                           "names are swapped for a camera; nothing was written")
     # each reference left out: its prior removed (its spots kept), where the rest put it —
     # when the rest still fix the frame; of many, an even sample (each costs a joint fit)
-    loo = np.full(N, np.nan)
     base = prior(s_x)
     left_out = np.unique(np.linspace(0, N - 1, min(N, MAX_LEFT_OUT)).round().astype(int))
     if len(left_out) < N:
         notes.append(f"{len(left_out)} of the {N} references left out in turn (an even "
                      "sample: each costs a joint fit)")
-    for i in left_out:
-        tick()
-        rest = used_r.copy()
-        rest[i] = False
-        if keep[:, i].sum() < (1 if free_height is not None else 2) or unfixed_motions(
-                adj[:N][rest], measured[rest], free_height is not None, wand is not None,
-                scale):
-            continue
-        sig = base.copy()
-        sig[i] = np.inf
-        _, moved = refine_jointly(cams, np.vstack([X0[:i], adj[i:i + 1], X0[i + 1:N],
-                                                   adj[N:]]), obs, point_sigma=sig,
-                                  pixel_sigma=s_px, models=models, iterations=6,
-                                  lengths=lengths_of(keep), aspect=aspect)
-        off = np.where(measured[i], moved[i] - X0[i], 0.0)
-        loo[i] = float(np.linalg.norm(off))
+
+    def leave_each_out(cams_, adj_, out_, count=True):
+        """Per reference of ``left_out``: how far from its record the fit (from ``cams_``,
+        ``adj_``) puts it without its prior (m; NaN where the rest would not fix the room),
+        the references ``out_`` (N bools) left out all along (their priors removed)."""
+        loo_ = np.full(N, np.nan)
+        start = np.where(out_[:, None], adj_[:N], X0)
+        for i in left_out:
+            if count:
+                tick()
+            rest = used_r & ~out_
+            rest[i] = False
+            if out_[i] or keep[:, i].sum() < (1 if free_height is not None else 2) \
+                    or unfixed_motions(adj_[:N][rest], measured[rest], free_height is not None,
+                                       wand is not None, scale):
+                continue
+            sig = base.copy()
+            sig[:N][out_] = np.inf
+            sig[i] = np.inf
+            _, moved = refine_jointly(cams_, np.vstack([start[:i], adj_[i:i + 1],
+                                                        start[i + 1:N], adj_[N:]]), obs,
+                                      point_sigma=sig, pixel_sigma=s_px, models=models,
+                                      iterations=6, lengths=lengths_of(keep), aspect=aspect)
+            off = np.where(measured[i], moved[i] - X0[i], 0.0)
+            loo_[i] = float(np.linalg.norm(off))
+        return loo_
+
+    loo = leave_each_out(cams, adj, np.zeros(N, bool))
     free_xyz = np.full((pts_free.shape[1], 3), np.nan)
     free_xyz[free_idx] = adj[N:]
     spread = {}
@@ -781,11 +807,32 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
             if kept:
                 choice.reason = f"kept as in the deployment, as {kept}"
             choices.append(choice)
-    return FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
-                           estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum())
-                           // per_set, rejected, spread, loo, floor, dropped, notes,
-                           assumed, predicted, exact, wand, wand_error, pts_free, marks_only,
-                           room, in_marks_frame)
+    cal = FreeCalibration(cams, models, choices, free_xyz, adj[:N], float(s_x),
+                          estimated, float(s_px), int((keep[:, N:].sum(axis=0) >= 1).sum())
+                          // per_set, rejected, spread, loo, floor, dropped, notes,
+                          assumed, predicted, exact, wand, wand_error, pts_free, marks_only,
+                          room, in_marks_frame, reference_ids=[str(i) for i in ids])
+    # a reference whose left-out residual stands far beyond the others': named, with what the
+    # survey gives without it (refitted without its prior, the others left out in turn again)
+    named, limit = far_beyond(loo, cal.left_out_allowed)
+    if named.any():
+        with_ = without = moved = float("nan")
+        if not unfixed_motions(adj[:N][used_r & ~named], measured[used_r & ~named],
+                               free_height is not None, wand is not None, scale):
+            sig = base.copy()
+            sig[:N][named] = np.inf
+            cams_w, adj_w = refine_jointly(
+                cams, np.vstack([np.where(named[:, None], adj[:N], X0), adj[N:]]), obs,
+                point_sigma=sig, pixel_sigma=s_px, models=models, iterations=WITHOUT_ITERATIONS,
+                lengths=lengths_of(keep), aspect=aspect)
+            loo_w = leave_each_out(cams_w, adj_w, named, count=False)
+            both = np.isfinite(loo) & np.isfinite(loo_w) & ~named
+            if both.any():
+                with_, without = float(loo[both].mean()), float(loo_w[both].mean())
+            moved = max(float(np.linalg.norm(np.subtract(a.center, b.center)))
+                        for a, b in zip(cams, cams_w))
+        cal.suspects = suspects_of(ids, loo, named, limit, with_, without, moved)
+    return cal
 
 
 def _wrong_lengths(adj, pair_i, keep, wand, wand_sigma) -> np.ndarray:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .calibration import calibrate
+from .calibration import SurveyError, calibrate
 from .held_out import held_out
 from .regions import learn_region_map
 
@@ -50,10 +50,12 @@ class SurveyResult:
     precision: dict = field(default_factory=dict)  #: point_sigma_m, estimated, pixel_sigma_px
     lens: list = field(default_factory=list)  #: per camera, the lens decision in words
     folds: int = 5  #: of the held-out check
-    test_points: dict | None = None  #: :func:`test_point_errors`, when test points were given
+    test_points: dict | None = None  #: :func:`vlpcal.reports.test_point_errors`, when given
     #: the held-out 3D figures behind the lens models, beside plain OpenCV's
     #: (:class:`~.lens_decision.LensDecision`; None when the lens was forced as "pose")
     decision: object = None
+    #: points whose held-out error stands far beyond the others' (:class:`~.suspects.Suspect`)
+    suspects: list = field(default_factory=list)
 
     def report(self, notes=()) -> dict:
         out = {"held_out_m": self.stats, "folds": self.folds, "cameras": self.cameras,
@@ -62,6 +64,7 @@ class SurveyResult:
                "lens_decision": None if self.decision is None else decision_report(
                    self.decision),
                "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
+               "suspects": [s.to_dict() for s in self.suspects],
                "notes": list(notes)}
         if self.test_points is not None:
             out["test_points"] = self.test_points
@@ -104,6 +107,7 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
     best = min(FUSION_OF, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
                else np.inf)
+    suspects = _suspect_points(cams, X, uv, ids, dep, cal, folds, per_point[best], best, limit)
     extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
     extra["fusion"] = {**extra.get("fusion", {}), "method": FUSION_OF[best],
                        "max_residual": limit, "region_map": rmap.to_dict()}
@@ -137,7 +141,47 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
                             extra)
     return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
-                        np.asarray(X, float), precision, words, folds, decision=cal.decision)
+                        np.asarray(X, float), precision, words, folds, decision=cal.decision,
+                        suspects=suspects)
+
+
+def _suspect_points(nominal, X, uv, ids, dep, cal, folds, errors, label, limit) -> list:
+    """The survey points whose held-out error (``errors``, m: each located by cameras
+    calibrated without it, with the fusion ``label``) stands far beyond the others'
+    (:func:`~.suspects.far_beyond`, the points' own noise in 3D the floor) and whose record
+    two or more of the cameras that saw it reject (a wrong record is wrong in every view; a
+    point in a camera's corner that the rest of the survey does not reach, or one camera's
+    wrong spot, is far off held out too, but only that camera disagrees: on the simulated
+    cheap-wide installs, seeds 0–4, 1–5 such points a survey stood 6–180 × beyond the others,
+    none rejected by two cameras). With the others' held-out mean with them and with the
+    k-fold check run again without them."""
+    from .suspects import far_beyond, suspects_of
+
+    errors = np.asarray(errors, float)
+    rejected = {}
+    for fit in cal.fits:
+        for p in fit.outliers:
+            rejected[p] = rejected.get(p, 0) + 1
+    named, beyond = far_beyond(errors, np.sqrt(3) * cal.point_sigma)
+    named &= np.array([rejected.get(p, 0) >= 2 for p in ids], bool)
+    if not named.any():
+        return []
+    keep = np.flatnonzero(~named)
+    again: dict = {}
+    X, uv = np.asarray(X, float), np.asarray(uv, float)
+    try:
+        held_out(nominal, X[keep], uv[:, keep], [ids[i] for i in keep], dep.room, cal.models,
+                 folds, cal.point_sigma, per_point=again, pair_method=dep.pair_method,
+                 max_residual=limit, nominal_max_residual=dep.max_residual,
+                 starts=cal.cameras, pixel_sigma=cal.pixel_sigma)
+        without = np.full(len(errors), np.nan)
+        without[keep] = again[label]
+    except SurveyError:  # the rest too few for the check
+        without = np.full(len(errors), np.nan)
+    both = np.isfinite(errors) & np.isfinite(without) & ~named
+    with_, out = ((float(errors[both].mean()), float(without[both].mean())) if both.any()
+                  else (float("nan"),) * 2)
+    return suspects_of(ids, errors, named, beyond, with_, out)
 
 
 def decision_report(decision) -> dict:
@@ -167,7 +211,7 @@ class FreeSurveyResult:
     free_sets: int  #: in the bundle
     free_height: float | None = None
     fusion: str = "robust"
-    test_points: dict | None = None  #: :func:`test_point_errors`, when test points were given
+    test_points: dict | None = None  #: :func:`vlpcal.reports.test_point_errors`, when given
     #: the calibrated cameras' size against the plan's: their heights over the floor over the
     #: plan's (:func:`_heights_ratio`; a hand-hung install: within a few per cent of 1)
     plan_scale: float = 1.0
@@ -202,6 +246,7 @@ class FreeSurveyResult:
                 "exact_cameras_error_m": _finite(cal.exact_error),
                 "weakly_fixed": cal.weakly_fixed,
                 "references_disagree": cal.references_disagree,
+                "suspects": [s.to_dict() for s in cal.suspects],
                 "cameras": self.cameras, "lens": self.lens,
                 "fusion": self.fusion,
                 "precision": {"point_sigma_m": cal.point_sigma,
@@ -304,21 +349,3 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
     return FreeSurveyResult(calibrated, cal, rows, words, list(ids), np.asarray(X, float),
                             n_sets, free_height,
                             plan_scale=_heights_ratio(cams, cal.cameras))
-
-
-def test_point_errors(dep, X, uv, ids) -> dict:
-    """Held-out evidence a calibration never saw (issue 15): measured test points ``X`` (N×3)
-    and their spots ``uv`` (C×N×2) fixed with the calibrated deployment ``dep`` as its
-    locator would (its fusion and residual limit); the errors against the measured positions,
-    whose own tape is in them. Returns the report's ``test_points`` entry."""
-    from ..fusion import fuse
-    from .held_out import error_stats
-
-    X = np.asarray(X, float)
-    fused = fuse(dep.cameras, uv, dep.fusion if dep.fusion in ("all", "robust") else "robust",
-                 max_residual=dep.max_residual)
-    err = np.linalg.norm(fused.X - X, axis=1)
-    views = np.isfinite(np.asarray(uv, float)).all(axis=2).sum(axis=0)
-    return {"points": len(X), **error_stats(err), "seen_by_fewer_than_two": int((views < 2).sum()),
-            "per_point": [{"point_id": p, "error_m": float(e) if np.isfinite(e) else None}
-                          for p, e in zip(ids, err)]}
