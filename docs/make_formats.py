@@ -62,13 +62,34 @@ def _rows(node: dict, defs: dict, path: str, required: bool, out: list) -> None:
               out)
 
 
+def _limits() -> dict:
+    """The input limits, from the constants vlpcal checks them by (so the two cannot drift)."""
+    sys.path.insert(0, str(ROOT))
+    from vlpcal import datasets, deployment, reading
+
+    n = lambda v: f"{v:,}".replace(",", " ")  # noqa: E731  (10 000, as the docs write it)
+    return {"deployment_mb": n(deployment.MAX_DEPLOYMENT_BYTES >> 20),
+            "leds": n(deployment.MAX_LEDS), "zones": n(deployment.MAX_ZONES),
+            "zone_points": n(deployment.MAX_ZONE_POINTS),
+            "zone_slack": n(round(1 / deployment.ZONE_SLACK)),
+            "yaml_mb": n(reading.MAX_BYTES >> 20), "yaml_nodes": n(reading.MAX_NODES),
+            "yaml_depth": n(reading.MAX_DEPTH), "csv_mb": n(datasets.MAX_CSV_BYTES >> 20),
+            "points": n(datasets.MAX_POINTS), "observations": n(datasets.MAX_OBSERVATIONS),
+            "free_spots": n(datasets.MAX_FREE_SPOTS), "times": n(datasets.MAX_TIMES_FRAMES),
+            "frame_mb": n(datasets.MAX_FRAME_BYTES >> 20), "burst": n(datasets.MAX_BURST),
+            "burst_mb": n(datasets.MAX_BURST_BYTES >> 20)}
+
+
 def render() -> str:
     schema = json.loads(SCHEMA.read_text())
     rows: list[str] = []
     _rows(schema, schema["$defs"], "", True, rows)
     table = "\n".join(["| key | type | required | meaning |", "|---|---|---|---|", *rows])
-    return TEMPLATE.replace("{deployment_table}", table).replace(
+    text = TEMPLATE.replace("{deployment_table}", table).replace(
         "{schema_description}", schema["description"])
+    for key, value in _limits().items():
+        text = text.replace(f"{{{key}}}", value)
+    return text
 
 
 TEMPLATE = """# vlpcal file formats
@@ -94,6 +115,16 @@ An unknown key, a missing key, a wrong shape or a non-finite number is refused w
 naming the file, the key path (`cameras[2].fx`) and what was expected. Writes are atomic. The
 JSON Schema (`vlpcal/schemas/deployment.schema.json`) can be given to an editor for completion
 and checking as you type.
+
+The `zones:` tile the room, so that every fix in it is one zone's to publish: each zone lies
+over part of `site.room`, no two overlap (zones meeting along a border are fine, and a camera
+near a border is in both zones' `cameras`), and together they cover the room. A zone outside
+the room, two zones overlapping or a part of the room in no zone is refused in one line naming
+the zones and where; a sliver up to 1/{zone_slack} of the room's larger side wide (coordinates
+rounded) is neither an overlap nor a gap. A zone may reach past the walls: its locator then
+also publishes the fixes just beyond them (a fix is kept up to five of its predicted errors
+outside the room); a fix in no zone's polygon — beyond the walls past every zone, on a border
+itself, in such a sliver — is published by none.
 
 ## Site file (`format: vlpcal-site`, `version: 1`)
 
@@ -250,6 +281,25 @@ in turn, with `cameras_moved_m`, the largest camera move without it), `datum_flo
 `quarter_sightings`, 2 × 2 [row][column], moved, turned and the lens), `lens`, `precision`
 and `notes`.
 
+## Limits
+
+Every input has a limit, checked before the work it would cost: a file past its size or its
+rows is refused in well under a second, reading a few megabytes, with one line naming the file
+and the limit (a CSV file's lines are counted before any is parsed); a deployment's blocks are
+judged once its YAML, at most 1 MB, is read (a few seconds at most).
+
+| input | at most |
+|---|---|
+| deployment file | {deployment_mb} MB; {leds} LEDs in `leds:`, {zones} zones of {zone_points} points each in `zones:` |
+| any other YAML file (site, import base) | {yaml_mb} MB, {yaml_nodes} values, {yaml_depth} levels of nesting |
+| any CSV file read | {csv_mb} MB, and the rows below |
+| `points.csv` (a survey's, `survey plan`'s) | {points} points |
+| `observations.csv`, `locate --observations` | {observations} spots |
+| `free/observations.csv` | {free_spots} spots |
+| `times.csv` (asynchronous frames) | {times} frames |
+| a frame | {frame_mb} MB |
+| a burst folder | {burst} frames, {burst_mb} MB |
+
 ## Interchange
 
 - **aniposelib / anipose TOML** (`vlpcal export --to anipose`, `vlpcal import --cameras
@@ -262,7 +312,9 @@ and `notes`.
 - **OpenCV FileStorage YAML** (`vlpcal export --to opencv`): `units`, `convention`,
   `camera_count` and a `cameras` sequence of maps with `id`, `image_width`, `image_height`,
   `camera_matrix`, `distortion_coefficients`, `rvec`, `tvec` and `position` (metres); read
-  back with `cv::FileStorage` (or `vlpcal import --cameras x.yaml`).
+  back with `cv::FileStorage` (or `vlpcal import --cameras x.yaml`). Each `id` is written
+  quoted: FileStorage reads an unquoted `true` or `false` as a number and `null` as nothing, so
+  an import refuses those unquoted, and keeps an unquoted number's digits as written (`01`).
 """
 
 

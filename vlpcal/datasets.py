@@ -17,10 +17,12 @@ the row or item, and what was expected.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import re
 import shutil
+import stat
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,8 +64,6 @@ def read_frame(path, missing=b""):
     regular file (a FIFO would block the reader forever, a link to ``/dev/zero`` never end),
     is larger than :data:`MAX_FRAME_BYTES` or cannot be read; ``missing`` when it is not
     there."""
-    import stat
-
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except FileNotFoundError:
@@ -100,19 +100,70 @@ def _finite(text: str, where: str) -> float:
     return value
 
 
-def _read_csv(path: Path, columns: tuple):
+#: bytes: a CSV file any reader takes is at most this large (a million rows or so)
+MAX_CSV_BYTES = 32 << 20
+#: an asynchronous folder's ``times.csv`` lists at most this many frames (an hour of four
+#: cameras at 30 fps is 432 000)
+MAX_TIMES_FRAMES = 500_000
+#: a free survey's ``free/observations.csv`` holds at most this many spots (survey capture
+#: --free stops at 100 000 sets; a calibration uses at most 5000 of them)
+MAX_FREE_SPOTS = 800_000
+#: a ``frame_id,camera_id,u,v`` (or a bundle's ``point_id,…``) file holds at most this many
+#: spots (an hour of four cameras at 30 fps is 432 000)
+MAX_OBSERVATIONS = 500_000
+#: a ``points.csv`` holds at most this many points (survey plan plans at most 1500; a tape
+#: survey measures tens to hundreds)
+MAX_POINTS = 10_000
+
+
+def _counted(f, path: Path, most: int, noun: str, why: str) -> None:
+    """Refuse an open regular file (binary) of more than ``most`` lines after its header:
+    its newlines counted in blocks of 1 MB before anything is parsed, so a file over the cap
+    costs milliseconds and a megabyte whatever it holds. Leaves ``f`` at its start."""
+    lines, last = 0, b"\n"
+    while block := f.read(1 << 20):
+        lines += block.count(b"\n")
+        last = block[-1:]
+        if lines > most + 1:
+            break
+    lines += last != b"\n"  # a last line without its newline
+    if lines - 1 > most:
+        raise DatasetError(f"{path}: more than {most} {noun} ({why})")
+    f.seek(0)
+
+
+def _read_csv(path: Path, columns: tuple, most: int, noun: str, why: str):
     """The rows of a CSV file with ``columns`` (dicts), read one at a time (a file of a
-    million rows is never held as a million dicts)."""
+    million rows is never held as a million dicts), the file first checked to be a regular
+    file (a FIFO would wait for a writer forever) of at most :data:`MAX_CSV_BYTES` and
+    ``most`` rows (``noun``: what a row is; ``why``: the cap's reason, for the message)."""
     try:
-        f = open(path, newline="", encoding="utf-8-sig")  # -sig: Excel's BOM
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as e:
         raise DatasetError(f"{path}: cannot read ({e.strerror})") from None
-    with f:
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise DatasetError(f"{path}: not a regular file (expected a CSV file of {noun})")
+        if st.st_size > MAX_CSV_BYTES:
+            raise DatasetError(f"{path}: larger than {MAX_CSV_BYTES >> 20} MB ({why})")
+        raw = os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+    with raw:
+        try:
+            _counted(raw, path, most, noun, why)
+        except OSError as e:
+            raise DatasetError(f"{path}: cannot read ({e.strerror})") from None
+        f = io.TextIOWrapper(raw, encoding="utf-8-sig", newline="")  # -sig: Excel's BOM
         try:
             reader = csv.DictReader(f)
             header = [h.strip() for h in (reader.fieldnames or [])]
         except (csv.Error, UnicodeDecodeError) as e:
             raise DatasetError(f"{path}: not a readable CSV ({e})") from None
+        except OSError as e:
+            raise DatasetError(f"{path}: cannot read ({e.strerror})") from None
         reader.fieldnames = header
         missing = [c for c in columns if c not in (header or [])]
         if missing:
@@ -301,7 +352,9 @@ def read_points(path, allow_empty: bool = False, unmeasured: bool = False
     coordinate was not measured (NaN; a frame mark such as ``X,,0,0``, DESIGN.md)."""
     path = Path(path)
     ids, xyz, seen = [], [], set()
-    for n, row in enumerate(_read_csv(path, POINTS_COLUMNS), start=2):
+    rows = _read_csv(path, POINTS_COLUMNS, MAX_POINTS, "points",
+                     "a survey measures tens to hundreds; a survey's plan has at most 1500")
+    for n, row in enumerate(rows, start=2):
         where = f"{path} line {n}"
         pid = _check_id((row["point_id"] or "").strip(), f"{where} point_id")
         if pid in seen:
@@ -394,10 +447,6 @@ def _read_free(free: Path, bundle: SurveyBundle) -> None:
     if opath.is_file():
         if bundle.free_frames:
             raise DatasetError(f"{free}: has both frames/ and observations.csv (expected one)")
-        if opath.stat().st_size > MAX_FREE_BYTES:
-            raise DatasetError(f"{opath}: larger than {MAX_FREE_BYTES >> 20} MB (expected a "
-                               "free survey's spots, set_id,camera_id,u,v: hours of motion fit "
-                               "in less; a calibration uses at most 5000 sets)")
         bundle.free_observations, order = read_observations(opath, "set_id", several=True)
         ids.update(order)
     if not ids:
@@ -408,7 +457,8 @@ def _read_free(free: Path, bundle: SurveyBundle) -> None:
 
 def read_observations(path, id_column: str = "frame_id", several: bool = False
                       ) -> tuple[dict, list[str]]:
-    """Spots reported by the cameras: ``<id_column>,camera_id,u,v`` (px).
+    """Spots reported by the cameras: ``<id_column>,camera_id,u,v`` (px), at most
+    :data:`MAX_OBSERVATIONS` of them (a free survey's, ``several``: :data:`MAX_FREE_SPOTS`).
 
     Returns ``{(id, camera_id): (u, v)}`` and the ids in order of first appearance. With
     ``several`` (a wand's two LEDs), a camera may report two spots of one id, and an optional
@@ -416,10 +466,16 @@ def read_observations(path, id_column: str = "frame_id", several: bool = False
     """
     path = Path(path)
     out, order, seen = {}, [], set()
-    for n, row in enumerate(_read_csv(path, (id_column, *OBSERVATION_COLUMNS)), start=2):
+    most, why = ((MAX_FREE_SPOTS, "hours of motion fit in less: a capture stops at 100 000 "
+                  "sets, a calibration uses at most 5000") if several else
+                 (MAX_OBSERVATIONS, "over an hour of four cameras at 30 fps: split the file"))
+    names: dict = {}  # each id's text once: a million rows repeat a few thousand ids
+    rows = _read_csv(path, (id_column, *OBSERVATION_COLUMNS), most, "spots", why)
+    for n, row in enumerate(rows, start=2):
         where = f"{path} line {n}"
         key = _check_id((row[id_column] or "").strip(), f"{where} {id_column}")
         cid = _check_id((row["camera_id"] or "").strip(), f"{where} camera_id")
+        key, cid = names.setdefault(key, key), names.setdefault(cid, cid)
         uv = (_finite(row["u"], f"{where} u"), _finite(row["v"], f"{where} v"))
         if several:
             led = (row.get("led") or "").strip() or None
@@ -507,8 +563,6 @@ def read_frames_folder(root) -> FramesFolder:
     return FramesFolder(root, sorted(ids, key=order), sorted(cams, key=order), files)
 
 
-#: an asynchronous folder's times.csv is read whole: at most this large
-MAX_TIMES_BYTES = 32 << 20
 #: s: capture times are seconds since a camera's boot or since 1970, far less than this
 MAX_CAPTURE_TIME = 1e10
 
@@ -569,13 +623,13 @@ def read_async_frames(root) -> AsyncFrames:
                 "goes to vlpcal locate --frames" if any(root.glob("*/*.jpg")) else "")
         raise DatasetError(f"{root}: no times.csv (expected <camera_id>/<frame_no>.jpg and "
                            f"times.csv with camera_id,frame_no,t){hint}")
-    if times.stat().st_size > MAX_TIMES_BYTES:
-        raise DatasetError(f"{times}: larger than {MAX_TIMES_BYTES >> 20} MB (over a million "
-                           "frames: hours of four cameras at 30 fps): split the recording")
-    events, seen = [], set()
-    for n, row in enumerate(_read_csv(times, ("camera_id", "frame_no", "t")), start=2):
+    events, seen, names = [], set(), {}
+    rows = _read_csv(times, ("camera_id", "frame_no", "t"), MAX_TIMES_FRAMES, "frames",
+                     "over an hour of four cameras at 30 fps: split the recording")
+    for n, row in enumerate(rows, start=2):
         where = f"{times} line {n}"
         cid = _check_id((row["camera_id"] or "").strip(), f"{where} camera_id")
+        cid = names.setdefault(cid, cid)  # each camera's id once, not once a frame
         no = _check_id((row["frame_no"] or "").strip(), f"{where} frame_no")
         if (cid, no) in seen:
             raise DatasetError(f"{where}: camera {cid!r} frame {no!r} is listed twice")
@@ -719,11 +773,6 @@ class SurveyAppender:
             os.fsync(f.fileno())
 
 
-#: a free survey's observations file is at most this large: ~800 000 spots, hours of motion
-#: (survey capture --free stops at 100 000 sets; a calibration uses at most 5000)
-MAX_FREE_BYTES = 32 << 20
-
-
 class FreeAppender:
     """A free survey's spots written moment by moment (issue 15): ``free/observations.csv``
     (``set_id,camera_id,u,v``), append-only, each set's lines flushed to disk before the next;
@@ -733,8 +782,6 @@ class FreeAppender:
     COLUMNS = ("set_id", *OBSERVATION_COLUMNS)
 
     def __init__(self, root):
-        import stat
-
         self.free = Path(root) / "free"
         self.path = self.free / "observations.csv"
         if self.free.exists() and not self.free.is_dir():
@@ -746,9 +793,9 @@ class FreeAppender:
         self.free.mkdir(parents=True, exist_ok=True)
         if self.path.exists() or self.path.is_symlink():
             st = os.stat(self.path) if self.path.exists() else None
-            if st is None or not stat.S_ISREG(st.st_mode) or st.st_size > MAX_FREE_BYTES:
+            if st is None or not stat.S_ISREG(st.st_mode) or st.st_size > MAX_CSV_BYTES:
                 raise DatasetError(f"{self.path}: not a regular file of at most "
-                                   f"{MAX_FREE_BYTES >> 20} MB (expected the free survey's "
+                                   f"{MAX_CSV_BYTES >> 20} MB (expected the free survey's "
                                    "spots, set_id,camera_id,u,v)")
             if st.st_size == 0:  # cut before its header: start it again
                 self.path.unlink()

@@ -356,7 +356,7 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
             if key not in OPTIONAL_BLOCKS:
                 fail(f"{key}: unknown key (expected format, version, site, cameras, or the "
                      f"optional {', '.join(OPTIONAL_BLOCKS)})")
-        _check_blocks(extra, {c.id for c in cameras})
+        _check_blocks(extra, {c.id for c in cameras}, room)
     except DeploymentError as e:
         if str(e).startswith(source):
             raise
@@ -429,8 +429,8 @@ def _choice(value, options, where: str) -> str:
     return value
 
 
-def _check_blocks(extra: dict, camera_ids: set) -> None:
-    """Check the optional blocks (see :data:`OPTIONAL_BLOCKS`)."""
+def _check_blocks(extra: dict, camera_ids: set, room: list) -> None:
+    """Check the optional blocks (see :data:`OPTIONAL_BLOCKS`; ``room``: the site's floor)."""
     if "detector" in extra:
         det = _mapping(extra["detector"], "detector")
         for key, value in det.items():
@@ -485,7 +485,7 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
     if "leds" in extra:
         _check_leds(extra["leds"])
     if "zones" in extra:
-        _check_zones(extra["zones"], camera_ids)
+        _check_zones(extra["zones"], camera_ids, room)
     if "bodies" in extra:
         _check_bodies(extra["bodies"], {str(d["id"]) for d in extra.get("leds", [])})
     if "provenance" in extra:
@@ -495,6 +495,11 @@ def _check_blocks(extra: dict, camera_ids: set) -> None:
 ZONE_KEYS = ("id", "polygon", "cameras")
 #: a zone's floor polygon has at most this many points
 MAX_ZONE_POINTS = 1000
+#: zones a site may be split into (a locator process each)
+MAX_ZONES = 64
+#: zones may part, or overlap, by a sliver at most this share of the room's larger side wide
+#: (1 mm in a 10 m room: coordinates rounded); anything wider is a gap or an overlap
+ZONE_SLACK = 1e-4
 
 
 def _records(value, block: str, keys: tuple, noun: str, most: int | None = None):
@@ -524,21 +529,74 @@ def _records(value, block: str, keys: tuple, noun: str, most: int | None = None)
         yield where, d
 
 
-def _check_zones(value, camera_ids: set) -> None:
+def _check_zones(value, camera_ids: set, room: list) -> None:
     """``zones:`` a list of ``{id, polygon, cameras}``: a site split among locator processes
-    (issue 17); a camera on a border belongs to both zones."""
-    for where, z in _records(value, "zones", ZONE_KEYS, "zone"):
+    (issue 17); a camera on a border belongs to both zones. The zones tile the room: each
+    over part of its floor, none overlapping another, together covering it (up to
+    :data:`ZONE_SLACK`), so that every fix in the room is one zone's to publish (issue 31)."""
+    ids, polygons = [], []
+    for where, z in _records(value, "zones", ZONE_KEYS, "zone", MAX_ZONES):
         if isinstance(z["polygon"], list) and len(z["polygon"]) > MAX_ZONE_POINTS:
             raise DeploymentError(f"{where}.polygon: expected at most {MAX_ZONE_POINTS} points, "
                                   f"got {len(z['polygon'])}")
-        _polygon(z["polygon"], f"{where}.polygon")
-        ids = z["cameras"]
-        if not isinstance(ids, list) or len(set(map(str, ids))) < 2:
+        polygons.append(_polygon(z["polygon"], f"{where}.polygon"))
+        ids.append(str(z["id"]))
+        cams = z["cameras"]
+        if not isinstance(cams, list) or len(set(map(str, cams))) < 2:
             raise DeploymentError(f"{where}.cameras: expected a list of at least 2 camera ids, "
-                                  f"got {shown(ids)}")
-        for cid in ids:
+                                  f"got {shown(cams)}")
+        for cid in cams:
             if str(cid) not in camera_ids:
                 raise DeploymentError(f"{where}.cameras: unknown camera {shown(cid)}")
+    _check_tiling(ids, polygons, room)
+
+
+def _check_tiling(ids: list, polygons: list, room: list) -> None:
+    """Zones ``ids`` with floor ``polygons`` (checked simple) tile the ``room``: none outside
+    it, no two overlapping, no part of it in none — each judged by whether a part wider than
+    :data:`ZONE_SLACK` of the room's size is left once every part is narrowed by it."""
+    import shapely
+
+    floor = shapely.Polygon(room)
+    zones = np.array([shapely.Polygon(p) for p in polygons], dtype=object)
+    x0, y0, x1, y1 = floor.bounds
+    slack = ZONE_SLACK * max(x1 - x0, y1 - y0)
+
+    def wide(geometry):
+        """Which geometries hold a part wider than the slack (any: a point or a line none)."""
+        return ~shapely.is_empty(shapely.buffer(geometry, -slack / 2))
+
+    def where(geometry) -> str:
+        x, y = shapely.get_coordinates(shapely.point_on_surface(geometry))[0]
+        return f"around ({x:.3g}, {y:.3g})"
+
+    inside = wide(shapely.intersection(zones, floor))
+    if not inside.all():
+        k = int(np.argmin(inside))
+        raise DeploymentError(f"zones[{k}].polygon: zone {ids[k]} lies outside site.room "
+                              "(expected a part of the room's floor: a zone there publishes "
+                              "no fix)")
+    a, b = shapely.STRtree(zones).query(zones, predicate="intersects")
+    a, b = a[a < b], b[a < b]
+    common = shapely.intersection(zones[a], zones[b])
+    over = np.flatnonzero(wide(common))
+    if len(over):
+        k = over[0]
+        area = shapely.area(common[k])
+        raise DeploymentError(f"zones: {ids[a[k]]} and {ids[b[k]]} overlap over {area:.3g} m² "
+                              f"{where(common[k])} (expected zones that meet along their "
+                              "borders at most: a fix there would be published twice)")
+    pieces = shapely.get_parts(shapely.difference(floor, shapely.union_all(zones)))
+    pieces = pieces[wide(pieces)]
+    if len(pieces):
+        gap = pieces[np.argmax(shapely.area(pieces))]
+        near = shapely.distance(zones, gap)
+        around = [ids[k] for k in np.flatnonzero(near <= max(slack, near.min()))]
+        area = float(shapely.area(pieces).sum())
+        raise DeploymentError(f"zones: {area:.3g} m² of site.room ({area / floor.area:.2%}) in "
+                              f"no zone, the most beside {' and '.join(around)} {where(gap)} "
+                              "(expected zones that cover the room: a fix there would be "
+                              "published by none)")
 
 
 BODY_KEYS = ("id", "leds")
@@ -624,15 +682,20 @@ def _check_leds(value) -> None:
         raise DeploymentError(f"leds: {wrong}")
 
 
+#: bytes: a deployment file is at most this large (a camera's line is ~250 bytes: thousands
+#: of cameras fit), checked before the YAML parser spends its ~4 s and ~120 MB a megabyte
+MAX_DEPLOYMENT_BYTES = 1 << 20
+
+
 def load(path) -> Deployment:
     """Read and check a deployment file; :class:`DeploymentError` names what is wrong (a file
-    too large, not UTF-8 YAML, with a key twice, nested too deep or full of aliases included:
-    :mod:`.reading`)."""
-    from .reading import ReadError, load_yaml
+    larger than :data:`MAX_DEPLOYMENT_BYTES`, not UTF-8 YAML, with a key twice, nested too
+    deep or full of aliases included: :mod:`.reading`)."""
+    from .reading import ReadError, load_yaml, read_text
 
-    path = Path(path)
+    path, what = Path(path), "a deployment YAML file"
     try:
-        doc = load_yaml(path, "a deployment YAML file")
+        doc = load_yaml(path, what, text=read_text(path, what, MAX_DEPLOYMENT_BYTES))
     except ReadError as e:
         raise DeploymentError(str(e)) from None
     return from_dict(doc, str(path))

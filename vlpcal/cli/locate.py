@@ -322,6 +322,11 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
     return len(ids)
 
 
+#: frame sets located at once from an observations file: the spots array and the fusion's
+#: work stay this many sets wide, however long the file
+OBSERVATION_CHUNK = 20_000
+
+
 def _locate_observations(loc, path, writer, statuses, notes) -> int:
     import numpy as np
 
@@ -333,20 +338,29 @@ def _locate_observations(loc, path, writer, statuses, notes) -> int:
         raise UserError(str(e)) from None
     index = {c: k for k, c in enumerate(loc.camera_ids)}
     frame_index = {f: n for n, f in enumerate(ids)}
-    uv = np.full((len(index), len(ids), 2), np.nan)
-    unknown = set()
-    for (fid, cid), p in obs.items():
-        if cid in index:
-            uv[index[cid], frame_index[fid]] = p
-        else:
-            unknown.add(cid)
-    _check_the_deployment_fits(loc, path, sorted({c for (_, c) in obs}), notes)
+    cams = sorted({c for (_, c) in obs})
+    _check_the_deployment_fits(loc, path, cams, notes)
+    unknown = [c for c in cams if c not in index]
     if unknown:
-        notes.append(f"ignored spots of camera(s) {', '.join(sorted(unknown))} that "
+        notes.append(f"ignored spots of camera(s) {', '.join(unknown)} that "
                      f"{loc.deployment.name} does not have")
-    fixes = loc.locate_pixels(uv, frame_ids=ids)
-    statuses.add(fixes)
-    writer.write(fixes)
+    # the spots as flat arrays in frame order, each chunk of frames filled from its slice
+    n = len(obs)
+    frame = np.fromiter((frame_index[f] for f, _ in obs), np.intp, n)
+    camera = np.fromiter((index.get(c, -1) for _, c in obs), np.intp, n)
+    spot = np.fromiter((x for p in obs.values() for x in p), float, 2 * n).reshape(n, 2)
+    del obs, frame_index
+    order = np.argsort(frame, kind="stable")
+    order = order[camera[order] >= 0]  # a camera the deployment lacks: its spots ignored
+    frame, camera, spot = frame[order], camera[order], spot[order]
+    for s in range(0, len(ids), OBSERVATION_CHUNK):
+        e = min(s + OBSERVATION_CHUNK, len(ids))
+        lo, hi = np.searchsorted(frame, (s, e))
+        uv = np.full((len(index), e - s, 2), np.nan)
+        uv[camera[lo:hi], frame[lo:hi] - s] = spot[lo:hi]
+        fixes = loc.locate_pixels(uv, frame_ids=ids[s:e])
+        statuses.add(fixes)
+        writer.write(fixes)
     return len(ids)
 
 
