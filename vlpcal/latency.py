@@ -48,24 +48,29 @@ class LatencyEstimate:
         self.applied = np.zeros(cameras)
         self._start = np.zeros(cameras)  #: s: the prior's centre
         self.windows = 0
+        self.held = False  #: held where a run before put them (:meth:`restart`)
 
     def restart(self, applied, information=None) -> None:
-        """Start again from latencies ``applied`` (s; a search of the spots, or a run before,
-        found them) known to ``information`` (none: the windows will measure them anew; what
-        windows said before, with their times off, is forgotten)."""
+        """Start again from latencies ``applied`` (s; a search of the spots found them): what
+        windows said before, with their times off, is forgotten. With ``information`` (a
+        run before measured them so): they are held — no window moves them — at the
+        uncertainty it gives."""
         self._start = np.asarray(applied, float).copy()
-        if information is None:
-            self.information[:] = 0.0
-        else:
-            self.information = np.array(information, float)
-        self.pull = self.information @ self._start
         self.value, self.applied = self._start.copy(), self._start.copy()
         self.windows = 0
+        self.held = information is not None
+        self.information = np.zeros_like(self.information) if information is None \
+            else np.array(information, float)
+        self.pull = self.information @ self._start
+        self.covariance = np.linalg.inv(self.information
+                                        + np.eye(len(self.value)) / self.prior ** 2)
 
     def add(self, cams, information, pull, placed) -> None:
         """One window's word on cameras ``cams`` (indices, C): its C×C information on their
         latencies, its pull (information × the change it wants, C), for rays placed with
-        latencies ``placed`` (C, s)."""
+        latencies ``placed`` (C, s). (Latencies held: none.)"""
+        if self.held:
+            return
         cams = np.asarray(cams)
         self.information[np.ix_(cams, cams)] += information
         self.pull[cams] += information @ placed + pull
@@ -73,6 +78,8 @@ class LatencyEstimate:
 
     def solve(self) -> None:
         """The latencies the windows so far give, relative to their cameras' middle one."""
+        if self.held:
+            return
         n = len(self.value)
         prior = 1.0 / self.prior ** 2
         cov = np.linalg.inv(self.information + np.eye(n) * prior)
@@ -120,8 +127,9 @@ SEARCH_MET, SEARCH_LEAST, SEARCH_APART = 0.8, 20, 2.0
 
 
 def pair_skew(times_a, dirs_a, times_b, dirs_b, baseline, f_b: float, gate: float,
-              period: float) -> float | None:
-    """How much later camera b's stated times run than camera a's (s), from their spots of one
+              period: float) -> tuple[float, float] | None:
+    """How much later camera b's stated times run than camera a's, and how surely (the half
+    width of the skews that meet as well; s), from their spots of one
     LED alone: at the right skew, each of a's rays (``times_a`` N, world directions ``dirs_a``
     N×3) and b's ray of the same moment (b's frames ``times_b`` M, ``dirs_b`` M×3, one spot
     each, interpolated between frames) lie in one plane with the baseline (b's centre less
@@ -162,7 +170,8 @@ def pair_skew(times_a, dirs_a, times_b, dirs_b, baseline, f_b: float, gate: floa
     j = int(np.argmax(fc))
     if fc[j] < SEARCH_LEAST or fc[j] < SEARCH_MET * fn[j] or fc[j] - rival <= 3 * np.sqrt(top):
         return None
-    return float(np.median(fine[fc >= fc[j] - np.sqrt(fc[j])]))
+    best = fine[fc >= fc[j] - np.sqrt(fc[j])]
+    return float(np.median(best)), float(0.5 * (best.max() - best.min()) + 0.05 * period)
 
 
 def camera_latencies(n: int, skews) -> np.ndarray:

@@ -50,7 +50,7 @@ from .bodies import angles, fit_pose, gives_full_pose, pose_from_points, rotatio
 from .deployment import Body, Deployment
 from .detection import detect_frame
 from .fit_watch import LEAST, FitWatch
-from .latency import PRIOR_PERIODS, LatencyEstimate, camera_latencies, pair_skew
+from .latency import APPLIED_SIGMAS, PRIOR_PERIODS, LatencyEstimate, camera_latencies, pair_skew
 
 #: the fit's window, in frame periods of the slowest camera (centred on each row's time)
 WINDOW = 4.0
@@ -114,6 +114,11 @@ SKEW_FRAMES = 150
 #: … and a verdict that the frames do not fit waits for half as many in two cameras, or for this
 #: many times the moments a verdict takes
 SKEW_WAIT = 4
+#: frames between two searches of the cameras' times while a window wants a latency past
+#: :data:`LINEAR_PERIODS` frame periods (what one window's linear word can tell)
+SEARCH_EVERY, LINEAR_PERIODS = 30, 1.0
+#: a recording's cameras' times are searched on at most this many one-spot frames a camera
+SEARCH_FRAMES = 2000
 
 #: a row whose predicted error passes this share of the room's size is ``degenerate``
 DEGENERATE_SHARE = 0.1
@@ -279,6 +284,9 @@ class Tracker:
         #: camera → its latest frames with one spot: (time, the spot's world direction)
         self._one_spot: dict = {}
         self._searched = False
+        #: a window's fit wanted a latency past its linear reach: search the times (at most
+        #: every :data:`SEARCH_EVERY` frames)
+        self._suspect, self._frames_since_search = False, 0
         self.tracks: list[_Track] = []
         self.held: list[_Track] = []  #: ended tracks whose ids wait (:data:`HOLD_SECONDS`)
         #: rigid bodies (``bodies:``): each placed from its LEDs' rays (:mod:`vlpcal.bodies`)
@@ -405,6 +413,10 @@ class Tracker:
                     ray.judged = True
         if self.codes:
             self._blink(k, t, given, near)
+        self._frames_since_search += 1
+        if self._suspect and self._frames_since_search >= SEARCH_EVERY:
+            self._frames_since_search, self._suspect = 0, False
+            self._search_times()
         if not self._lag:  # rows at once: this frame's too
             out += self._due(t)
         return out
@@ -412,35 +424,85 @@ class Tracker:
     def misfit(self):
         """Whether the frames do not fit the deployment (:meth:`FitWatch.misfit`) — unless a
         camera's times do not fit the others': the first time they seem not to, the cameras'
-        times are searched (:func:`~vlpcal.latency.pair_skew` on their latest spots) and a
-        skew found is applied, the tracks started again and the frames judged anew."""
+        times are searched (:meth:`_search_times`) and a skew found is applied, the frames
+        then judged anew."""
         misfit = self.fit.misfit()
         if misfit is None or self._searched:
             return misfit
         full = sum(len(q) >= SKEW_FRAMES // 2 for q in self._one_spot.values()) >= 2
-        if not full and self.fit.moments < SKEW_WAIT * self.fit.least:
+        waited = self.fit.moments >= SKEW_WAIT * self.fit.least
+        if not full and not waited:
             return None  # (too few spots to search the times by yet)
+        if self._frames_since_search >= SEARCH_EVERY or not waited:
+            self._frames_since_search = 0
+            if self._search_times():
+                self._searched = True
+                return None
+        if self.fit.moments < 2 * SKEW_WAIT * self.fit.least:
+            return None  # (searched in vain: again on the next frames, a while)
         self._searched = True
+        return misfit
+
+    def _search_times(self) -> bool:
+        """The cameras' latencies searched on their latest one-spot frames
+        (:func:`~vlpcal.latency.pair_skew`): when a pair's skew is not what the latencies
+        applied give it (by half a frame period or more), the latencies found are applied and
+        the tracks started again (their rays were placed at the wrong times). Whether so."""
+        if self.spots != 1:
+            return False
         skews = self._skews()
-        if not skews:
-            return misfit
-        self.latency.restart(camera_latencies(len(self.cameras), skews))
+        applied = self.latency.applied
+        if not any(abs(s - (applied[b] - applied[a])) >= max(0.5 * self.period, within)
+                   for a, b, (s, within) in skews):
+            return False
+        self.latency.restart(camera_latencies(len(self.cameras),
+                                              [(a, b, s) for a, b, (s, _) in skews]))
         self.tracks, self.held, self._pending = [], [], []
+        self._one_spot.clear()  # (and the frames judged anew: those before had times off)
         self.fit = FitWatch(self.fit.deployment, self.fit.what, least=self.fit.least)
-        self._one_spot.clear()
-        return None
+        return True
 
     def latencies(self) -> dict:
         """Camera id → how late its capture times were found to run behind the others' (s),
         for the cameras whose times are corrected."""
         return {c.id: float(v) for c, v in zip(self.cameras, self.latency.applied) if v}
 
-    def _skews(self) -> list:
-        """(a, b, how much later b's stated times run than a's) for pairs of cameras whose
-        latest one-spot frames tell it."""
+    def search_times(self, frames) -> bool:
+        """Before a recording is tracked: its cameras' latencies searched on all its one-spot
+        frames (``(time, camera id, spots K×2 px)``; :func:`~vlpcal.latency.pair_skew`) and
+        those found applied from its first frame on. Whether any was found."""
+        if self.spots != 1:  # (several LEDs: a frame with one spot may be either one's)
+            return False
+        logs: dict = {}
+        for t, cid, uvs in frames:
+            k = self._camera(cid)
+            uvs = np.asarray(uvs, float).reshape(-1, 2)
+            uvs = uvs[np.isfinite(uvs).all(axis=1)]
+            if len(uvs) == 1:
+                logs.setdefault(k, []).append((t, uvs[0]))
+        one = {}
+        for k, seen in logs.items():
+            seen = seen[::max(1, len(seen) // SEARCH_FRAMES)]  # (an even sample of a long run)
+            xy = self.cameras[k].normalise(np.array([uv for _, uv in seen]) - self._offset[k])
+            ok = np.isfinite(xy).all(axis=1)
+            one[k] = (np.array([t for t, _ in seen])[ok], np.c_[xy[ok], np.ones(ok.sum())]
+                      @ self._R[k])
+        skews = self._skews(one)
+        if not any(abs(s) >= 0.5 * self.period for _, _, (s, _) in skews):
+            return False  # (within that, the windows tell them better)
+        self.latency.restart(camera_latencies(len(self.cameras),
+                                              [(a, b, s) for a, b, (s, _) in skews]))
+        return True
+
+    def _skews(self, logs=None) -> list:
+        """(a, b, (how much later b's stated times run than a's, how surely)) for pairs of
+        cameras whose one-spot frames (``logs``: camera → times, world directions; default:
+        the latest ones) tell it."""
         gate = 2 * GATE_SIGMAS * self.pixel_sigma
-        logs = {k: (np.array([t for t, _ in q]), np.array([d for _, d in q]))
-                for k, q in self._one_spot.items() if len(q) >= 2}
+        if logs is None:  # the latest one-spot frames of each camera
+            logs = {k: (np.array([t for t, _ in q]), np.array([d for _, d in q]))
+                    for k, q in self._one_spot.items()}
+        logs = {k: v for k, v in logs.items() if len(v[0]) >= 2}
         out = []
         for a, (ta, da) in logs.items():
             for b, (tb, db) in logs.items():
@@ -1245,10 +1307,15 @@ class Tracker:
                     and self._plausible(fit, cov):
                 break
             fit = cov = None
+        timing = 0.0
+        if fit is not None:  # (a window that shares no ray with the last one that told the
+            learn = rays[0].t > tr.timed_until  # latencies tells them too)
+            timing = self._timed(rays, t, fit, cov, learn)
+            if timing is None:  # its cameras' times disagree: not placed by them
+                fit = cov = None
+            elif learn:
+                tr.timed_until = rays[-1].t
         fit_ok = fit is not None
-        if fit_ok and rays[0].t > tr.timed_until:  # a window that shares no ray with the last
-            self._time(rays, t, fit, cov)  # one that told the latencies
-            tr.timed_until = rays[-1].t
         if fit is None:  # one camera (or none that fits): the motion places it on a ray
             pos, vel, s_pos, _ = self._extrapolated(tr, t)
             if rays:
@@ -1258,9 +1325,7 @@ class Tracker:
                 d = d / np.linalg.norm(d)
                 pos = cam.center + d * float((pos - cam.center) @ d)
             fit, cov = np.r_[pos, vel, np.zeros(3)], np.eye(9) * s_pos ** 2
-        variance = np.trace(cov[:3, :3])
-        if fit_ok:
-            variance += self._timing_variance(rays, t, fit, cov)
+        variance = np.trace(cov[:3, :3]) + (timing if fit_ok else 0.0)
         sigma = float(np.sqrt(max(variance, 0.0)))
         status = "ok" if fit_ok else "one_camera"
         if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name: none
@@ -1269,21 +1334,34 @@ class Tracker:
         return TrackUpdate(t, tr.led, fit[:3].copy(), fit[3:6].copy(), sigma,
                            "+".join(self.cameras[k].id for k in cams), status)
 
-    def _time(self, rays, t0: float, fit, cov) -> None:
-        """What a window the track's fit placed says about its cameras' latencies
-        (:mod:`vlpcal.latency`): the information on them once the path is free, and the pull
-        of the residuals."""
+    def _timed(self, rays, t0: float, fit, cov, learn: bool) -> float | None:
+        """A window the fit placed, judged against the cameras' latencies
+        (:mod:`vlpcal.latency`): m², what their remaining uncertainty adds to its position's
+        variance (its fit moves with them); None when its rays want a latency past what one
+        window's linear word can tell (:data:`LINEAR_PERIODS`: its path bent to fit rays at
+        wrong times — no place, and the cameras' times are searched). ``learn``: its
+        information on the latencies (the path free) and the residuals' pull are added."""
         A, G, e, cams = self._timed_design(rays, t0, fit)
-        if len(cams) < 2:
-            return
         AG = A.T @ G
-        S = G.T @ G - AG.T @ cov @ AG  # (cov's weights were its guess's: kept ≥ 0)
-        vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
-        placed = np.array([np.mean([r.shift for r in rays if r.camera == c]) for c in cams])
-        self.latency.add(cams, (vecs * np.maximum(vals, 0.0)) @ vecs.T, G.T @ e, placed)
-        n = len(self.cameras)
-        if self.latency.windows % max(1, n // 32) == 0:  # (an n × n solve: not every window
-            self.latency.solve()  # of a large site's)
+        if len(cams) >= 2:
+            S = G.T @ G - AG.T @ cov @ AG  # (cov's weights were its guess's: kept ≥ 0)
+            vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
+            g = G.T @ e
+            keep = vals > 1e-9 * max(vals.max(), 1e-300)  # (a shift common to all: not seen)
+            along = vecs[:, keep].T @ g
+            change = vecs[:, keep] @ (along / vals[keep])
+            if np.abs(change).max(initial=0.0) > LINEAR_PERIODS * self.period \
+                    and along @ (along / vals[keep]) > APPLIED_SIGMAS ** 2:  # (and sure)
+                self._suspect = True
+                return None
+            if learn:
+                placed = np.array([np.mean([r.shift for r in rays if r.camera == c])
+                                   for c in cams])
+                self.latency.add(cams, (vecs * np.maximum(vals, 0.0)) @ vecs.T, g, placed)
+                if self.latency.windows % max(1, len(self.cameras) // 32) == 0:
+                    self.latency.solve()  # (an n × n solve: not every window of a large site's)
+        J = -(cov @ AG)[:3]
+        return float(np.einsum("ij,jk,ik->", J, self.latency.relative(cams), J))
 
     def _timed_design(self, rays, t0: float, fit):
         """A window's equations at the fit ``fit`` (9), each in its spot sigmas: on the path
@@ -1300,13 +1378,6 @@ class Tracker:
         G = np.zeros((len(eq), len(cams)))
         G[np.arange(len(eq)), col] = -np.einsum("ij,ij->i", rows, f[1] + tt[:, None] * f[2]) * w
         return A * w[:, None], G, (y - A @ fit) * w, cams
-
-    def _timing_variance(self, rays, t0: float, fit, cov) -> float:
-        """m²: what the cameras' latencies, as uncertain as they still are, add to a row's
-        position variance (its window's fit moves with them)."""
-        A, G, _, cams = self._timed_design(rays, t0, fit)
-        J = -(cov @ (A.T @ G))[:3]
-        return float(np.einsum("ij,jk,ik->", J, self.latency.relative(cams), J))
 
     def _metres_per_px(self, X, cams) -> float:
         if not cams:

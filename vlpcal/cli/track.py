@@ -226,11 +226,11 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     from collections import Counter
 
     unreadable: Counter = Counter()
-    spotted: list = []  # (time, camera, spots) of every frame: a second pass's, when needed
+    spotted: list = []  # (time, camera, spots) of every frame, tracked once all are found
 
     def track_block(block):
         """Each camera's frames of the block detected as one batch (a tenth of the cost of
-        one by one), then fed to the tracker in time order."""
+        one by one), kept in time order."""
         found_at: dict = {}
         for cid in {c for _, c, _, _ in block}:
             mine = [(no, f) for _, c, no, f in block if c == cid]
@@ -243,9 +243,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                 if w is not None and f is not None:
                     unreadable[w] += 1
         for t, cid, no, _ in block:
-            rows.extend(_published(publisher, tracker.update_spots(cid, t, found_at[(cid, no)])))
             spotted.append((t, cid, found_at[(cid, no)]))
-            check(tracker)
 
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
@@ -265,6 +263,10 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     if missing == len(folder.events):
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
+    tracker.search_times(spotted)  # the cameras' times, searched on the whole recording
+    for t, cid, uv in spotted:
+        rows.extend(_published(publisher, tracker.update_spots(cid, t, uv)))
+        check(tracker)
     rows += _published(publisher, tracker.finish())
     if tracker.latencies() and publisher is None:  # rows from the first frame at the
         tracker, rows = _retracked(tracker, spotted, check)  # times the run found
@@ -295,7 +297,7 @@ def _retracked(first, spotted, check) -> tuple:
     from ..tracking import Tracker
 
     tracker = Tracker(first.deployment, period=first.period, spots=first.spots, lag=first.lag)
-    tracker.latency.restart(first.latency.applied)
+    tracker.latency.restart(first.latency.applied, first.latency.information)
     rows = []
     for t, cid, uv in spotted:
         rows += tracker.update_spots(cid, t, uv)
