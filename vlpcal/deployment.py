@@ -21,7 +21,7 @@ from .bodies import gives_full_pose
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
 from .geometry import Camera, max_radius2
-from .reading import ID_RULE, is_id, shown
+from .reading import ID_RULE, is_id, room_slip, shown, slipped_units
 
 FORMAT, VERSION = "vlpcal-deployment", 1
 CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
@@ -314,6 +314,9 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
         height = _number(site["ceiling_height"], "site.ceiling_height", positive=True,
                          within=(0, MAX_LENGTH), unit=" m")
         room = _polygon(site["room"], "site.room")
+        slip = room_slip(float(height), room)
+        if slip:
+            fail(slip)
         keep_out = site.get("keep_out")
         keep_out = [] if keep_out is None else keep_out
         if not isinstance(keep_out, list):
@@ -341,6 +344,12 @@ def from_dict(doc, source: str = "<deployment>") -> Deployment:
                 fail(f"{where}.id: duplicate camera id {shown(cid)}")
             seen.add(cid)
             check_intrinsics(c, where)
+            z = c["position"][2] if isinstance(c["position"], list) \
+                and len(c["position"]) == 3 else None
+            if isinstance(z, (int, float)) and not isinstance(z, bool) and z > 2 * height:
+                fail(f"{where}.position[2]: {z:g} m above the floor under a {height:g} m "
+                     f"ceiling: {slipped_units(z, lambda m: 0 < m <= 1.25 * height)} (metres "
+                     "expected)")
             _near_the_room(_vector(c["position"], 3, f"{where}.position", *METRES), room,
                            height, f"{where}.position")
             rvec = _vector(c["rotation"], 3, f"{where}.rotation")

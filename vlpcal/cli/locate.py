@@ -257,7 +257,7 @@ def _check_the_deployment_fits(loc, source, camera_ids, notes, folder=None) -> N
     """The likely mistake of a wrong deployment for the frames (or spots), caught before
     any work: refused (exit 2) when most of its cameras have nothing here, or when most
     cameras' frames are not the size the deployment says; a note when a few are absent."""
-    from ..detection import jpeg_size
+    from ..detection import spread, usual_size
 
     dep, ids = loc.deployment, loc.camera_ids
     present = [c for c in ids if c in camera_ids]
@@ -279,9 +279,9 @@ def _check_the_deployment_fits(loc, source, camera_ids, notes, folder=None) -> N
     if folder is None:
         return
     wrong = []
-    for cid in present:  # each camera's first frame: its header says its size
-        fid = next(f for f in folder.frame_ids if (f, cid) in folder.files)
-        size = jpeg_size(folder.frame(fid, cid))
+    for cid in present:  # the size most of a spread of its frames' headers say
+        fids = [f for f in folder.frame_ids if (f, cid) in folder.files]
+        size = usual_size(folder.frame(f, cid) for f in spread(fids))
         cam = dep.camera(cid)
         if size is not None and size != (cam.height, cam.width):
             wrong.append(f"{cid} {size[1]}×{size[0]} (the deployment says "
