@@ -84,11 +84,11 @@ def test_a_gap_is_judged_against_the_rooms_size():
     zones = _zones(("west", _box(0, 3.0)), ("east", _box(3.005, 7.2)))
     with pytest.raises(DeploymentError, match="in no zone"):
         from_dict(Deployment("line", 2.3, ROOM, CAMS, [], zones).to_dict())
-    big = [[x * 1e4, y * 1e4] for x, y in ROOM]
-    cams = [paper_camera(f"C{k + 1}", (1.2e4 * (k + 1), 0.9e4, 2.3)) for k in range(5)]
+    big = [[x * 1e4, y * 1e4] for x, y in ROOM]  # (the scene scaled whole: ceiling too)
+    cams = [paper_camera(f"C{k + 1}", (1.2e4 * (k + 1), 0.9e4, 2.3e4)) for k in range(5)]
     zones = _zones(("west", _box(0, 3.0e4, 0, 1.8e4)), ("east", _box(3.0e4 + 5, 7.2e4, 0,
                                                                         1.8e4)))
-    from_dict(Deployment("big", 2.3, big, cams, [], zones).to_dict())
+    from_dict(Deployment("big", 2.3e4, big, cams, [], zones).to_dict())
 
 
 def test_a_site_split_in_more_zones_than_a_site_has_machines_is_refused():

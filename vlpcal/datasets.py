@@ -642,9 +642,25 @@ def read_async_frames(root) -> AsyncFrames:
         events.append((t, cid, no))
     if not events:
         raise DatasetError(f"{times}: no frames listed")
+    _check_own_times(times, events)
     events.sort(key=lambda e: (e[0], e[1]))
     order = lambda t: (natural_key(t), t)  # noqa: E731
     return AsyncFrames(root, events, sorted({c for _, c, _ in events}, key=order))
+
+
+def _check_own_times(times, events) -> None:
+    """Each camera's frames each at its own capture time: a camera whose frames share a few
+    times (all one time, a time per second) did not time them, and its frames placed at those
+    times would be placed wrongly."""
+    by_camera: dict = {}
+    for t, cid, _ in events:
+        by_camera.setdefault(cid, []).append(t)
+    for cid, ts in by_camera.items():
+        distinct = len(np.unique(ts))
+        if len(ts) > 2 and distinct <= len(ts) / 2:
+            raise DatasetError(f"{times}: camera {cid}'s {len(ts)} frames have {distinct} "
+                               f"capture time{'s' if distinct > 1 else ''} between them "
+                               "(expected each frame's own capture time, s)")
 
 
 def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:

@@ -119,6 +119,8 @@ SKEW_WAIT = 4
 SEARCH_EVERY, LINEAR_PERIODS = 30, 1.0
 #: a recording's cameras' times are searched on at most this many one-spot frames a camera
 SEARCH_FRAMES = 2000
+#: searches of a run that may apply latencies: skews that keep changing are no latency
+SEARCH_RESTARTS = 2
 
 #: a row whose predicted error passes this share of the room's size is ``degenerate``
 DEGENERATE_SHARE = 0.1
@@ -227,6 +229,24 @@ class LayoutMisfit:
                 "calibrated as they hang? (no rows of it while they disagree)")
 
 
+@dataclass(frozen=True)
+class TimesDrift:
+    """Two cameras whose capture times drift apart along a recording: (time, how much later
+    ``second``'s times run than ``first``'s), s, on stretches of it."""
+
+    first: str
+    second: str
+    skews: tuple[tuple[float, float], ...]
+
+    def message(self) -> str:
+        said = ", ".join(f"{s:+.3f} s at {t:.0f} s" for t, s in self.skews[:6])
+        return (f"cameras {self.first} and {self.second}: their capture times drift apart "
+                f"along the recording ({self.second} against {self.first}: {said}), so no "
+                "frame of theirs is placed right: are the times each frame's capture time "
+                "(not its number over the frame rate: dropped frames shift those), and the "
+                "cameras' clocks steady?")
+
+
 @dataclass(eq=False)
 class _BodyState:
     body: Body
@@ -287,6 +307,7 @@ class Tracker:
         #: a window's fit wanted a latency past its linear reach: search the times (at most
         #: every :data:`SEARCH_EVERY` frames)
         self._suspect, self._frames_since_search = False, 0
+        self._restarts = 0  #: searches that applied latencies (:data:`SEARCH_RESTARTS` at most)
         self.tracks: list[_Track] = []
         self.held: list[_Track] = []  #: ended tracks whose ids wait (:data:`HOLD_SECONDS`)
         #: rigid bodies (``bodies:``): each placed from its LEDs' rays (:mod:`vlpcal.bodies`)
@@ -448,8 +469,8 @@ class Tracker:
         (:func:`~vlpcal.latency.pair_skew`): when a pair's skew is not what the latencies
         applied give it (by half a frame period or more), the latencies found are applied and
         the tracks started again (their rays were placed at the wrong times). Whether so."""
-        if self.spots != 1:
-            return False
+        if self.spots != 1 or self._restarts >= SEARCH_RESTARTS:
+            return False  # (times whose skews keep changing are no latency: judged as they are)
         skews = self._skews()
         applied = self.latency.applied
         if not any(abs(s - (applied[b] - applied[a])) >= max(0.5 * self.period, within)
@@ -457,6 +478,7 @@ class Tracker:
             return False
         self.latency.restart(camera_latencies(len(self.cameras),
                                               [(a, b, s) for a, b, (s, _) in skews]))
+        self._restarts += 1
         self.tracks, self.held, self._pending = [], [], []
         self._one_spot.clear()  # (and the frames judged anew: those before had times off)
         self.fit = FitWatch(self.fit.deployment, self.fit.what, least=self.fit.least)
@@ -467,12 +489,14 @@ class Tracker:
         for the cameras whose times are corrected."""
         return {c.id: float(v) for c, v in zip(self.cameras, self.latency.applied) if v}
 
-    def search_times(self, frames) -> bool:
+    def search_times(self, frames) -> list[TimesDrift]:
         """Before a recording is tracked: its cameras' latencies searched on all its one-spot
         frames (``(time, camera id, spots K×2 px)``; :func:`~vlpcal.latency.pair_skew`) and
-        those found applied from its first frame on. Whether any was found."""
+        those found applied from its first frame on — unless a pair's skew changes along the
+        recording (a clock that drifts, frames numbered rather than timed): then those pairs
+        are returned (and nothing applied), as their times place no frame right."""
         if self.spots != 1:  # (several LEDs: a frame with one spot may be either one's)
-            return False
+            return []
         logs: dict = {}
         for t, cid, uvs in frames:
             k = self._camera(cid)
@@ -487,12 +511,39 @@ class Tracker:
             ok = np.isfinite(xy).all(axis=1)
             one[k] = (np.array([t for t, _ in seen])[ok], np.c_[xy[ok], np.ones(ok.sum())]
                       @ self._R[k])
+        drifts = self._drifts(one)
+        if drifts:
+            return drifts
         skews = self._skews(one)
-        if not any(abs(s) >= 0.5 * self.period for _, _, (s, _) in skews):
-            return False  # (within that, the windows tell them better)
-        self.latency.restart(camera_latencies(len(self.cameras),
-                                              [(a, b, s) for a, b, (s, _) in skews]))
-        return True
+        if any(abs(s) >= 0.5 * self.period for _, _, (s, _) in skews):  # (within that, the
+            self.latency.restart(camera_latencies(  # windows tell them better)
+                len(self.cameras), [(a, b, s) for a, b, (s, _) in skews]))
+        return []
+
+    def _drifts(self, logs) -> list[TimesDrift]:
+        """Pairs of cameras whose skew, searched on stretches of :data:`SKEW_FRAMES` frame
+        periods, changes along the recording by more than a frame period and its own
+        uncertainty."""
+        if not logs:
+            return []
+        start = min(float(t[0]) for t, _ in logs.values() if len(t))
+        end = max(float(t[-1]) for t, _ in logs.values() if len(t))
+        span = SKEW_FRAMES * self.period
+        edges = np.arange(start, end + span, span)
+        found: dict = {}
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            part = {k: (t[(t >= lo) & (t < hi)], d[(t >= lo) & (t < hi)])
+                    for k, (t, d) in logs.items()}
+            for a, b, (skew, within) in self._skews(part):
+                found.setdefault((a, b), []).append((0.5 * (lo + hi), skew, within))
+        out = []
+        for (a, b), seen in found.items():
+            first = min(seen, key=lambda x: x[1])
+            last = max(seen, key=lambda x: x[1])
+            if last[1] - first[1] > max(self.period, first[2] + last[2]):
+                out.append(TimesDrift(self.cameras[a].id, self.cameras[b].id,
+                                      tuple((t, s) for t, s, _ in sorted(seen))))
+        return out
 
     def _skews(self, logs=None) -> list:
         """(a, b, (how much later b's stated times run than a's, how surely)) for pairs of
