@@ -295,3 +295,32 @@ def test_a_bundles_csv_files_are_counted_too(tmp_path, monkeypatch):
     _rows(tmp_path / "b" / "points.csv", "point_id,x,y,z", ["P1,1,1,0", "P2,2,1,0", "P3,3,1,0"])
     with pytest.raises(DatasetError, match=r"points.csv: more than 2 points \("):
         read_survey_bundle(tmp_path / "b")
+
+
+def test_every_fix_has_exactly_one_zone_even_on_a_border_or_past_the_walls():
+    """A fix on the border two zones share was published by neither (each kept what its
+    polygon strictly held), and one past the walls by none: now each fix is one zone's."""
+    from types import SimpleNamespace
+
+    from vlpcal.cli.mqtt import ZoneWriter
+
+    class Kept:
+        def __init__(self):
+            self.fixes = []
+
+        def write(self, fixes, extra=None):
+            self.fixes += fixes
+
+    zones = {"west": (_box(0, 3.0), ["C1"]), "east": (_box(3.0, 7.2), ["C2"])}
+    at = [(1.0, 0.5), (3.0, 0.5), (3.0, 0.0), (5.0, 1.0), (-0.2, 0.9), (7.5, 2.0),
+          (3.0, -0.4), (float("nan"), 1.0)]
+    fixes = [SimpleNamespace(x=x, y=y, z=0.1) for x, y in at]
+    kept = {zone: Kept() for zone in zones}
+    for zone in zones:
+        ZoneWriter(kept[zone], zones, zone).write(fixes)
+    west = {(f.x, f.y) for f in kept["west"].fixes}
+    east = {(f.x, f.y) for f in kept["east"].fixes}
+    assert not west & east
+    assert west | east == set(at[:-1])  # every placed fix once; no position: no zone's
+    assert {(1.0, 0.5), (-0.2, 0.9), (3.0, 0.5), (3.0, 0.0)} <= west  # (the border: west)
+    assert {(5.0, 1.0), (7.5, 2.0)} <= east

@@ -126,7 +126,7 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
         writer = PublishingWriter(writer, publisher, site_led if zone else led_of(dep),
                                   utc="t_s" if spots_url else None)
     if zone is not None:  # written and published: the fixes inside the zone's polygon
-        writer = ZoneWriter(writer, _load_deployment(deployment_path).zones[zone][0])
+        writer = ZoneWriter(writer, _load_deployment(deployment_path).zones, zone)
     # from here on every way out either closes the writer (the fixes so far are kept) or
     # aborts it (nothing replaced)
     t0 = time.perf_counter()

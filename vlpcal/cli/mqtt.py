@@ -116,25 +116,33 @@ class PublishingWriter:
 
 
 class ZoneWriter:
-    """Fixes inside a zone's floor polygon only (``locate --zone``): each zone's locator
-    writes and publishes its own part of the site; a fix without a position is no zone's."""
+    """The fixes of one zone only (``locate --zone``): each zone's locator writes and
+    publishes its own part of the site. Every fix has one owner: the zone whose floor holds
+    it, else — on a border two zones share, or past the walls — the nearest, the first
+    listed of those as near (so each fix is published exactly once); a fix without a
+    position is no zone's."""
 
-    def __init__(self, writer, polygon):
+    def __init__(self, writer, zones: dict, zone: str):
         from shapely.geometry import Polygon
 
-        self.writer, self.polygon = writer, Polygon(polygon)
+        self.writer = writer
+        self.polygons = [Polygon(polygon) for polygon, _ in zones.values()]
+        self.mine = list(zones).index(zone)
         self.outside = 0
 
     def write(self, fixes, extra: dict | None = None) -> None:
         import numpy as np
-        from shapely import contains_xy
+        from shapely import distance, points
 
         fixes = list(fixes)
         X = np.array([(f.x, f.y, f.z) for f in fixes], float).reshape(-1, 3)
-        inside = np.isfinite(X).all(axis=1)
-        inside[inside] = contains_xy(self.polygon, X[inside, 0], X[inside, 1])
-        self.outside += int((~inside).sum())
-        self.writer.write([f for f, ok in zip(fixes, inside) if ok], extra)
+        ours = np.isfinite(X).all(axis=1)
+        if ours.any():
+            where = points(X[ours, :2])
+            apart = np.stack([distance(p, where) for p in self.polygons])
+            ours[ours] = apart.argmin(axis=0) == self.mine
+        self.outside += int((~ours).sum())
+        self.writer.write([f for f, ok in zip(fixes, ours) if ok], extra)
 
     def close(self) -> None:
         self.writer.close()
