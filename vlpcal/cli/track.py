@@ -263,7 +263,10 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     if missing == len(folder.events):
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
-    tracker.search_times(spotted)  # the cameras' times, searched on the whole recording
+    drifts = tracker.search_times(spotted)  # the cameras' times, searched on the recording
+    if drifts:
+        raise UserError(f"{folder.root / 'times.csv'}: {drifts[0].message()} (nothing was "
+                        "written)")
     for t, cid, uv in spotted:
         rows.extend(_published(publisher, tracker.update_spots(cid, t, uv)))
         check(tracker)
