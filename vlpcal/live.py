@@ -37,10 +37,22 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT, stamps: bool = False) 
     bounded: a part (or a snapshot) may not exceed :data:`MAX_PART` bytes, and each frame must
     arrive whole within ``timeout`` s of the one before (a camera that trickles a byte a second
     is a stalled camera, however long the command was asked to run).
+
+    ``http://user:password@host/…`` is sent as HTTP basic authentication (the password read
+    apart, :func:`~vlpcal.reading.credentials`: no part of it reaches the URL parser or a
+    message).
     """
+    import base64
     import urllib.request
 
-    with urllib.request.urlopen(url, timeout=timeout) as resp:
+    from .reading import credentials
+
+    bare, user, password = credentials(url)  # http://user:password@host/…: HTTP basic auth
+    request = urllib.request.Request(bare)
+    if user is not None:  # not sent on to where a redirect leads
+        who = base64.b64encode(f"{user}:{password or ''}".encode()).decode("ascii")
+        request.add_unredirected_header("Authorization", f"Basic {who}")
+    with urllib.request.urlopen(request, timeout=timeout) as resp:
         ctype = resp.headers.get("Content-Type", "")
         buf = b""
         since = time.monotonic()  # when the frame being read was begun

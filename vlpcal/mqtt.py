@@ -21,7 +21,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from urllib.parse import unquote, urlsplit
+from urllib.parse import urlsplit
 
 #: the password, when the URL has none, comes from this environment variable (never echoed)
 PASSWORD_ENV = "VLPCAL_MQTT_PASSWORD"
@@ -64,53 +64,36 @@ class Target:
 def parse_url(url: str) -> Target:
     """Read an ``mqtt://[user[:password]@]host[:port]/prefix`` URL (``mqtts://`` for TLS); the
     password may instead be in :data:`PASSWORD_ENV`. A wrong URL is an :class:`MqttError`."""
-    from .reading import is_id
+    from .reading import credentials, is_id, redacted
 
-    # who (and a password, whatever its characters: / ? # @ : included) is what stands
-    # before the last @ — a prefix has none; it is read apart, so no part of a password
-    # ever reaches the URL parser or its messages
-    scheme, sep, rest = url.partition("://")
-    user = secret = None
-    if sep and "@" in rest:
-        who, rest = rest.rsplit("@", 1)
-        user, colon, secret = who.partition(":")
-        user, secret = unquote(user) or None, (unquote(secret) if colon else None)
-    odd = [ch for ch in scheme + sep + rest if ord(ch) <= 32 or ord(ch) == 127]
+    # who (and a password, whatever its characters) is read apart: a prefix holds no @
+    bare, user, secret = credentials(url)
+    rest = bare.partition("://")[2]
+    odd = [ch for ch in bare if ord(ch) <= 32 or ord(ch) == 127]
     if odd:  # the URL parser drops line breaks and tabs: site\n1 would be the prefix site1
-        raise MqttError(f"{_safe(url)}: expected no spaces, tabs or line breaks in an MQTT URL's "
-                        f"host or prefix (found {odd[0]!r})")
+        raise MqttError(f"{redacted(url)}: expected no spaces, tabs or line breaks in an MQTT "
+                        f"URL's host or prefix (found {odd[0]!r})")
     try:
-        parts = urlsplit(f"{scheme}{sep}{rest}")
+        parts = urlsplit(bare)
         port = parts.port
     except ValueError:
-        raise MqttError(f"{_safe(url)}: not an MQTT URL (its host and port cannot be read); "
+        raise MqttError(f"{redacted(url)}: not an MQTT URL (its host and port cannot be read); "
                         "expected mqtt://[user[:password]@]host[:port]/prefix") from None
     if parts.query or parts.fragment or "#" in rest or "?" in rest:
-        raise MqttError(f"{_safe(url)}: expected no query or fragment (? #) in an MQTT URL's "
+        raise MqttError(f"{redacted(url)}: expected no query or fragment (? #) in an MQTT URL's "
                         "host or prefix")
     if port is not None and not 1 <= port <= 65535:
-        raise MqttError(f"{_safe(url)}: expected a port from 1 to 65535")
+        raise MqttError(f"{redacted(url)}: expected a port from 1 to 65535")
     if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
-        raise MqttError(f"{_safe(url)}: expected mqtt://[user[:password]@]host[:port]/prefix "
+        raise MqttError(f"{redacted(url)}: expected mqtt://[user[:password]@]host[:port]/prefix "
                         "(or mqtts:// for TLS)")
     prefix = parts.path.strip("/")
     if not prefix or not all(is_id(p) for p in prefix.split("/")) or len(prefix) > 200:
-        raise MqttError(f"{_safe(url)}: expected a topic prefix after the host (letters, digits, "
-                        "_ - . between slashes, e.g. mqtt://broker/site1)")
+        raise MqttError(f"{redacted(url)}: expected a topic prefix after the host (letters, "
+                        "digits, _ - . between slashes, e.g. mqtt://broker/site1)")
     tls = parts.scheme == "mqtts"
     password = secret if secret is not None else os.environ.get(PASSWORD_ENV)
     return Target(parts.hostname, port or (8883 if tls else 1883), prefix, tls, user, password)
-
-
-def _safe(url: str) -> str:
-    """``url`` as a message may show it: whatever stands before its last ``@`` (who, and a
-    password, however odd its characters) replaced, cut short, one line."""
-    import re
-
-    from .reading import one_line
-
-    return one_line(re.sub(r"^([A-Za-z][A-Za-z0-9+.-]*://)?.*@", lambda m: (m.group(1) or "")
-                           + "***@", url, flags=re.S), 120)
 
 
 def check_ca_file(ca_file) -> None:

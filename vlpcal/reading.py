@@ -47,20 +47,10 @@ def is_id(value) -> bool:
 
 def one_line(text: str, limit: int = 1000) -> str:
     """``text`` as one printable line: line breaks and tabs as spaces, other control
-    characters (a terminal's escape sequences, from a file name or a server's reply) and
-    undecodable bytes shown escaped, cut to ``limit`` characters."""
-    out = []
-    for ch in str(text):
-        o = ord(ch)
-        if ch in "\r\n\t":
-            out.append(" ")
-        elif o < 32 or o == 127 or 0x80 <= o < 0xA0:
-            out.append(f"\\x{o:02x}")
-        elif 0xDC80 <= o <= 0xDCFF:  # a byte that was not UTF-8 (a file name)
-            out.append(f"\\x{o - 0xDC00:02x}")
-        else:
-            out.append(ch)
-    line = re.sub(" {2,}", " ", "".join(out)).strip()
+    characters (a terminal's escape sequences, from a file name or a server's reply) shown
+    escaped as :func:`printable` shows them, cut to ``limit`` characters."""
+    line = printable(re.sub(r"[\r\n\t]", " ", str(text)))
+    line = re.sub(" {2,}", " ", line).strip()
     return line if len(line) <= limit else line[:limit - 1] + "…"
 
 
@@ -268,17 +258,54 @@ def shown(value) -> str:
 
 
 def printable(text: str) -> str:
-    """``text`` safe to print on a terminal: control characters (escape sequences, carriage
-    returns, bells, C1 controls, bidirectional overrides) written as escapes, so a name or a
-    string from a file cannot retitle a window, clear a screen or forge a line."""
+    """``text`` safe to print on a terminal, the one rule for every string from a file or the
+    network that reaches one: control and format characters (escape sequences, carriage
+    returns, tabs, bells, C1 controls, bidirectional overrides, zero-width marks) written as
+    escapes (``\\x1b``, ``\\r``, ``\\u202e``), undecodable bytes of a file name as ``\\xff``;
+    line breaks kept. A name or a string from a file cannot retitle a window, clear a screen,
+    forge a line or reorder one."""
+    text = str(text)
+    if text.replace("\n", " ").isprintable():  # most text: nothing to escape
+        return text
+    return "".join(map(_escaped, text))
+
+
+def _escaped(ch: str) -> str:
     import unicodedata
 
-    def safe(ch: str) -> str:
-        if ch == "\n" or ch == " " or not unicodedata.category(ch).startswith("C"):
-            return ch
-        return ch.encode("unicode_escape").decode("ascii")
+    kind = unicodedata.category(ch)
+    if ch == "\n" or (kind[0] != "C" and kind not in ("Zl", "Zp")):
+        return ch
+    o = ord(ch)
+    if 0xDC80 <= o <= 0xDCFF:  # a byte that was not UTF-8 (a file name read as surrogateescape)
+        return f"\\x{o - 0xDC00:02x}"
+    return ch.encode("unicode_escape").decode("ascii")
 
-    return "".join(map(safe, str(text)))
+
+# -- URLs that may carry a password --------------------------------------------------------------
+
+def credentials(url: str) -> tuple[str, str | None, str | None]:
+    """``scheme://[user[:password]@]rest`` → ``(scheme://rest, user, password)``, user and
+    password ``%XX`` decoded (None when absent). The password may hold any character
+    (``/ ? # @ :`` included): it is what stands between the first ``:`` and the last ``@``, read
+    apart so that no part of it ever reaches a URL parser or its messages; the rest of the
+    URL holds no ``@`` (written ``%40``)."""
+    from urllib.parse import unquote
+
+    scheme, sep, rest = url.partition("://")
+    if not sep or "@" not in rest:
+        return url, None, None
+    who, rest = rest.rsplit("@", 1)
+    user, colon, secret = who.partition(":")
+    return scheme + sep + rest, unquote(user) or None, (unquote(secret) if colon else None)
+
+
+def redacted(url) -> str:
+    """``url`` as a message may show it, the one rule for every URL vlpcal prints: whatever
+    stands before its last ``@`` (who, and a password, however odd its characters) replaced
+    by ``***``, cut short, one printable line."""
+    return one_line(re.sub(r"^([A-Za-z][A-Za-z0-9+.-]*://)?.*@", lambda m: (m.group(1) or "")
+                           + "***@", str(url), flags=re.S), 120)
 
 
 # -- unit slips: a length that fits the scene only in another unit ------------------------------

@@ -143,8 +143,10 @@ def reclaim(folder) -> list[str]:
         else:
             _remove(path)
             done.append(f"{folder}: removed {name} (left by a stopped run)")
-    for line in done:
-        print(line, file=sys.stderr)
+    from .reading import printable
+
+    for line in done:  # names from a folder and a journal: printed safely
+        print(printable(line), file=sys.stderr)  # noqa: T201 (below the CLI's echo)
     return done
 
 

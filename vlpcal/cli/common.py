@@ -8,6 +8,18 @@ import click
 from .. import __version__
 
 
+def echo(message: str = "", err: bool = False, nl: bool = True) -> None:
+    """A line of human text to the terminal (stdout, or stderr with ``err``): the one way the
+    commands print notes, warnings, summaries and tables. Names, paths, topics and messages
+    from files or the network are in it, so it goes through
+    :func:`~vlpcal.reading.printable`: no escape sequence, carriage return or bidirectional
+    override reaches the terminal raw. (Error lines go through :class:`UserError`; data rows
+    through their writers.)"""
+    from ..reading import printable
+
+    click.echo(printable(message), err=err, nl=nl)
+
+
 class UserError(click.ClickException):
     """A user's mistake (a wrong path, a malformed file): one line, exit code 2."""
 
@@ -31,7 +43,7 @@ class FitCheck:
 
     def __init__(self, keep_going: bool, kept: str):
         self.keep_going, self.kept, self.said = keep_going, kept, False
-        self.say = lambda msg: click.echo(msg, err=True)
+        self.say = lambda msg: echo(msg, err=True)
 
     def __call__(self, watch) -> None:
         if self.said:
@@ -240,16 +252,19 @@ def _camera_sources(cameras, dep, stamps: bool = False) -> dict:
     """``--camera ID=SOURCE`` values → camera id → frame source, checked against ``dep``
     (``stamps``: :func:`~vlpcal.live.open_source`'s)."""
     from ..live import open_source
+    from ..reading import is_id, redacted
 
     ids = [c.id for c in dep.cameras]
     sources = {}
-    for spec in cameras:
-        cid, sep, src = spec.partition("=")
+    for given in cameras:
+        cid, sep, src = given.partition("=")
+        # as messages show it: no part of a password (which may hold an = too)
+        spec = f"{cid}={redacted(src)}" if sep and is_id(cid) else redacted(given)
         if not sep or not cid or not src:
             raise UserError(f"--camera {spec!r}: expected ID=SOURCE, e.g. "
                             "C1=http://10.0.0.21:81/stream")
         if cid not in ids:
-            raise UserError(f"--camera {spec!r}: {dep.name} has no camera {cid!r} "
+            raise UserError(f"--camera {spec!r}: {dep.name} has no such camera "
                             f"(it has {', '.join(ids)})")
         if cid in sources:
             raise UserError(f"--camera {spec!r}: camera {cid} given twice")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .common import Finite, UserError, _floats, _floor_diagonal, _load_deployment, main
+from .common import Finite, UserError, _floats, _floor_diagonal, _load_deployment, echo, main
 
 
 @main.command()
@@ -93,9 +93,9 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
         except ValueError as e:
             raise click.BadParameter(str(e), param_hint="--profile") from None
     if describe:
-        click.echo(f"{profile.name}: {profile.description}")
+        echo(f"{profile.name}: {profile.description}")
         for key, text in profile.sources.items():
-            click.echo(f"  {key}: {text}")
+            echo(f"  {key}: {text}")
         return
     if publish:
         ctx = click.get_current_context()
@@ -189,7 +189,7 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
             try:
                 route = free_route(nominal, free_sweep(nominal, wand))
             except SurveyError as e:
-                click.echo(f"free survey: no route ({e}); the LED wanders the room instead")
+                echo(f"free survey: no route ({e}); the LED wanders the room instead")
     out.parent.mkdir(parents=True, exist_ok=True)
     with OutputSet(out, folders=True) as (stage,):
         stage.chmod(0o755)
@@ -214,13 +214,13 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
 
                 _write_body_truth(stage / "streams.bodies.truth.csv", origin, yaw,
                                   np.unique(np.concatenate([t for _, t, _ in frames.values()])))
-            click.echo(f"streams: a robot at up to {robot_speed:g} m/s (slower in its turns) "
-                       + (f"carrying {body} blinking LEDs (body R1) " if body else "")
-                       + f"for {seconds:g} s, cameras "
-                       f"not synchronised → {out / 'streams'} (truth in "
-                       f"{out / 'streams.truth.csv'}"
-                       + (f", the body's in {out / 'streams.bodies.truth.csv'}" if body else "")
-                       + ")")
+            echo(f"streams: a robot at up to {robot_speed:g} m/s (slower in its turns) "
+                 + (f"carrying {body} blinking LEDs (body R1) " if body else "")
+                 + f"for {seconds:g} s, cameras "
+                 f"not synchronised → {out / 'streams'} (truth in "
+                 f"{out / 'streams.truth.csv'}"
+                 + (f", the body's in {out / 'streams.bodies.truth.csv'}" if body else "")
+                 + ")")
 
 
 def _write_body_truth(path, origin, yaw, t) -> None:
@@ -280,18 +280,18 @@ def _publish_spots(profile, seed, url, speed, seconds, body=None) -> None:
     seen = sum(len(uv) > 0 for _, _, uv in events)
     what = (f"a robot carrying {body} blinking LEDs (body R1)" if body else "a robot's LED",
             "with a spot" if body else "with the LED")
-    click.echo(f"{profile.name}: {len(scene.true)} cameras publishing {len(events)} frames' "
-               f"spots ({seen} {what[1]}) of {what[0]} at {speed:g} m/s over {seconds:g} s on "
-               f"{target.shown()}/spots/…", err=True)
+    echo(f"{profile.name}: {len(scene.true)} cameras publishing {len(events)} frames' "
+         f"spots ({seen} {what[1]}) of {what[0]} at {speed:g} m/s over {seconds:g} s on "
+         f"{target.shown()}/spots/…", err=True)
     try:
-        res = play_spots(target, events, say=lambda m: click.echo(m, err=True))
+        res = play_spots(target, events, say=lambda m: echo(m, err=True))
     except MqttError as e:
         raise UserError(f"--publish {e}") from None
     unsent = len(events) - res["sent"]
-    click.echo(f"published {res['sent']} spot messages, {res['spots']} {what[1]} (p99 "
-               f"{res['late_p99_ms']:.1f} ms behind schedule)"
-               + (f"; {unsent} of the {len(events)} not sent (the broker went away)"
-                  if unsent else ""), err=True)
+    echo(f"published {res['sent']} spot messages, {res['spots']} {what[1]} (p99 "
+         f"{res['late_p99_ms']:.1f} ms behind schedule)"
+         + (f"; {unsent} of the {len(events)} not sent (the broker went away)"
+            if unsent else ""), err=True)
 
 
 def _into_frame(points, o, x):
@@ -356,21 +356,21 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
 
             moved = _into_frame(np.c_[route.stops, np.zeros(len(route.stops))], o, x)
             route = replace(route, stops=moved[:, :2])
-        click.echo(f"the wand survey's marks define the frame: O at ({o[0]:.2f}, {o[1]:.2f}) m "
-                   f"of the plan is (0, 0, 0), X at ({x[0]:.2f}, {x[1]:.2f}) m on its +x axis; "
-                   "truth.yaml and every position written are in that frame")
+        echo(f"the wand survey's marks define the frame: O at ({o[0]:.2f}, {o[1]:.2f}) m "
+             f"of the plan is (0, 0, 0), X at ({x[0]:.2f}, {x[1]:.2f}) m on its +x axis; "
+             "truth.yaml and every position written are in that frame")
     simulate_survey(scene, stage / "survey", pts, seed=seed, overwrite=True)
     n_cams = len(scene.true)
-    click.echo(f"{profile.name} (seed {seed}): {out / 'nominal.yaml'}, {out / 'truth.yaml'}")
+    echo(f"{profile.name} (seed {seed}): {out / 'nominal.yaml'}, {out / 'truth.yaml'}")
     if own:
         src = profile.sources
-        click.echo(f"  {n_cams} camera{'s' * (n_cams != 1)} hung with "
-                   f"{src['install errors']}; frames look like "
-                   f"{src['look']}")
+        echo(f"  {n_cams} camera{'s' * (n_cams != 1)} hung with "
+             f"{src['install errors']}; frames look like "
+             f"{src['look']}")
     shots = sum(int(c.project(pts)[2].sum()) for c in scene.true)
-    click.echo(f"survey: {len(pts)} points at h = {', '.join(map(str, heights))} m, "
-               f"{shots} frames from {n_cams} camera{'s' * (n_cams != 1)} → "
-               f"{out / 'survey'}")
+    echo(f"survey: {len(pts)} points at h = {', '.join(map(str, heights))} m, "
+         f"{shots} frames from {n_cams} camera{'s' * (n_cams != 1)} → "
+         f"{out / 'survey'}")
     if free_sets:
         from ..sim.writers import simulate_free_survey
 
@@ -388,13 +388,13 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
             stops = len(route.stops)
             what += (f" along survey plan's route ({stops} stops)" if free_sets >= stops else
                      f" at {free_sets} of survey plan's {stops} stops")
-        click.echo(f"free survey: {len(refs.ids)} "
-                   f"{'marks' if marks is not None else 'reference points'} and {free_sets} "
-                   "free sets "
-                   f"{what} → {out / 'free-survey'}; {len(sets)} of the sets have frames "
-                   f"({jpegs} in all: a camera saw "
-                   f"{'an LED' if wand is not None else 'the LED'}; the others are left out, "
-                   f"as a capture leaves them); truth in {out / 'free-survey.truth.csv'}")
+        echo(f"free survey: {len(refs.ids)} "
+             f"{'marks' if marks is not None else 'reference points'} and {free_sets} "
+             "free sets "
+             f"{what} → {out / 'free-survey'}; {len(sets)} of the sets have frames "
+             f"({jpegs} in all: a camera saw "
+             f"{'an LED' if wand is not None else 'the LED'}; the others are left out, "
+             f"as a capture leaves them); truth in {out / 'free-survey.truth.csv'}")
     if trajectory:
         test = path_of(scene, trajectory, seed=seed)
     else:
@@ -407,8 +407,8 @@ def _simulate_into(stage, out, scene, profile, seed, pts, heights, free_sets, fr
         test = cand[rng.choice(len(cand), min(test_points, len(cand)), replace=False)]
     if len(test):
         simulate_frames(scene, stage / "frames", test, seed=seed + 1, overwrite=True)
-        click.echo(f"frames: {len(test)} {'trajectory' if trajectory else 'test'} positions "
-                   f"→ {out / 'frames'} (truth in {out / 'frames.truth.csv'})")
+        echo(f"frames: {len(test)} {'trajectory' if trajectory else 'test'} positions "
+             f"→ {out / 'frames'} (truth in {out / 'frames.truth.csv'})")
 
 
 @main.command()
@@ -431,32 +431,32 @@ def demo(out: str, seed: int):
     from ..demo import REDO, DemoError, format_table, run_demo
 
     try:
-        res = run_demo(out, seed, say=lambda m: click.echo(m, err=True))
+        res = run_demo(out, seed, say=lambda m: echo(m, err=True))
     except DemoError as e:
         raise UserError(str(e)) from None
     p, s, f = res.planned, res.survey, res.free
     robot = {r.label: r for r in res.rows}
     free_cm = robot["vlpcal: calibrated, free survey"].mean_cm
     tape_cm = robot["vlpcal: calibrated, tape survey"].mean_cm
-    click.echo(f"\nvlpcal demo (seed {seed}): {p['cameras']} cameras planned ({p['family']}); "
-               f"the robot: {res.frames} frames.\n"
-               f"free survey: {f['references']} points measured + {f['minutes']:g} min of the "
-               f"LED carried through the room → the robot's mean error {free_cm:.2f} cm\n"
-               f"  (its references fix the room to about {f['datum_floor_cm']:.2f} cm; the "
-               f"tape survey's {f['test_points']} points, never used by it, are "
-               f"{f['test_points_cm']:.2f} cm off, their tape included)\n"
-               f"tape survey: {s['points']} points measured → {tape_cm:.2f} cm (held out: "
-               f"{s['held_out_nominal_cm']:.2f} cm with the cameras as planned, "
-               f"{s['held_out_calibrated_cm']:.2f} cm calibrated)\n3D error in cm:\n")
-    click.echo(format_table(res))
-    click.echo(f"\nThe paper's pipeline: NI-P spots, its pair method, fusions (a)–(c) with the "
-               f"cameras as planned.\nvlpcal: blob spots, robust all-camera least squares (the "
-               f"tape-calibrated file\nuses the fusion its survey chose: {s['fusion']}). fixes/s: "
-               "JPEG decoding included, one core.")
-    click.echo(f"\nwrote {res.folder}/ in {res.seconds:.0f} s:")
+    echo(f"\nvlpcal demo (seed {seed}): {p['cameras']} cameras planned ({p['family']}); "
+         f"the robot: {res.frames} frames.\n"
+         f"free survey: {f['references']} points measured + {f['minutes']:g} min of the "
+         f"LED carried through the room → the robot's mean error {free_cm:.2f} cm\n"
+         f"  (its references fix the room to about {f['datum_floor_cm']:.2f} cm; the "
+         f"tape survey's {f['test_points']} points, never used by it, are "
+         f"{f['test_points_cm']:.2f} cm off, their tape included)\n"
+         f"tape survey: {s['points']} points measured → {tape_cm:.2f} cm (held out: "
+         f"{s['held_out_nominal_cm']:.2f} cm with the cameras as planned, "
+         f"{s['held_out_calibrated_cm']:.2f} cm calibrated)\n3D error in cm:\n")
+    echo(format_table(res))
+    echo(f"\nThe paper's pipeline: NI-P spots, its pair method, fusions (a)–(c) with the "
+         f"cameras as planned.\nvlpcal: blob spots, robust all-camera least squares (the "
+         f"tape-calibrated file\nuses the fusion its survey chose: {s['fusion']}). fixes/s: "
+         "JPEG decoding included, one core.")
+    echo(f"\nwrote {res.folder}/ in {res.seconds:.0f} s:")
     for name, (what, _) in REDO.items():
-        click.echo(f"  {name:21s} {what}")
-    click.echo("\nredo any step by hand, e.g. (inside the folder):")
+        echo(f"  {name:21s} {what}")
+    echo("\nredo any step by hand, e.g. (inside the folder):")
     for _, cmd in REDO.values():
         if cmd:
-            click.echo(f"  {cmd}")
+            echo(f"  {cmd}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .common import UserError, _load_deployment, _output_file, main
+from .common import UserError, _load_deployment, _output_file, echo, main
 
 
 @main.command("export")
@@ -49,8 +49,8 @@ def export_cameras(deployment_path, fmt, out, units):
     else:
         text = to_opencv_yaml(dep.cameras)
     write_text(out, text)
-    click.echo(f"wrote {len(dep.cameras)} cameras of {dep.name} to {out} ({fmt}"
-               f"{', ' + units if fmt == 'anipose' else ', m'})")
+    echo(f"wrote {len(dep.cameras)} cameras of {dep.name} to {out} ({fmt}"
+         f"{', ' + units if fmt == 'anipose' else ', m'})")
 
 
 @main.command("import")
@@ -134,8 +134,8 @@ def import_cameras(cameras_path, base_path, out, units):
         for k in dropped:
             extra.pop(k, None)
         if dropped:
-            click.echo(f"dropped {', '.join(dropped)} of {base_path}: learned for other "
-                       "cameras (run survey calibrate to learn them again)", err=True)
+            echo(f"dropped {', '.join(dropped)} of {base_path}: learned for other "
+                 "cameras (run survey calibrate to learn them again)", err=True)
     extra["provenance"] = provenance("vlpcal import", **{"from": {"cameras": str(path),
                                                                   "base": str(base_path)}})
     out = _output_file(out, inputs=(cameras_path, base_path))
@@ -144,5 +144,5 @@ def import_cameras(cameras_path, base_path, out, units):
         save(dep, out, header=f"Cameras imported by vlpcal import from {path}.")
     except DeploymentError as e:
         raise UserError(f"{path}: {e}") from None
-    click.echo(f"wrote {out}: {len(cams)} cameras ({', '.join(c.id for c in cams)}) in the room "
-               f"of {base.name}")
+    echo(f"wrote {out}: {len(cams)} cameras ({', '.join(c.id for c in cams)}) in the room "
+         f"of {base.name}")

@@ -15,6 +15,7 @@ from .common import (
     _load_deployment,
     _output_file,
     _same_file,
+    echo,
     main,
 )
 from .mqtt import (
@@ -108,7 +109,7 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
                             what="the figure")
         if out != "-" and _same_file(plot, out):
             raise UserError(f"--plot {plot}: the same file as --out")
-    say = (lambda msg: None) if quiet else (lambda msg: click.echo(msg, err=True))
+    say = (lambda msg: None) if quiet else (lambda msg: echo(msg, err=True))
     live = bool(cameras) or bool(spots_url)
     publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path, zone)
     from ..writing import OutputError
@@ -148,8 +149,8 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     except KeyboardInterrupt:
         if not sent:  # an offline run into a file: the previous file stays, as it was
             writer.abort()
-            click.echo(f"interrupted (Ctrl-C or a signal): nothing was written; {out} is as "
-                       "it was", err=True)
+            echo(f"interrupted (Ctrl-C or a signal): nothing was written; {out} is as "
+                 "it was", err=True)
             raise SystemExit(1) from None
         notes.append("interrupted: the fixes so far are kept")
         n = sum(statuses.values())
@@ -444,7 +445,7 @@ def _locate_spots(loc, target, ca_file, writer, tolerance, duration, max_sets, s
     try:
         while not (t_end and time.monotonic() > t_end) and not (max_sets and n >= max_sets):
             if (quiet_note := sub.silence()) is not None:  # a warning: -q hides none
-                click.echo(quiet_note, err=True)
+                echo(quiet_note, err=True)
             got = sub.get(timeout=tolerance)
             if got is None:
                 if pending and time.time() - first > 2 * tolerance:

@@ -7,7 +7,7 @@ import math
 
 import click
 
-from .common import UserError, _load_deployment, _output_file, main
+from .common import UserError, _load_deployment, _output_file, echo, main
 
 
 @main.command()
@@ -50,7 +50,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         raise UserError(f"{out}: the planned deployment is a YAML file (.yaml); its maps (.png) "
                         "go beside it")
     out = _output_file(out, inputs=(site_path,), beside=(".png",))
-    say = (lambda m: None) if quiet else (lambda m: click.echo(m, err=True))
+    say = (lambda m: None) if quiet else (lambda m: echo(m, err=True))
     result = plan_site(site, max_cameras, progress=say)
     r = site.requirements
     if not result.candidates and "all" in result.missing:
@@ -79,11 +79,11 @@ def plan(site_path, out, candidate, max_cameras, quiet):
             "requirements, lower the LED heights or use a camera with more pixels"
             + unit_doubt(site))
     k = len(result.candidates)
-    click.echo(f"{site.name}: {result.candidates[0].count} cameras meet the requirements "
-               f"({k} candidate{'s' if k > 1 else ''}; {result.tried} layouts judged, "
-               f"{result.seconds:.1f} s)\n")
-    click.echo(f"{'#':>2s} {'layout':10s} {'cams':>4s} {'x×y':>6s} {'spacing m':>12s} "
-               f"{'yaw':>5s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
+    echo(f"{site.name}: {result.candidates[0].count} cameras meet the requirements "
+         f"({k} candidate{'s' if k > 1 else ''}; {result.tried} layouts judged, "
+         f"{result.seconds:.1f} s)\n")
+    echo(f"{'#':>2s} {'layout':10s} {'cams':>4s} {'x×y':>6s} {'spacing m':>12s} "
+         f"{'yaw':>5s} {'coverage':>8s} {'mean cm':>8s} {'p95 cm':>7s}")
     for k, c in enumerate(result.candidates, start=1):
         xs = {round(cam.position[0], 6) for cam in c.cameras}
         ys = {round(cam.position[1], 6) for cam in c.cameras}
@@ -94,15 +94,15 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         if c.family in ("tilted", "free") and len(xs) * len(ys) > c.count:
             grid = "–"  # not a grid: the positions are in the deployment
         yaw = yaw if len(yaw) <= 5 else "mixed"
-        click.echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>5s} "
-                   f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
-                   f"{c.evaluation.p95 * 100:7.2f}")
+        echo(f"{k:2d} {c.family:10s} {c.count:4d} {grid:>6s} {sp:>12s} {yaw:>5s} "
+             f"{c.evaluation.coverage:8.1%} {c.evaluation.mean * 100:8.2f} "
+             f"{c.evaluation.p95 * 100:7.2f}")
     for family, why in result.missing.items():
-        click.echo(f"   {family:10s} {why}")
-    click.echo(f"x×y: distinct camera positions along x and y (cameras on a {_mount(site)} "
-               "grid from the room's lower-left corner); yaw: "
-               f"degrees from the room's x axis to each image's {site.camera.width} px side "
-               "(the maps draw it)")
+        echo(f"   {family:10s} {why}")
+    echo(f"x×y: distinct camera positions along x and y (cameras on a {_mount(site)} "
+         "grid from the room's lower-left corner); yaw: "
+         f"degrees from the room's x axis to each image's {site.camera.width} px side "
+         "(the maps draw it)")
     _echo_tilted(site, result)
     if candidate > len(result.candidates):
         raise UserError(f"--candidate {candidate}: the plan has {k} candidate"
@@ -114,7 +114,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
         plan_maps(png, site, chosen)
         yaml_file.write_text(dumps(dep, f"Planned by vlpcal plan from {site_path}: candidate "
                                         f"{candidate}."), encoding="utf-8")
-    click.echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
+    echo(f"\nwrote {out} (candidate {candidate}) and {out.with_suffix('.png')}")
     _echo_mounting(chosen.cameras)
     _echo_linkage(dep)
 
@@ -132,36 +132,36 @@ def _echo_tilted(site, result) -> None:
     m = result.mended
     if m is not None:
         tilted = site.mounting is not None and site.mounting.max_tilt > 0
-        click.echo(f"{m.best.family}: no lattice meets the exact reference model "
-                   f"(see above); from one of {m.start} cameras the optimiser mended a "
-                   f"layout of {m.best.count}" + (" tilted" if tilted else " level")
-                   + f" cameras ({_solves(m)})")
+        echo(f"{m.best.family}: no lattice meets the exact reference model "
+             f"(see above); from one of {m.start} cameras the optimiser mended a "
+             f"layout of {m.best.count}" + (" tilted" if tilted else " level")
+             + f" cameras ({_solves(m)})")
     t = result.tilted
     if t is None:
         if site.mounting is None and m is None and result.candidates:
-            click.echo(f"what tilting would save is not estimated for a layout this large "
-                       f"({result.candidates[0].count} cameras); a mounting: block in the "
-                       "site plans tilted cameras")
+            echo(f"what tilting would save is not estimated for a layout this large "
+                 f"({result.candidates[0].count} cameras); a mounting: block in the "
+                 "site plans tilted cameras")
         return
     if site.mounting is None and t.best is not None:
         fewer = "" if t.complete else " or fewer (the what-if ran out of its time)"
-        click.echo(f"with tilt up to {deg}: {t.best.count} cameras{fewer} instead of "
-                   f"{t.start} — needs tilting brackets (a mounting: block in the site "
-                   f"would allow it; {_solves(t)})")
+        echo(f"with tilt up to {deg}: {t.best.count} cameras{fewer} instead of "
+             f"{t.start} — needs tilting brackets (a mounting: block in the site "
+             f"would allow it; {_solves(t)})")
     elif site.mounting is None and t.complete:
-        click.echo(f"tilting up to {deg} would not save a camera ({_solves(t)})")
+        echo(f"tilting up to {deg} would not save a camera ({_solves(t)})")
     elif site.mounting is None:
-        click.echo(f"what tilting up to {deg} would save was not found in the what-if's time "
-                   f"({_solves(t)}); a mounting: block in the site plans tilted cameras")
+        echo(f"what tilting up to {deg} would save was not found in the what-if's time "
+             f"({_solves(t)}); a mounting: block in the site plans tilted cameras")
     elif t.best is not None:
         from ..planning.poses import pose_of, tilts
 
         most = math.degrees(max(tilts([pose_of(c) for c in t.best.cameras])))
-        click.echo(f"tilted: {t.best.count} cameras, tilted up to {most:.0f}° (of {deg} "
-                   f"allowed), from the best {t.best.seed} layout ({_solves(t)})")
+        echo(f"tilted: {t.best.count} cameras, tilted up to {most:.0f}° (of {deg} "
+             f"allowed), from the best {t.best.seed} layout ({_solves(t)})")
     else:
-        click.echo(f"tilted: none below {t.start} cameras with tilts up to {deg} "
-                   f"({_solves(t)})")
+        echo(f"tilted: none below {t.start} cameras with tilts up to {deg} "
+             f"({_solves(t)})")
 
 
 def _echo_mounting(cameras) -> None:
@@ -172,15 +172,15 @@ def _echo_mounting(cameras) -> None:
     poses = [pose_of(c) for c in cameras]
     if all(math.hypot(p[3], p[4]) < math.radians(0.5) for p in poses):
         return
-    click.echo("how to hang it (turn: the level camera's image x axis from the room's x "
-               "axis, set first; then tilt the optical axis toward the direction given, "
-               "degrees from the room's x axis):")
+    echo("how to hang it (turn: the level camera's image x axis from the room's x "
+         "axis, set first; then tilt the optical axis toward the direction given, "
+         "degrees from the room's x axis):")
     for c, p in zip(cameras, poses):
         tilt = math.degrees(math.hypot(p[3], p[4]))
         toward = round(math.degrees(math.atan2(p[3], -p[4]))) % 360  # leans along (−wy, wx)
-        click.echo(f"  {c.id:>4s} at ({p[0]:.2f}, {p[1]:.2f}) m: turn "
-                   f"{round(math.degrees(p[2])) % 360:3d}°, tilt {tilt:2.0f}°"
-                   + (f" toward {toward:3d}°" if tilt >= 0.5 else ""))
+        echo(f"  {c.id:>4s} at ({p[0]:.2f}, {p[1]:.2f}) m: turn "
+             f"{round(math.degrees(p[2])) % 360:3d}°, tilt {tilt:2.0f}°"
+             + (f" toward {toward:3d}°" if tilt >= 0.5 else ""))
 
 
 def _echo_linkage(dep) -> None:
@@ -195,9 +195,9 @@ def _echo_linkage(dep) -> None:
         lines = link_cameras(dep).sentences()
     except SurveyError as e:
         lines = [f"cannot be judged: {e}"]
-    click.echo(f"free survey (vlpcal survey plan --free): {lines[0]}")
+    echo(f"free survey (vlpcal survey plan --free): {lines[0]}")
     for line in lines[1:]:
-        click.echo(f"  {line}")
+        echo(f"  {line}")
 
 
 @main.command("check")
@@ -243,15 +243,15 @@ def check(site_path, deployment_path, maps):
     levels = sorted(set(ev.points[:, 2].round(6)))
     hs = ", ".join(f"{h:g}" for h in levels)
     n = len(dep.cameras)
-    click.echo(f"{deployment_path}: {n} camera{'' if n == 1 else 's'} judged against "
-               f"{site_path} ({site.name}; LED at {hs} m, {r.min_cameras} cameras per point, "
-               f"spot noise {r.pixel_noise:g} px):")
+    echo(f"{deployment_path}: {n} camera{'' if n == 1 else 's'} judged against "
+         f"{site_path} ({site.name}; LED at {hs} m, {r.min_cameras} cameras per point, "
+         f"spot noise {r.pixel_noise:g} px):")
     model = site.camera
     other = sorted({c.id for c in dep.cameras if (c.width, c.height) != (model.width,
                                                                          model.height)})
     if other:
-        click.echo(f"  note: {', '.join(other[:5])}{' …' if len(other) > 5 else ''} have another "
-                   "image size than the site's camera model; each camera is judged as it is")
+        echo(f"  note: {', '.join(other[:5])}{' …' if len(other) > 5 else ''} have another "
+             "image size than the site's camera model; each camera is judged as it is")
     from shapely import contains_xy, distance, points
     from shapely.geometry import Polygon
 
@@ -268,23 +268,23 @@ def check(site_path, deployment_path, maps):
         close = [f"{c.id} ({d:.2f} m)" for c, d, ok in zip(dep.cameras, near, inside)
                  if ok and d < site.mounting.wall_clearance - 1e-6]
         if steep:
-            click.echo(f"  note: {', '.join(steep[:5])}{' …' if len(steep) > 5 else ''} tilt "
-                       f"past the site's max_tilt "
-                       f"({math.degrees(site.mounting.max_tilt):g}°); judged as they are")
+            echo(f"  note: {', '.join(steep[:5])}{' …' if len(steep) > 5 else ''} tilt "
+                 f"past the site's max_tilt "
+                 f"({math.degrees(site.mounting.max_tilt):g}°); judged as they are")
         if close:
-            click.echo(f"  note: {', '.join(close[:5])}{' …' if len(close) > 5 else ''} hang "
-                       f"closer to a wall than the site's wall_clearance "
-                       f"({site.mounting.wall_clearance:g} m); judged as they are")
+            echo(f"  note: {', '.join(close[:5])}{' …' if len(close) > 5 else ''} hang "
+                 f"closer to a wall than the site's wall_clearance "
+                 f"({site.mounting.wall_clearance:g} m); judged as they are")
     high = [c.id for c in dep.cameras if not 0 < c.position[2] <= site.ceiling_height]
     if outside or high:
-        click.echo(f"  note: camera(s) {', '.join((outside + high)[:5])} hang outside the "
-                   "room or above its ceiling; judged as they are")
+        echo(f"  note: camera(s) {', '.join((outside + high)[:5])} hang outside the "
+             "room or above its ceiling; judged as they are")
     p95 = f"{ev.p95 * 100:.2f} cm" if math.isfinite(ev.p95) else "–"
     mean = f"{ev.mean * 100:.2f} cm" if math.isfinite(ev.mean) else "–"
-    click.echo(f"  coverage {ev.coverage:.1%} (required {r.coverage:.1%}): the share of the "
-               f"floor's sample points seen by {r.min_cameras} or more cameras")
-    click.echo(f"  predicted error over those points: p95 {p95} (required ≤ "
-               f"{r.max_error_p95 * 100:.3g} cm), mean {mean}")
+    echo(f"  coverage {ev.coverage:.1%} (required {r.coverage:.1%}): the share of the "
+         f"floor's sample points seen by {r.min_cameras} or more cameras")
+    echo(f"  predicted error over those points: p95 {p95} (required ≤ "
+         f"{r.max_error_p95 * 100:.3g} cm), mean {mean}")
     why = []
     if ev.coverage < r.coverage:
         why.append(f"coverage {ev.coverage:.1%} < {r.coverage:.1%}")
@@ -293,18 +293,18 @@ def check(site_path, deployment_path, maps):
                    if math.isfinite(ev.p95) else "p95 unbounded: some points are seen by "
                    "cameras at one place only, which cannot triangulate them")
     if dep.room != site.room:
-        click.echo("  note: the deployment's room differs from the site's; the site's is used")
+        echo("  note: the deployment's room differs from the site's; the site's is used")
     if maps is not None:
         cand = Candidate(f"as in {deployment_path}", 0, 0, (), (), 0.0, list(dep.cameras), ev)
         from ..writing import OutputSet
 
         with OutputSet(maps) as (png,):
             plan_maps(png, site, cand)
-        click.echo(f"  maps: {maps}")
+        echo(f"  maps: {maps}")
     if why:
-        click.echo(f"verdict: does not meet the site ({'; '.join(why)})")
+        echo(f"verdict: does not meet the site ({'; '.join(why)})")
         raise SystemExit(1)
-    click.echo("verdict: meets the site")
+    echo("verdict: meets the site")
 
 
 def _mount(site) -> str:

@@ -6,7 +6,7 @@ import math
 
 import click
 
-from .common import _load_deployment, main
+from .common import _load_deployment, echo, main
 
 
 @main.command("show")
@@ -118,10 +118,8 @@ def _provenance(dep, prov) -> None:
 
 
 def _say(text: str = "") -> None:
-    """A line of the report, names and strings from the file printed safely."""
-    from ..reading import printable
-
-    click.echo(printable(text))
+    """A line of the report (names and strings from the file printed safely: :func:`echo`)."""
+    echo(text)
 
 
 def _extent(room):

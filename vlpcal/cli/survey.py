@@ -15,6 +15,7 @@ from .common import (
     _floor_diagonal,
     _load_deployment,
     _output_file,
+    echo,
     main,
 )
 from .view import DEFAULT_BIND
@@ -180,21 +181,21 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
     if route is not None:
         _echo_free_plan(plan, route, out, wand)
         return
-    click.echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
-               f"(grid {format_length(plan.step)}; positions to {format_length(plan.mark)}) → "
-               f"{out}, map {out.with_suffix('.png')}")
-    click.echo(budget_sentence(plan, chosen=step is None))
+    echo(f"{len(plan.ids)} points at h = {', '.join(f'{h:g}' for h in sorted(set(hs)))} m "
+         f"(grid {format_length(plan.step)}; positions to {format_length(plan.mark)}) → "
+         f"{out}, map {out.with_suffix('.png')}")
+    echo(budget_sentence(plan, chosen=step is None))
     few = [f"{cid} {int(n)}" for cid, n in zip(plan.camera_ids, plan.seen.sum(axis=1))
            if n < min_per_camera]
     if few:
-        click.echo(f"note: fewer points than --min-per-camera {min_per_camera} (the finest grid "
-                   f"gives no more): {', '.join(few)}")
+        echo(f"note: fewer points than --min-per-camera {min_per_camera} (the finest grid "
+             f"gives no more): {', '.join(few)}")
     ids = plan.camera_ids
     for k, cid in enumerate(ids):
         shared = [(ids[j], int((plan.seen[k] & plan.seen[j]).sum())) for j in range(len(ids))
                   if j != k]
         pairs = ", ".join(f"{cj} {n}" for cj, n in shared if n)
-        click.echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
+        echo(f"  {cid}: sees {int(plan.seen[k].sum())} points; shared with {pairs or '–'}")
     said = f"time: about {duration_words(plan.minutes)} with a tape (a minute a point)"
     if plan.minutes >= 60:  # hours of work: a wand needs none of it
         try:
@@ -208,7 +209,7 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
             said += (f"; a wand survey needs no tape: 5 marks on the floor (about 5 min) and "
                      f"about {duration_words(wand_route.minutes)} of waving a 0.5 m wand "
                      f"(vlpcal survey plan -d {deployment_path} --wand 0.5 --out marks.csv)")
-    click.echo(said)
+    echo(said)
 
 
 def _echo_free_plan(plan, route, out, wand=None) -> None:
@@ -220,56 +221,56 @@ def _echo_free_plan(plan, route, out, wand=None) -> None:
     from ..survey.plan import duration_words
     if wand is not None:
         axis = {"x": "+x", "y": "+y"}[plan.axis]
-        click.echo(f"wand survey ({wand:g} m between its LEDs; no tape): {len(plan.ids)} marks on "
-                   f"the floor, each seen by two cameras or more → {out} (its empty cells: not "
-                   f"measured), map {out.with_suffix('.png')}; put a mark where each is said "
-                   "(in the plan's frame, to a few cm) and let the cameras see the LED on it:")
+        echo(f"wand survey ({wand:g} m between its LEDs; no tape): {len(plan.ids)} marks on "
+             f"the floor, each seen by two cameras or more → {out} (its empty cells: not "
+             f"measured), map {out.with_suffix('.png')}; put a mark where each is said "
+             "(in the plan's frame, to a few cm) and let the cameras see the LED on it:")
         o = plan.xyz[0, :2]
         for pid, (x, y, _), seen in zip(plan.ids, plan.xyz, plan.seen.T):
             who = "+".join(c for c, s in zip(plan.camera_ids, seen) if s)
             what = ("the origin" if pid == "O" else
                     f"{np.hypot(x - o[0], y - o[1]):.2f} m along the plan's {axis} from O: the "
                     "calibrated frame's +x" if pid == "X" else "anywhere near, on the floor")
-            click.echo(f"  {pid}: ({x:.2f}, {y:.2f}) m, {what}; seen by {who}")
+            echo(f"  {pid}: ({x:.2f}, {y:.2f}) m, {what}; seen by {who}")
     else:
         hs = sorted(set(plan.xyz[:, 2].round(6)))
-        click.echo(f"{len(plan.ids)} reference points at h = {', '.join(f'{h:g}' for h in hs)} m "
-                   f"→ {out}, map {out.with_suffix('.png')}: measure each to "
-                   f"{format_length(plan.mark)} (about {duration_words(plan.minutes)}), and let "
-                   "the cameras see the LED there")
+        echo(f"{len(plan.ids)} reference points at h = {', '.join(f'{h:g}' for h in hs)} m "
+             f"→ {out}, map {out.with_suffix('.png')}: measure each to "
+             f"{format_length(plan.mark)} (about {duration_words(plan.minutes)}), and let "
+             "the cameras see the LED there")
         for pid, (x, y, z), seen in zip(plan.ids, plan.xyz, plan.seen.T):
             who = "+".join(c for c, s in zip(plan.camera_ids, seen) if s)
-            click.echo(f"  {pid}: ({x:.3f}, {y:.3f}, {z:.3f}) m, seen by {who}")
+            echo(f"  {pid}: ({x:.3f}, {y:.3f}, {z:.3f}) m, seen by {who}")
     stops = f"{len(route.stops)} stop{'s' if len(route.stops) > 1 else ''}"
     time = (f"about {duration_words(route.minutes)}" if route.low == route.high else
             f"one sweep each: about {duration_words(route.minutes)}")
     low = np.flatnonzero(route.tops < route.high - 1e-9)
     if route.low == route.high:
-        click.echo(f"then, while the cameras record, drive the robot (its LED at {route.low:g} m) "
-                   f"through {stops} ({time}) and over the floor between them (the map shows the "
-                   "route); calibrate with --free-height " f"{route.low:g}:")
+        echo(f"then, while the cameras record, drive the robot (its LED at {route.low:g} m) "
+             f"through {stops} ({time}) and over the floor between them (the map shows the "
+             "route); calibrate with --free-height " f"{route.low:g}:")
     else:
         what = "wave the wand" if wand is not None else "carry the LED"
-        click.echo(f"then, while the cameras record, {what} along {stops} ({time}), sweeping "
-                   f"{'its LEDs' if wand is not None else 'it'} from {route.low:g} to "
-                   f"{route.high:g} m and back at each"
-                   + (f" ({len(low)} stop{'s' if len(low) != 1 else ''} only as high as said: "
-                      "there two cameras share a thin overlap near the floor)" if len(low) else "")
-                   + " (the map shows the route; walk it again until `survey capture` has "
-                   f"its {CAPTURE_SETS} sets, {CAPTURE_SECONDS / 60:g} min at 10 a second):")
+        echo(f"then, while the cameras record, {what} along {stops} ({time}), sweeping "
+             f"{'its LEDs' if wand is not None else 'it'} from {route.low:g} to "
+             f"{route.high:g} m and back at each"
+             + (f" ({len(low)} stop{'s' if len(low) != 1 else ''} only as high as said: "
+                "there two cameras share a thin overlap near the floor)" if len(low) else "")
+             + " (the map shows the route; walk it again until `survey capture` has "
+             f"its {CAPTURE_SETS} sets, {CAPTURE_SECONDS / 60:g} min at 10 a second):")
     for n, ((x, y), pairs, quarters, t) in enumerate(
             zip(route.stops, route.pairs, route.quarters, route.tops), start=1):
         what = [f"pairs {', '.join(f'{a}+{b}' for a, b in pairs)}"] if pairs else []
         what += [", ".join(quarters)] if quarters else []
         what += [f"sweep only to {t:.2f} m"] if t < route.high - 1e-9 else []
-        click.echo(f"  {n:2d}. ({x:.2f}, {y:.2f}) m: {'; '.join(what)}")
+        echo(f"  {n:2d}. ({x:.2f}, {y:.2f}) m: {'; '.join(what)}")
     lines = route.linkage.sentences()
     if len(route.groups) <= 1:
-        click.echo(f"linked: {lines[0]}")
+        echo(f"linked: {lines[0]}")
         return
-    click.echo(f"warning: {lines[0]}; a free survey would refuse them after the measuring:")
+    echo(f"warning: {lines[0]}; a free survey would refuse them after the measuring:")
     for line in lines[1:]:
-        click.echo(f"warning: {line}")
+        echo(f"warning: {line}")
 
 
 @survey.command("capture")
@@ -358,8 +359,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     sources = _camera_sources(cameras, dep)
     missing = [c.id for c in dep.cameras if c.id not in sources]
     if missing:
-        click.echo(f"note: no --camera for {', '.join(missing)}: their frames stay missing",
-                   err=True)
+        echo(f"note: no --camera for {', '.join(missing)}: their frames stay missing",
+             err=True)
     from pathlib import Path
 
     # every camera is asked for a frame before the walk starts (and before any file exists)
@@ -372,8 +373,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
         raise NoCameraAnswered(f"no camera answered ({said}): check their power, network and "
                                "the --camera URLs before the walk; nothing was written")
     for cid, (ok, what) in answers.items():
-        click.echo(f"camera {cid}: {what}" + ("" if ok else "; going on without it"),
-                   err=True)
+        echo(f"camera {cid}: {what}" + ("" if ok else "; going on without it"),
+             err=True)
     hub = server = None
     if view_bind is not None:
         from ..view.tap import FrameTap
@@ -394,7 +395,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     delay = (1.0 if yes else 0.0) if delay is None else delay
 
     def say(line: str) -> None:
-        click.echo(line)
+        echo(line)
         sys.stdout.flush()
 
     # per prompt: the keys shown, and what each means (Enter is "")
@@ -412,7 +413,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
         shown, own = keys[kind]
         choices = {**own, "s": "skip", "b": "back", "q": "quit"}
         while True:
-            click.echo(f"{prompt}  [{shown}] > ", nl=False)
+            echo(f"{prompt}  [{shown}] > ", nl=False)
             sys.stdout.flush()
             line = sys.stdin.readline()
             if not line:  # end of input: stop, resumable
@@ -424,7 +425,7 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
                 continue
             if choices[key] != "extra":
                 return Step(choices[key])
-            click.echo("  measured position of the extra point, x y z in metres > ", nl=False)
+            echo("  measured position of the extra point, x y z in metres > ", nl=False)
             sys.stdout.flush()
             try:
                 vals = [float(t) for t in sys.stdin.readline().replace(",", " ").split()]
@@ -455,8 +456,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
                                      say, wand, hub)
         except KeyboardInterrupt:
             grouper.stop()
-            click.echo(f"\ninterrupted: the free sets so far are safe in {survey_path}; run the "
-                       "same command to resume", err=True)
+            echo(f"\ninterrupted: the free sets so far are safe in {survey_path}; run the "
+                 "same command to resume", err=True)
             sys.exit(130)
         frames = Burst(grouper, burst)  # the reference points' bursts start afresh
     session = CaptureSession(dep, ids, xyz, appender, frames, ask, say,
@@ -478,8 +479,8 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
             shutil.rmtree(bundle, ignore_errors=True)  # nothing captured: leave nothing
     done = len(done_ids)
     if n is None:
-        click.echo(f"\ninterrupted: {done} points are safe in {survey_path}; run the same "
-                   "command to resume", err=True)
+        echo(f"\ninterrupted: {done} points are safe in {survey_path}; run the same "
+             "command to resume", err=True)
         sys.exit(130)
     if session.stalled:
         raise click.ClickException(
@@ -656,7 +657,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     test = _read_test_points(dep, test_path, survey_path, bundle) if test_path else None
     uv, notes = survey_spots(dep, bundle)
     for note in notes:
-        click.echo(note, err=True)
+        echo(note, err=True)
     X, ids = bundle.xyz, bundle.point_ids
     _check_survey_positions(survey_path, dep, X, ids)
     if bundle.free_ids:
@@ -682,14 +683,14 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
                              f"Calibrated by vlpcal survey calibrate from {survey_path}.")
     label = {fusion: row for row, fusion in FUSION_OF.items()}[result.fusion]
     if all(st["mean"] is None for st in result.stats.values()):
-        click.echo("warning: no held-out survey point got a fix (none was seen by two "
-                   "cameras): nothing says how well these cameras locate; survey where they "
-                   "overlap", err=True)
-        click.echo(f"\nwrote {paths[0]} (fusion {result.fusion}: no fusion could be compared), "
-                   f"{paths[1]}, {paths[2]}")
+        echo("warning: no held-out survey point got a fix (none was seen by two "
+             "cameras): nothing says how well these cameras locate; survey where they "
+             "overlap", err=True)
+        echo(f"\nwrote {paths[0]} (fusion {result.fusion}: no fusion could be compared), "
+             f"{paths[1]}, {paths[2]}")
         return
-    click.echo(f"\nwrote {paths[0]} (fusion {result.fusion}: the table's row '{label}', the "
-               f"best held out), {paths[1]}, {paths[2]}")
+    echo(f"\nwrote {paths[0]} (fusion {result.fusion}: the table's row '{label}', the "
+         f"best held out), {paths[1]}, {paths[2]}")
 
 
 def _write_or_refuse(out, result, notes, survey_path, header):
@@ -747,7 +748,7 @@ def _read_test_points(dep, test_path, survey_path, survey):
                             "sees)")
     uv, notes = survey_spots(dep, tb)
     for note in notes:
-        click.echo(f"test points: {note}", err=True)
+        echo(f"test points: {note}", err=True)
     return tb.point_ids, tb.xyz, uv
 
 
@@ -769,7 +770,7 @@ def _report_test_points(result, test) -> None:
     why = [f"{n} {said.get(status, status)}" for status, n in tp["statuses"].items()]
     unfixed = f" ({'; '.join(why)})" if why else ""
     if not fixed:
-        click.echo(f"\ntest points: none of {tp['points']} was fixed{unfixed}")
+        echo(f"\ntest points: none of {tp['points']} was fixed{unfixed}")
         return
     cal = getattr(result, "calibration", None)
     sigma = cal.point_sigma if cal is not None else result.precision["point_sigma_m"]
@@ -779,10 +780,10 @@ def _report_test_points(result, test) -> None:
         own = (f"whose own measurement error is in these figures: at the references' "
                f"±{format_length(sigma)} per axis, about {format_length(sigma * 1.596)} of the "
                "mean")
-    click.echo(f"\ntest points (never used by the calibration): {fixed} of {tp['points']} "
-               f"fixed{unfixed}, mean {format_length(tp['mean'])}, p95 "
-               f"{format_length(tp['p95'])}, max {format_length(tp['max'])} from their measured "
-               f"positions ({own})")
+    echo(f"\ntest points (never used by the calibration): {fixed} of {tp['points']} "
+         f"fixed{unfixed}, mean {format_length(tp['mean'])}, p95 "
+         f"{format_length(tp['p95'])}, max {format_length(tp['max'])} from their measured "
+         f"positions ({own})")
 
 
 def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes, quiet,
@@ -821,7 +822,7 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                             f"spot ({u[i][j]:g}, {v[i][j]:g}) is outside its "
                             f"{cam.width}×{cam.height} image (expected pixels within it)")
     for note in free_notes:
-        click.echo(note, err=True)
+        echo(note, err=True)
     n_ref = len(bundle.point_ids)
     try:
         from ..survey.free import MAX_LEFT_OUT
@@ -845,29 +846,29 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
     marks = cal.in_marks_frame  # frame marks among the references
     marks_only = cal.marks_only
     refs = "marks" if marks_only else "references"
-    click.echo(f"free survey: {result.free_sets} sets (moments a camera saw the LED), "
-               f"{cal.used_sets} used (seen by "
-               + ("a camera at the stated height" if free_height is not None else
-                  "two or more cameras")
-               + f"); {sum(cal.rejected.values())} spots rejected, {cal.dropped_sets} sets of "
-               f"two views that disagree dropped; {refs} ±"
-               f"{cal.point_sigma * 1000:.2g} mm {'in height' if marks_only else 'per axis'} ("
-               + ("estimated" if cal.point_sigma_estimated else
-                  "assumed" if cal.point_sigma_assumed else "as stated")
-               + f"), spots ±{cal.pixel_sigma:.3g} px")
+    echo(f"free survey: {result.free_sets} sets (moments a camera saw the LED), "
+         f"{cal.used_sets} used (seen by "
+         + ("a camera at the stated height" if free_height is not None else
+            "two or more cameras")
+         + f"); {sum(cal.rejected.values())} spots rejected, {cal.dropped_sets} sets of "
+         f"two views that disagree dropped; {refs} ±"
+         f"{cal.point_sigma * 1000:.2g} mm {'in height' if marks_only else 'per axis'} ("
+         + ("estimated" if cal.point_sigma_estimated else
+            "assumed" if cal.point_sigma_assumed else "as stated")
+         + f"), spots ±{cal.pixel_sigma:.3g} px")
     for note in cal.notes:
-        click.echo(f"note: {note}")
+        echo(f"note: {note}")
     for words in result.lens:
-        click.echo(f"  {words}")
-    click.echo(f"\n{'camera':8s} {'spread px':>9s} {'free sets':>9s} {'rejected':>8s} "
-               f"{'moved':>9s} {'turned °':>8s}  lens")
+        echo(f"  {words}")
+    echo(f"\n{'camera':8s} {'spread px':>9s} {'free sets':>9s} {'rejected':>8s} "
+         f"{'moved':>9s} {'turned °':>8s}  lens")
     for r in result.cameras:
-        click.echo(f"{r['camera'][:8]:8s} {r['spread_px']:9.3f} {r['free_sets_seen']:9d} "
-                   f"{r['rejected_spots']:8d} {r['moved_m'] * 1000:6.1f} mm "
-                   f"{r['turned_deg']:8.2f}  {r['lens_model']}")
-    click.echo("\nwhere the free LED went, in each camera's image:")
+        echo(f"{r['camera'][:8]:8s} {r['spread_px']:9.3f} {r['free_sets_seen']:9d} "
+             f"{r['rejected_spots']:8d} {r['moved_m'] * 1000:6.1f} mm "
+             f"{r['turned_deg']:8.2f}  {r['lens_model']}")
+    echo("\nwhere the free LED went, in each camera's image:")
     for r in result.cameras:
-        click.echo(f"  {r['coverage']}")
+        echo(f"  {r['coverage']}")
     loo = cal.leave_one_out[np.isfinite(cal.leave_one_out)]
     if len(loo):
         tape = cal.point_sigma * 1000 * math.sqrt(3)
@@ -875,77 +876,77 @@ def _calibrate_free(dep, bundle, uv, out, lens, point_sigma, free_height, notes,
                f"them, ±{cal.point_sigma * 1000:.1f} mm "
                f"{'assumed' if cal.point_sigma_assumed else 'as stated'}, is in these figures"
                if marks_only else f"their own tape, ±{tape:.1f} mm in 3D, included")
-        click.echo(f"\n{refs}, each left out in turn where the rest still fix the room (its "
-                   f"spots place it): mean {loo.mean() * 1000:.1f} mm, max "
-                   f"{loo.max() * 1000:.1f} mm over {len(loo)} of them ({own})")
+        echo(f"\n{refs}, each left out in turn where the rest still fix the room (its "
+             f"spots place it): mean {loo.mean() * 1000:.1f} mm, max "
+             f"{loo.max() * 1000:.1f} mm over {len(loo)} of them ({own})")
     else:
-        click.echo(f"\n{refs}: too few to leave one out (the rest must still fix the room)")
+        echo(f"\n{refs}: too few to leave one out (the rest must still fix the room)")
     _print_suspects(cal.suspects, bundle.root / "points.csv", held_out=False)
-    click.echo(f"your {n_ref} "
-               + ("marks" if marks_only else "reference points and marks" if marks else
-                  "reference points")
-               + (f" and the wand's length (±{WAND_PRECISION:.1%})" if wand else "")
-               + f" fix the room to about {cal.datum_floor * 1000:.1f} mm (the datum floor: no "
-               "calibration does better on average"
-               + (f", predicted at the ±{cal.point_sigma * 1000:g} mm assumed"
-                  if cal.point_sigma_assumed else "") + "); "
-               + ("place the LED on the marks more carefully (--point-sigma says how well), or "
-                  "add floor marks, to do better" if marks else
-                  "measure more points, or more precisely, to do better"))
+    echo(f"your {n_ref} "
+         + ("marks" if marks_only else "reference points and marks" if marks else
+            "reference points")
+         + (f" and the wand's length (±{WAND_PRECISION:.1%})" if wand else "")
+         + f" fix the room to about {cal.datum_floor * 1000:.1f} mm (the datum floor: no "
+         "calibration does better on average"
+         + (f", predicted at the ±{cal.point_sigma * 1000:g} mm assumed"
+            if cal.point_sigma_assumed else "") + "); "
+         + ("place the LED on the marks more carefully (--point-sigma says how well), or "
+            "add floor marks, to do better" if marks else
+            "measure more points, or more precisely, to do better"))
     if marks:
-        click.echo("the calibrated deployment is in the marks' frame: O is its origin, X on "
-                   "its +x axis, the floor marks at z = 0 (the room moved with the cameras)")
+        echo("the calibrated deployment is in the marks' frame: O is its origin, X on "
+             "its +x axis, the floor marks at z = 0 (the room moved with the cameras)")
     if cal.wand_error is not None:
         w = cal.wand_error
         worst = max(w.per_camera.items(), key=lambda t: -1 if np.isnan(t[1]) else t[1])
-        click.echo(f"wand: {w.sets} held-out sets (never in the fit) triangulate its "
-                   f"{wand * 1000:g} mm to ±{w.mean * 1000:.2f} mm on average (p95 "
-                   f"{w.p95 * 1000:.2f} mm; worst camera {worst[0]} {worst[1] * 1000:.2f} mm)"
-                   + (f"; {w.discarded} more whose spots do not meet (a reflection or another "
-                      "light taken for an end) left out" if w.discarded else ""))
+        echo(f"wand: {w.sets} held-out sets (never in the fit) triangulate its "
+             f"{wand * 1000:g} mm to ±{w.mean * 1000:.2f} mm on average (p95 "
+             f"{w.p95 * 1000:.2f} mm; worst camera {worst[0]} {worst[1] * 1000:.2f} mm)"
+             + (f"; {w.discarded} more whose spots do not meet (a reflection or another "
+                "light taken for an end) left out" if w.discarded else ""))
     if math.isfinite(cal.predicted_error):
-        click.echo(f"predicted: fixes with these cameras {format_length(cal.predicted_error)} "
-                   "off on average over the floor (the survey's adjustment, linearised; exact "
-                   f"cameras: {format_length(cal.exact_error)})")
+        echo(f"predicted: fixes with these cameras {format_length(cal.predicted_error)} "
+             "off on average over the floor (the survey's adjustment, linearised; exact "
+             f"cameras: {format_length(cal.exact_error)})")
     if cal.references_disagree:
         loo_mm = float(np.nanmean(cal.leave_one_out)) * 1000
         allowed = cal.left_out_allowed * 1000
-        click.echo(f"warning: this survey fixes the cameras weakly: its references, each left "
-                   f"out in turn, land {loo_mm:.1f} mm from their records on average where "
-                   f"their own noise and the predicted error allow about {allowed:.1f} mm — "
-                   "cameras whose lens and pose the free LED could not tell apart; measure "
-                   "references where those cameras see, wave a wand (--wand), or give "
-                   "--test-points to see")
+        echo(f"warning: this survey fixes the cameras weakly: its references, each left "
+             f"out in turn, land {loo_mm:.1f} mm from their records on average where "
+             f"their own noise and the predicted error allow about {allowed:.1f} mm — "
+             "cameras whose lens and pose the free LED could not tell apart; measure "
+             "references where those cameras see, wave a wand (--wand), or give "
+             "--test-points to see")
     elif cal.weakly_fixed:
         from ..survey import plan_references
 
         asked = len(plan_references(dep).ids)
-        click.echo(f"warning: this survey fixes the cameras weakly: fixes are predicted "
-                   f"{format_length(cal.predicted_error)} off, where exact cameras in the frame "
-                   f"of your references would be "
-                   f"{format_length(math.hypot(cal.exact_error, cal.datum_floor))}: the free LED "
-                   f"cannot fix the lenses across the cameras' overlaps with {n_ref} references; "
-                   f"measure more (survey plan --free asks for {asked}), or give --test-points "
-                   "to see")
+        echo(f"warning: this survey fixes the cameras weakly: fixes are predicted "
+             f"{format_length(cal.predicted_error)} off, where exact cameras in the frame "
+             f"of your references would be "
+             f"{format_length(math.hypot(cal.exact_error, cal.datum_floor))}: the free LED "
+             f"cannot fix the lenses across the cameras' overlaps with {n_ref} references; "
+             f"measure more (survey plan --free asks for {asked}), or give --test-points "
+             "to see")
     for r in result.cameras:
         if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
-            click.echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
-                       f"({r['moved_share']:.0%} of its distance to the free LED) and turned "
-                       f"{r['turned_deg']:.1f}° from the deployment: is this survey from this "
-                       "site, and are its camera ids right?")
+            echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
+                 f"({r['moved_share']:.0%} of its distance to the free LED) and turned "
+                 f"{r['turned_deg']:.1f}° from the deployment: is this survey from this "
+                 "site, and are its camera ids right?")
     if result.scale_doubtful:
         top = max(c.position[2] for c in result.deployment.cameras)
         said = (f"the wand's length ({format_length(wand)})" if wand is not None else
                 "the references' measurements (their units, a misread tape)")
-        click.echo(f"warning: the calibrated cameras stand {result.plan_scale:.2f} × as high "
-                   f"above the floor as the deployment's (the highest {format_length(top)}, "
-                   f"under a {format_length(dep.ceiling_height)} ceiling): check {said}")
+        echo(f"warning: the calibrated cameras stand {result.plan_scale:.2f} × as high "
+             f"above the floor as the deployment's (the highest {format_length(top)}, "
+             f"under a {format_length(dep.ceiling_height)} ceiling): check {said}")
     _report_test_points(result, test)
     paths = _write_or_refuse(out, result, notes + free_notes, survey_path,
                              f"Calibrated by vlpcal survey calibrate from {survey_path} (free "
                              "survey).")
-    click.echo(f"\nwrote {paths[0]} (fusion robust: all cameras by least squares), {paths[1]}, "
-               f"{paths[2]}")
+    echo(f"\nwrote {paths[0]} (fusion robust: all cameras by least squares), {paths[1]}, "
+         f"{paths[2]}")
 
 
 def _print_lens_table(result) -> None:
@@ -959,24 +960,24 @@ def _print_lens_table(result) -> None:
     if not rows or d is None:
         return
     if not d.points:
-        click.echo("  no survey point was seen by two cameras: each lens was chosen by its own "
-                   "held-out reprojection error")
+        echo("  no survey point was seen by two cameras: each lens was chosen by its own "
+             "held-out reprojection error")
         return
     figures = [c.get("held_out_3d_m") for r in rows for c in r["lens_candidates"].values()]
     unit, scale = _unit_for([f for f in figures if f is not None])
     for cid, s in d.starts_disagree.items():
         nom = next(c for c in result.deployment.cameras if c.id == cid)
         centre = ((nom.width - 1) / 2, (nom.height - 1) / 2)
-        click.echo(f"  {cid}: its fit ({s.model}) has more than one minimum: the principal point "
-                   f"{s.chained[0] - centre[0]:+.0f}, {s.chained[1] - centre[1]:+.0f} px from "
-                   f"the image centre (from the simpler fits) or {s.best[0] - centre[0]:+.0f}, "
-                   f"{s.best[1] - centre[1]:+.0f} px (from the data's own starts, "
-                   f"{s.cost_ratio:.3g} × lower in cost): the lower kept, then refined with "
-                   "the rest")
-    click.echo(f"held-out 3D error per camera's lens model, {unit} (each camera fitted alone, "
-               f"the others as chosen; * chosen: the simplest within one standard error of "
-               f"the lowest; – not fitted):\n  {'camera':8s}"
-               + "".join(f"{m:>11s}" for m in LENS_MODELS))
+        echo(f"  {cid}: its fit ({s.model}) has more than one minimum: the principal point "
+             f"{s.chained[0] - centre[0]:+.0f}, {s.chained[1] - centre[1]:+.0f} px from "
+             f"the image centre (from the simpler fits) or {s.best[0] - centre[0]:+.0f}, "
+             f"{s.best[1] - centre[1]:+.0f} px (from the data's own starts, "
+             f"{s.cost_ratio:.3g} × lower in cost): the lower kept, then refined with "
+             "the rest")
+    echo(f"held-out 3D error per camera's lens model, {unit} (each camera fitted alone, "
+         f"the others as chosen; * chosen: the simplest within one standard error of "
+         f"the lowest; – not fitted):\n  {'camera':8s}"
+         + "".join(f"{m:>11s}" for m in LENS_MODELS))
     for r in rows:
         cells = []
         for m in LENS_MODELS:
@@ -984,21 +985,21 @@ def _print_lens_table(result) -> None:
             cell = "–" if v is None else f"{v * scale:.3g}" + ("*" if m == r["lens_model"]
                                                                 else "")
             cells.append(f"{cell:>11s}")
-        click.echo(f"  {r['camera']:8s}" + "".join(cells))
+        echo(f"  {r['camera']:8s}" + "".join(cells))
     import math
 
     capped = (f"; {d.opencv_capped} of its points past the {format_length(d.cap_m)} cap, "
               "where a fold it could not fit or a wild fix counts" if d.opencv_capped else "")
-    click.echo(f"  this choice {format_length(d.held_out_m)}; plain OpenCV calibrateCamera "
-               f"(full lens, from the deployment's) "
-               f"{format_length(d.opencv_m) if math.isfinite(d.opencv_m) else 'no fit'} on the "
-               f"same folds{capped} ({d.points} points seen by two or more cameras, "
-               "triangulated by least squares; the k-fold table below fits cameras and points "
-               "jointly and fixes points as the locator does)")
+    echo(f"  this choice {format_length(d.held_out_m)}; plain OpenCV calibrateCamera "
+         f"(full lens, from the deployment's) "
+         f"{format_length(d.opencv_m) if math.isfinite(d.opencv_m) else 'no fit'} on the "
+         f"same folds{capped} ({d.points} points seen by two or more cameras, "
+         "triangulated by least squares; the k-fold table below fits cameras and points "
+         "jointly and fixes points as the locator does)")
     if d.held_out_m > d.opencv_m:
-        click.echo(f"warning: plain OpenCV locates the held-out survey points better "
-                   f"({format_length(d.opencv_m)} against {format_length(d.held_out_m)})",
-                   err=True)
+        echo(f"warning: plain OpenCV locates the held-out survey points better "
+             f"({format_length(d.opencv_m)} against {format_length(d.held_out_m)})",
+             err=True)
 
 
 def _unit_for(values) -> tuple[str, float]:
@@ -1016,51 +1017,51 @@ def _print_calibration(result, folds: int) -> None:
 
     n = len(result.points)
     prec = result.precision
-    click.echo("\nlens, per camera (chosen by the held-out 3D error of survey points unless "
-               "--lens forces one):")
+    echo("\nlens, per camera (chosen by the held-out 3D error of survey points unless "
+         "--lens forces one):")
     for sentence in result.lens:
-        click.echo(f"  {sentence}")
+        echo(f"  {sentence}")
     _print_lens_table(result)
     how = "estimated from the fit" if prec["estimated"] else "as stated"
-    click.echo(f"survey positions: ±{format_length(prec['point_sigma_m'])} per axis ({how}); spots "
-               f"±{prec['pixel_sigma_px']:.2g} px")
+    echo(f"survey positions: ±{format_length(prec['point_sigma_m'])} per axis ({how}); spots "
+         f"±{prec['pixel_sigma_px']:.2g} px")
     # one unit for the table, chosen so that the best row reads with three figures
     unit, scale = _unit_for([st["mean"] for st in result.stats.values()
                              if st["mean"] is not None])
-    click.echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), {unit}; the "
-               "reference is the measured position itself "
-               f"(±{format_length(prec['point_sigma_m'])} per axis ≈ "
-               f"{format_length(prec['point_sigma_m'] * 3 ** 0.5)} in 3D):")
-    click.echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p95':>7s} {'max':>7s} {'fixed':>6s}")
+    echo(f"\nheld-out 3D error ({folds}-fold by survey point, {n} points), {unit}; the "
+         "reference is the measured position itself "
+         f"(±{format_length(prec['point_sigma_m'])} per axis ≈ "
+         f"{format_length(prec['point_sigma_m'] * 3 ** 0.5)} in 3D):")
+    echo(f"{'':32s} {'mean':>7s} {'median':>7s} {'p95':>7s} {'max':>7s} {'fixed':>6s}")
     for label, st in result.stats.items():
         if st["mean"] is None:
-            click.echo(f"{label:32s} {'–':>7s} {'':23s} {st['fixed']:6.0%}")
+            echo(f"{label:32s} {'–':>7s} {'':23s} {st['fixed']:6.0%}")
             continue
         cells = " ".join(f"{st[k] * scale:7.3f}" if st[k] * scale < 10 else
                          f"{st[k] * scale:7.1f}" for k in ("mean", "median", "p95", "max"))
-        click.echo(f"{label:32s} {cells} {st['fixed']:6.0%}")
-    click.echo("(fixed: share of the held-out points with a fix; a point one camera saw "
-               "has none)")
-    click.echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'lens':>9s} {'moved':>9s} "
-               f"{'turned °':>9s}  rejected spots")
+        echo(f"{label:32s} {cells} {st['fixed']:6.0%}")
+    echo("(fixed: share of the held-out points with a fix; a point one camera saw "
+         "has none)")
+    echo(f"\n{'camera':8s} {'RMS px':>7s} {'points':>7s} {'lens':>9s} {'moved':>9s} "
+         f"{'turned °':>9s}  rejected spots")
     for r in result.cameras:
-        click.echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['lens_model']:>9s} "
-                   f"{format_length(r['moved_m']):>9s} {r['turned_deg']:9.2f}  "
-                   f"{', '.join(r['outliers']) or '–'}")
+        echo(f"{r['camera']:8s} {r['rms_px']:7.3f} {r['points']:7d} {r['lens_model']:>9s} "
+             f"{format_length(r['moved_m']):>9s} {r['turned_deg']:9.2f}  "
+             f"{', '.join(r['outliers']) or '–'}")
     for r in result.cameras:
         if r["moved_share"] > 0.2 or r["turned_deg"] > 20:
             traded = r["lens_model"] != "pose" and "weakly determined" in r["lens"]
             why = ("; its lens line says its fit trades the lens against the pose: the move "
                    "may be that, not the camera" if traded else
                    ": is this survey from this site, and are the camera ids the same?")
-            click.echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
-                       f"({r['moved_share']:.0%} of its distance to the survey) and turned "
-                       f"{r['turned_deg']:.0f}° from the deployment{why}", err=True)
+            echo(f"warning: camera {r['camera']} moved {format_length(r['moved_m'])} "
+                 f"({r['moved_share']:.0%} of its distance to the survey) and turned "
+                 f"{r['turned_deg']:.0f}° from the deployment{why}", err=True)
     if result.mismeasured:
-        click.echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
-                   "from its record the calibrated cameras put the LED):")
+        echo("\nmis-measured survey points (rejected by the cameras that saw them; how far "
+             "from its record the calibrated cameras put the LED):")
         for pid, off in result.mismeasured:
-            click.echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
+            echo(f"  {pid}: {format_length(off)}" if np.isfinite(off) else f"  {pid}: –")
     _print_suspects(result.suspects, "points.csv", held_out=True)
 
 
@@ -1070,8 +1071,8 @@ def _print_suspects(suspects, points, held_out: bool) -> None:
     from ..survey.suspects import suspect_words
 
     for s in suspects:
-        click.echo(f"warning: {suspect_words(s, held_out)} Check it and correct it in {points} "
-                   "(or delete its line), then calibrate again.")
+        echo(f"warning: {suspect_words(s, held_out)} Check it and correct it in {points} "
+             "(or delete its line), then calibrate again.")
 
 
 def _check_wand_fits(wand, dep, to_wave: bool = False) -> None:

@@ -7,7 +7,16 @@ import re
 
 import click
 
-from .common import Finite, FitCheck, UserError, _load_deployment, _output_file, _same_file, main
+from .common import (
+    Finite,
+    FitCheck,
+    UserError,
+    _load_deployment,
+    _output_file,
+    _same_file,
+    echo,
+    main,
+)
 from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary, subscriber_notes
 from .view import DEFAULT_BIND
 
@@ -77,9 +86,9 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
     if ca_file:  # what the tracks must never overwrite
         _output_file(out, inputs=(deployment_path, ca_file), what="the tracks")
     if spots is not None and spots < len(dep.leds):  # a warning: -q hides none
-        click.echo(f"warning: --leds {spots}: {deployment_path} has {len(dep.leds)} LEDs in "
-                   f"its leds: block; each frame is searched for {spots} spot(s), so the "
-                   "others are not tracked whenever more are in view", err=True)
+        echo(f"warning: --leds {spots}: {deployment_path} has {len(dep.leds)} LEDs in "
+             f"its leds: block; each frame is searched for {spots} spot(s), so the "
+             "others are not tracked whenever more are in view", err=True)
     if plot is not None:
         if not str(plot).lower().endswith(".png"):
             raise UserError(f"--plot {plot}: the figure is a PNG picture (.png)")
@@ -117,14 +126,14 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
             with OutputSet(plot) as (png,):
                 track_figure(png, dep, rows, f"{dep.name}: vlpcal track → {out}")
             if not quiet:
-                click.echo(f"figure → {plot}", err=True)
+                echo(f"figure → {plot}", err=True)
     finally:
         if server is not None:
             server.close()
         if publisher:
             publisher.close()
             if not quiet:
-                click.echo(publisher_summary(publisher), err=True)
+                echo(publisher_summary(publisher), err=True)
 
 
 class _Layouts:
@@ -142,7 +151,7 @@ class _Layouts:
         for misfit in self.tracker.layout_misfits():
             if (misfit.body, misfit.leds) not in self.said:
                 self.said.add((misfit.body, misfit.leds))
-                click.echo(f"warning: {misfit.message()}", err=True)
+                echo(f"warning: {misfit.message()}", err=True)
 
 
 #: why a frame could not be measured, said of frames
@@ -199,10 +208,10 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
         raise UserError(f"{frames_dir}: cameras {', '.join(unknown)} are not in "
                         f"{deployment_path} (expected its camera ids)")
     for cid, lo, hi, others in folder.alone():  # a warning: -q hides none
-        click.echo(f"warning: {folder.root / 'times.csv'}: {cid}'s capture times "
-                   f"({lo:.6g}–{hi:.6g} s) never overlap those of {', '.join(others)}, so its "
-                   "frames are never seen with theirs: are all the times on one clock?",
-                   err=True)
+        echo(f"warning: {folder.root / 'times.csv'}: {cid}'s capture times "
+             f"({lo:.6g}–{hi:.6g} s) never overlap those of {', '.join(others)}, so its "
+             "frames are never seen with theirs: are all the times on one clock?",
+             err=True)
     if fps is None:  # the slowest camera's median frame interval
         intervals = FrameIntervals(kept=None)
         for t, cid, _ in folder.events:
@@ -279,18 +288,18 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     if wrong:  # its rows before the verdict were skewed by the layout too: none written
         kept = [r for r in rows if not (r.pose is not None and r.led in wrong)]
         if len(kept) < len(rows):
-            click.echo(f"warning: {len(rows) - len(kept)} rows of {', '.join(sorted(wrong))} "
-                       "given before its layout was judged are left out of the file", err=True)
+            echo(f"warning: {len(rows) - len(kept)} rows of {', '.join(sorted(wrong))} "
+                 "given before its layout was judged are left out of the file", err=True)
         rows = kept
     if not rows:
         raise _no_rows(tracker, frames_dir, unreadable)
     _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
     if not quiet:
         bad = "; ".join(f"{n} frames {_UNREADABLE.get(w, w)}" for w, n in unreadable.items())
-        click.echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
-                   + _lag_said(tracker)
-                   + (f"; {missing} listed frames missing" if missing else "")
-                   + (f"; {bad} (not used)" if bad else ""), err=True)
+        echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
+             + _lag_said(tracker)
+             + (f"; {missing} listed frames missing" if missing else "")
+             + (f"; {bad} (not used)" if bad else ""), err=True)
     return rows
 
 
@@ -314,9 +323,9 @@ def _said_latencies(tracker) -> None:
     for cid, late in sorted(tracker.latencies().items()):
         if abs(late) < 0.1 * tracker.period:  # (within a tenth of a frame: nothing to see to)
             continue
-        click.echo(f"warning: camera {cid}'s capture times run {abs(late):.3f} s "
-                   f"{'behind' if late > 0 else 'ahead of'} the others' (seen in the LED's "
-                   "motion; its frames were placed at the times corrected)", err=True)
+        echo(f"warning: camera {cid}'s capture times run {abs(late):.3f} s "
+             f"{'behind' if late > 0 else 'ahead of'} the others' (seen in the LED's "
+             "motion; its frames were placed at the times corrected)", err=True)
 
 
 def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False) -> None:
@@ -385,7 +394,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
 
     def say(msg):
         if not quiet:
-            click.echo(msg, err=True)
+            echo(msg, err=True)
 
     t_end = time.monotonic() + duration if duration else None
     frames = TimedFrames(sources, deadline=t_end, on_event=say)
@@ -501,7 +510,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
 
     def say(msg):
         if not quiet:
-            click.echo(msg, err=True)
+            echo(msg, err=True)
 
     # refused at once if the file is there; no file: the view alone
     live = _LiveTracks(out, 0.0, bool(dep.bodies)) if out is not None else _NoTracks()
@@ -522,7 +531,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     try:
         while not (t_end and time.monotonic() > t_end):
             if (quiet_note := sub.silence()) is not None:  # a warning: -q hides none
-                click.echo(quiet_note, err=True)
+                echo(quiet_note, err=True)
             got = sub.get(timeout=0.2)
             if got is None:
                 continue

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .common import Finite, UserError, main
+from .common import Finite, UserError, echo, main
 
 #: the page's address unless told otherwise
 DEFAULT_BIND = "127.0.0.1:8765"
@@ -46,7 +46,7 @@ def open_view(dep, bind: str, source: str = "", live: bool = True, site=None, pa
     if server.token:
         line += ("  (bound beyond this machine: the page asks for this token; anyone on the "
                  "network who has the address has the view)")
-    click.echo(line, err=True)
+    echo(line, err=True)
     return hub, server
 
 
@@ -104,8 +104,8 @@ def _calibration(path) -> tuple[dict | None, bytes | None]:
         figure = png.read_bytes() if png.is_file() and png.stat().st_size <= REPORT_BYTES \
             else None
     except (OSError, ValueError, KeyError, TypeError, AttributeError, OverflowError):
-        click.echo(f"note: {report}: not a calibration report that can be read; the plan is "
-                   "shown without it", err=True)
+        echo(f"note: {report}: not a calibration report that can be read; the plan is "
+             "shown without it", err=True)
         return None, None
     return {"report": report.name, "cameras": cameras, "held_out": held,
             "figure": figure is not None}, figure
@@ -171,7 +171,7 @@ def view(path, bind, cameras, spots_url, follow_url, ca_file, duration):
             _track_live(dep, path, cameras, duration, None, None, None, None, True, None,
                         lambda watch: None, hub)
         else:
-            click.echo("Ctrl-C to stop", err=True)
+            echo("Ctrl-C to stop", err=True)
             while t_end is None or time.monotonic() < t_end:
                 time.sleep(0.2)
     except KeyboardInterrupt:
@@ -191,8 +191,8 @@ def _follow(target, ca_file, hub, t_end) -> None:
         sub = RowSubscriber(target, ca_file)
     except MqttError as e:
         raise UserError(f"--follow {e}") from None
-    click.echo(f"following {target.shown()}/{{fixes,bodies,spots}}/+ (Ctrl-C to stop)",
-               err=True)
+    echo(f"following {target.shown()}/{{fixes,bodies,spots}}/+ (Ctrl-C to stop)",
+         err=True)
     try:
         while t_end is None or time.monotonic() < t_end:
             item = sub.get(timeout=0.2)
@@ -207,9 +207,9 @@ def _follow(target, ca_file, hub, t_end) -> None:
         sub.close()
         if sub.bad:
             one = sub.bad == 1
-            click.echo(f"{sub.bad} message{'' if one else 's'} on {target.shown()} "
-                       f"{'was not a fix' if one else 'were not fixes'}, track update, body "
-                       "pose or spots (not shown)", err=True)
+            echo(f"{sub.bad} message{'' if one else 's'} on {target.shown()} "
+                 f"{'was not a fix' if one else 'were not fixes'}, track update, body "
+                 "pose or spots (not shown)", err=True)
 
 
 def _deployment_or_site(path):
