@@ -57,9 +57,22 @@ class FitCheck:
         self.say(f"warning: {misfit.message()} (going on: --keep-going)")
 
 
+#: whether a stop (Ctrl-C, SIGTERM, SIGHUP) has come: a library running Python from C
+#: (CasADi's IPOPT) may swallow the KeyboardInterrupt it raises, so a command also asks this
+#: (:func:`_stop_asked`) before it writes
+STOP = {"asked": False}
+
+
+def _stop_asked() -> None:
+    """Raises the KeyboardInterrupt of a stop that came, if a library swallowed it."""
+    if STOP["asked"]:
+        raise KeyboardInterrupt
+
+
 def _stop_on_signals() -> None:
     """SIGTERM and SIGHUP (a service manager, a closed terminal) stop a command the way Ctrl-C
-    does, through Python, so staged outputs are cleaned (or a locate's fixes so far kept)."""
+    does, through Python, so staged outputs are cleaned (or a locate's fixes so far kept);
+    each is also noted in :data:`STOP`."""
     import signal
     import threading
 
@@ -67,11 +80,23 @@ def _stop_on_signals() -> None:
         return
 
     def interrupt(signum, frame):
+        STOP["asked"] = True
         raise KeyboardInterrupt
 
     for name in ("SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), interrupt)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # (not when ignored)
+        signal.signal(signal.SIGINT, interrupt)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A library's warning (matplotlib's missing glyph of a name in a figure, say) printed as
+    Python prints it, but through :func:`echo`: it may quote a name from a file."""
+    import warnings
+
+    echo(warnings.formatwarning(message, category, filename, lineno, line).rstrip("\n"),
+         err=True)
 
 
 #: each command → the module of :mod:`vlpcal.cli` that defines it, imported when the command
@@ -103,6 +128,7 @@ class OneLineErrors(click.Group):
         from ..writing import OutputError
 
         _stop_on_signals()
+        warnings.showwarning = _show_warning
         # numbers are checked where files are read and numeric edge cases end in statuses:
         # numpy's floating-point notes (0/0 in an empty mean) are not the user's business
         warnings.simplefilter("ignore", RuntimeWarning)
