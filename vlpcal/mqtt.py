@@ -369,13 +369,13 @@ def fix_message(t: float, fix_row: dict) -> dict:
 
 def track_message(t: float, update) -> dict:
     """A track update (:class:`~vlpcal.tracking.TrackUpdate`) as its MQTT message: the CSV
-    row's numbers (µm, µm/s), null where there is none (a degenerate row's position)."""
+    row's numbers (µs, µm, µm/s), null where there is none (a degenerate row's position)."""
     def num(v):
         v = float(v)
         return round(v, 6) if math.isfinite(v) else None
 
     (x, y, z), (vx, vy, vz) = map(num, update.position), map(num, update.velocity)
-    message = {"t": t, "led": update.led, "x": x, "y": y, "z": z, "vx": vx, "vy": vy, "vz": vz,
+    message = {"t": round(float(t), 6), "led": update.led, "x": x, "y": y, "z": z, "vx": vx, "vy": vy, "vz": vz,
                "sigma_m": num(update.sigma_m), "cameras": update.cameras,
                "status": update.status}
     if update.pose is not None:  # a body's: its orientation too
