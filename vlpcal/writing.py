@@ -190,6 +190,17 @@ class OutputSet:
                               "replaced") from None
 
     def commit(self) -> list[Path]:
+        self._journal, self._moved = None, 0
+        try:
+            return self._commit()
+        except BaseException as e:  # Ctrl-C or SIGTERM before the first rename: nothing is
+            if not self._moved and not isinstance(e, Exception):  # replaced, nothing is left
+                self.discard()
+                if self._journal is not None:
+                    self._journal.unlink(missing_ok=True)
+            raise
+
+    def _commit(self) -> list[Path]:
         for s, given in zip(self.staged, self.given):
             if not os.path.lexists(s):
                 self.discard()
@@ -201,7 +212,7 @@ class OutputSet:
                 for t in self.targets]
         moves = [[str(s), str(t), str(o) if o else ""]
                  for s, t, o in zip(self.staged, self.targets, olds)]
-        journal = self._name(self.targets[-1], "commit")
+        journal = self._journal = self._name(self.targets[-1], "commit")
         if len(moves) > 1 or any(olds):
 
             def write_journal():
@@ -215,7 +226,9 @@ class OutputSet:
             for s, t, o in zip(self.staged, self.targets, olds):
                 if o:
                     os.replace(t, o)
+                    self._moved += 1
                 os.replace(s, t)
+                self._moved += 1
         except OSError as e:  # rare (the folder changed under us): the journal finishes it
             raise OutputError(f"{self.given[-1]}: renaming into place failed ({e.strerror}); "
                               "the next run in that folder finishes it") from None
@@ -225,6 +238,17 @@ class OutputSet:
                 _remove(o)
         self.staged = []
         return self.targets
+
+    def join(self, other: OutputSet) -> None:
+        """Take ``other``'s staged files into this set, renamed before its own (this set's
+        last target stays the last renamed): committed, or discarded, with it."""
+        for t, given in zip(other.targets, other.given):
+            if t in self.targets or other.folders != self.folders:
+                raise OutputError(f"{given}: the command would write two of its files there; "
+                                  "choose another name")
+        self.targets[:0], self.given[:0], self.staged[:0] = (other.targets, other.given,
+                                                             other.staged)
+        other.targets, other.given, other.staged = [], [], []
 
     def discard(self) -> None:
         for s in self.staged:

@@ -220,14 +220,28 @@ class _PlottingWriter:
         from ..reports import run_figure
         from ..writing import OutputSet
 
-        self.writer.close()
         if not self.parts:
+            self.writer.close()
             return
+        # drawn first, then renamed with the fixes as one set: a stop while drawing (or
+        # before the renames) leaves the previous fixes and figure as they were
         t, X, sigma, status = (np.concatenate(k) for k in zip(*self.parts))
-        with OutputSet(self.plot) as (png,):
+        figure = OutputSet(self.plot)
+        (png,) = figure.stage()
+        try:
             run_figure(png, self.dep, t - t.min() if self.live else t, [self.led] * len(t), X,
                        sigma, status, None, f"{self.dep.name}: vlpcal locate",
                        "time from the first fix (s)" if self.live else "frame set (in order)")
+        except BaseException:
+            figure.discard()
+            self.writer.abort()
+            raise
+        fixes = getattr(self.writer, "_set", None)  # staged fixes (a live run's are written)
+        if fixes is not None:
+            fixes.join(figure)
+        self.writer.close()
+        if fixes is None:
+            figure.commit()
         self.say(f"figure → {self.plot}")
 
     def abort(self) -> None:

@@ -51,7 +51,13 @@ def plan(site_path, out, candidate, max_cameras, quiet):
                         "go beside it")
     out = _output_file(out, inputs=(site_path,), beside=(".png",))
     say = (lambda m: None) if quiet else (lambda m: echo(m, err=True))
-    result = plan_site(site, max_cameras, progress=say)
+    from .common import _stop_asked
+
+    def progress(line):  # between solves: a stop CasADi swallowed (a solve that "failed")
+        _stop_asked()
+        say(line)
+
+    result = plan_site(site, max_cameras, progress=progress)
     r = site.requirements
     if not result.candidates and "all" in result.missing:
         raise click.ClickException(f"{site_path}: no layout of up to {max_cameras} cameras "
@@ -110,6 +116,7 @@ def plan(site_path, out, candidate, max_cameras, quiet):
     chosen = result.candidates[candidate - 1]
     dep = planned_deployment(site, chosen, candidate, site_path)
     say("  drawing the maps…")
+    _stop_asked()  # (the last solve's)
     with OutputSet(out.with_suffix(".png"), out) as (png, yaml_file):  # both, or neither
         plan_maps(png, site, chosen)
         yaml_file.write_text(dumps(dep, f"Planned by vlpcal plan from {site_path}: candidate "

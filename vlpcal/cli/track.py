@@ -118,13 +118,14 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
                                quiet, publisher, check, hub)
         else:
             rows = _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps,
-                          quiet, publisher, check)
+                          quiet, publisher, check, plot)
         if plot is not None:
             from ..reports import track_figure
             from ..writing import OutputSet
 
-            with OutputSet(plot) as (png,):
-                track_figure(png, dep, rows, f"{dep.name}: vlpcal track → {out}")
+            if not frames_dir:  # (a folder's figure is written with its tracks: _track)
+                with OutputSet(plot) as (png,):
+                    track_figure(png, dep, rows, f"{dep.name}: vlpcal track → {out}")
             if not quiet:
                 echo(f"figure → {plot}", err=True)
     finally:
@@ -190,7 +191,7 @@ def _published(publisher, rows, utc: float = 0.0):
 
 
 def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, quiet,
-           publisher, check) -> list:
+           publisher, check, plot=None) -> list:
     import sys
 
     from ..datasets import DatasetError, read_async_frames
@@ -293,7 +294,8 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
         rows = kept
     if not rows:
         raise _no_rows(tracker, frames_dir, unreadable)
-    _write_tracks(out, rows, pose_columns=bool(tracker.bodies))
+    _write_tracks(out, rows, pose_columns=bool(tracker.bodies),
+                  figure=(plot, dep, f"{dep.name}: vlpcal track → {out}") if plot else None)
     if not quiet:
         bad = "; ".join(f"{n} frames {_UNREADABLE.get(w, w)}" for w, n in unreadable.items())
         echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
@@ -328,14 +330,21 @@ def _said_latencies(tracker) -> None:
              "motion; its frames were placed at the times corrected)", err=True)
 
 
-def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False) -> None:
+def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False,
+                  figure=None) -> None:
     """The tracks file, staged and renamed (``utc``: added to each row's time;
-    ``pose_columns``: the bodies' columns too)."""
+    ``pose_columns``: the bodies' columns too; ``figure``: (png, deployment, title), drawn
+    and renamed with the tracks as one set: a stop while drawing replaces neither)."""
     import csv
 
     from ..writing import OutputSet
 
-    with OutputSet(out) as (tmp,):
+    with OutputSet(*([figure[0]] if figure else []), out) as staged:
+        tmp = staged[-1]
+        if figure:
+            from ..reports import track_figure
+
+            track_figure(staged[0], figure[1], rows, figure[2])
         with open(tmp, "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(_columns(pose_columns))
