@@ -375,9 +375,9 @@ def track_message(t: float, update) -> dict:
         return round(v, 6) if math.isfinite(v) else None
 
     (x, y, z), (vx, vy, vz) = map(num, update.position), map(num, update.velocity)
-    message = {"t": round(float(t), 6), "led": update.led, "x": x, "y": y, "z": z, "vx": vx, "vy": vy, "vz": vz,
-               "sigma_m": num(update.sigma_m), "cameras": update.cameras,
-               "status": update.status}
+    message = {"t": round(float(t), 6), "led": update.led, "x": x, "y": y, "z": z,
+               "vx": vx, "vy": vy, "vz": vz, "sigma_m": num(update.sigma_m),
+               "cameras": update.cameras, "status": update.status}
     if update.pose is not None:  # a body's: its orientation too
         message.update(zip(("yaw", "pitch", "roll", "sigma_yaw"), map(num, update.pose)))
     return message
