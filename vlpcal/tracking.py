@@ -1391,7 +1391,10 @@ class Tracker:
         variance (its fit moves with them); None when its rays want a latency past what one
         window's linear word can tell (:data:`LINEAR_PERIODS`: its path bent to fit rays at
         wrong times — no place, and the cameras' times are searched). ``learn``: its
-        information on the latencies (the path free) and the residuals' pull are added."""
+        information on the latencies (the path free) and the residuals' pull are added. One
+        LED's tracks only (:attr:`spots` 1)."""
+        if self.spots != 1:  # several LEDs: a window may hold another LED's spot a while,
+            return 0.0  # and disagree for that — their times are taken as stated
         A, G, e, cams = self._timed_design(rays, t0, fit)
         AG = A.T @ G
         if len(cams) >= 2:
