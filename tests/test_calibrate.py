@@ -130,6 +130,10 @@ def test_refusals_say_which_camera_and_why(rng):
     blind[1] = np.nan
     with pytest.raises(SurveyError, match="camera C2: saw none of the"):
         calibrate(cams, floor, blind, ids)
+    # a tape's precision written in millimetres (3 for 3 mm) passed as metres gave a
+    # calibration worse than the nominal cameras, exit 0 (issue 31's hostile probe)
+    with pytest.raises(SurveyError, match=r"±3.0 m, .* a tenth of it: .*millimetres\?"):
+        calibrate(cams, floor, observe(cams, floor, rng), ids, point_sigma=3.0)
 
 
 def test_cli_calibrates_from_observations_alone_and_refuses_clearly(tmp_path, rng):

@@ -55,7 +55,7 @@ def _track(sim, frames, out):
                                  "--out", str(out)], capture_output=True, text=True, timeout=300)
 
 
-@pytest.mark.parametrize("late", [0.03, 0.25])
+@pytest.mark.parametrize("late", [0.03, 0.25, 0.5])
 def test_a_camera_whose_times_run_late_is_found_corrected_and_named(robot, tmp_path, late):
     """One camera's times.csv a frame (30 ms) or 0.25 s late: every ok row lay 40 sigma off
     at 30 ms (height), and at 0.25 s the run was refused as a wrong deployment. Now the
@@ -63,13 +63,13 @@ def test_a_camera_whose_times_run_late_is_found_corrected_and_named(robot, tmp_p
     with the camera on time."""
     on_time = _track(robot, robot / "streams", tmp_path / "on.csv")
     assert on_time.returncode == 0, on_time.stderr
-    assert "capture times run" not in on_time.stderr  # nothing said of cameras on time
+    assert "capture times are" not in on_time.stderr  # nothing said of cameras on time
     base, _ = _judged(robot, tmp_path / "on.csv")
     res = _track(robot, _late_copy(robot, tmp_path / "late", "C2", late), tmp_path / "t.csv")
     assert res.returncode == 0, res.stderr
-    said = [line for line in res.stderr.splitlines() if "capture times run" in line]
-    assert len(said) == 1 and "camera C2's" in said[0] and "behind" in said[0], res.stderr
-    assert abs(float(said[0].split(" run ")[1].split(" s ")[0]) - late) <= 0.002, said
+    said = [line for line in res.stderr.splitlines() if "capture times are" in line]
+    assert len(said) == 1 and "camera C2's" in said[0] and " late " in said[0], res.stderr
+    assert abs(float(said[0].split(" are ")[1].split(" s ")[0]) - late) <= 0.002, said
     err, sigma = _judged(robot, tmp_path / "t.csv")
     assert len(err) > 0.8 * len(base)
     assert (err <= 3 * sigma).all(), (err / sigma).max()
@@ -94,9 +94,9 @@ def test_a_camera_on_a_slower_link_live_is_found_and_its_rows_stay_honest(robot,
     finally:
         server.close()
     assert res.returncode == 0, res.stderr
-    said = [line for line in res.stderr.splitlines() if "capture times run" in line]
+    said = [line for line in res.stderr.splitlines() if "capture times are" in line]
     assert len(said) == 1 and "camera C2's" in said[0], res.stderr
-    assert abs(float(said[0].split(" run ")[1].split(" s ")[0]) - 0.1) <= 0.01, said
+    assert abs(float(said[0].split(" are ")[1].split(" s ")[0]) - 0.1) <= 0.01, said
     import time
 
     utc = time.time() - time.monotonic()

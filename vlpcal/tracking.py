@@ -484,6 +484,12 @@ class Tracker:
         self.fit = FitWatch(self.fit.deployment, self.fit.what, least=self.fit.least)
         return True
 
+    def in_order(self, frames) -> list:
+        """``(time, camera id, …)`` frames in the order of their capture times as the cameras'
+        latencies found so far correct them (the order :meth:`update_spots` wants them in)."""
+        applied = self.latency.applied
+        return sorted(frames, key=lambda f: f[0] - applied[self._camera(f[1])])
+
     def latencies(self) -> dict:
         """Camera id → how late its capture times were found to run behind the others' (s),
         for the cameras whose times are corrected."""
@@ -521,14 +527,16 @@ class Tracker:
         return []
 
     def _drifts(self, logs) -> list[TimesDrift]:
-        """Pairs of cameras whose skew, searched on stretches of :data:`SKEW_FRAMES` frame
-        periods, changes along the recording by more than a frame period and its own
-        uncertainty."""
+        """Pairs of cameras whose skew, searched on stretches of the recording, changes along
+        it by more than a frame period and its own uncertainty."""
         if not logs:
             return []
         start = min(float(t[0]) for t, _ in logs.values() if len(t))
         end = max(float(t[-1]) for t, _ in logs.values() if len(t))
-        span = SKEW_FRAMES * self.period
+        # stretches of SKEW_FRAMES periods, a short recording's a third of it (not under a
+        # third of SKEW_FRAMES: a stretch must hold enough spots to search)
+        span = max(SKEW_FRAMES / 3 * self.period, min(SKEW_FRAMES * self.period,
+                                                      (end - start) / 3))
         edges = np.arange(start, end + span, span)
         found: dict = {}
         for lo, hi in zip(edges[:-1], edges[1:]):

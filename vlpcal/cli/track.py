@@ -277,7 +277,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     if drifts:
         raise UserError(f"{folder.root / 'times.csv'}: {drifts[0].message()} (nothing was "
                         "written)")
-    for t, cid, uv in spotted:
+    for t, cid, uv in tracker.in_order(spotted):
         rows.extend(_published(publisher, tracker.update_spots(cid, t, uv)))
         check(tracker)
     rows += _published(publisher, tracker.finish())
@@ -313,7 +313,7 @@ def _retracked(first, spotted, check) -> tuple:
     tracker = Tracker(first.deployment, period=first.period, spots=first.spots, lag=first.lag)
     tracker.latency.restart(first.latency.applied, first.latency.information)
     rows = []
-    for t, cid, uv in spotted:
+    for t, cid, uv in tracker.in_order(spotted):
         rows += tracker.update_spots(cid, t, uv)
         check(tracker)
     return tracker, rows + tracker.finish()
@@ -325,9 +325,10 @@ def _said_latencies(tracker) -> None:
     for cid, late in sorted(tracker.latencies().items()):
         if abs(late) < 0.1 * tracker.period:  # (within a tenth of a frame: nothing to see to)
             continue
-        echo(f"warning: camera {cid}'s capture times run {abs(late):.3f} s "
-             f"{'behind' if late > 0 else 'ahead of'} the others' (seen in the LED's "
-             "motion; its frames were placed at the times corrected)", err=True)
+        echo(f"warning: camera {cid}'s capture times are {abs(late):.3f} s "
+             f"{'late' if late > 0 else 'early'} against the others' (seen in the LED's "
+             f"motion): its frames were placed {abs(late):.3f} s "
+             f"{'earlier' if late > 0 else 'later'} than their times say", err=True)
 
 
 def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False,

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import Camera
+from ..reading import slipped_units
 from .camera_fit import CameraFit, fit_camera
 from .errors import SurveyError
 from .least_squares import SchurSolver, levenberg_marquardt
@@ -32,6 +33,9 @@ from .lens_decision import as_start, data_starts, decide
 #: a camera whose spots scatter about its best fit by more than this share of its image
 #: diagonal is not seeing the LED (random spots, a wrong id)
 GARBAGE_IMAGE_SHARE = 0.025
+#: a tape's stated precision past this share of the survey's extent is a unit slip (a tape
+#: read to within a tenth of the room measures nothing)
+SIGMA_SHARE = 0.1
 
 
 # -- the lens model, chosen by held-out error -----------------------------------------------
@@ -361,10 +365,12 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
         raise ValueError(f"point_sigma: expected metres or 'auto', got {point_sigma!r}")
     extent = float(np.linalg.norm(np.ptp(X, axis=0))) if len(X) else 0.0
     if not estimated and not (
-            1e-9 * extent < float(point_sigma) < extent):
+            1e-9 * extent < float(point_sigma) <= SIGMA_SHARE * extent):
+        units = slipped_units(float(point_sigma),
+                              lambda m: 1e-9 * extent < m <= SIGMA_SHARE * extent)
         raise SurveyError(f"the stated precision of the survey positions, ±{point_sigma} m, is "
                           f"not between a billionth of the survey's extent ({extent:.3g} m) and "
-                          "the extent itself: metres expected (or 'auto')")
+                          f"a tenth of it: {units} (metres expected, or 'auto')")
     fits, obs, choices = [], [], []
     rejected: dict = {}
     decision = None
