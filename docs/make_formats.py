@@ -123,8 +123,9 @@ the room, two zones overlapping or a part of the room in no zone is refused in o
 the zones and where; a sliver up to 1/{zone_slack} of the room's larger side wide (coordinates
 rounded) is neither an overlap nor a gap. A zone may reach past the walls: its locator then
 also publishes the fixes just beyond them (a fix is kept up to five of its predicted errors
-outside the room); a fix in no zone's polygon — beyond the walls past every zone, on a border
-itself, in such a sliver — is published by none.
+outside the room). Every fix has one zone to publish it: the zone whose polygon holds it, else
+— on a border two zones share, beyond the walls past every zone, in such a sliver — the zone
+nearest it (of zones as near, the first listed).
 
 ## Site file (`format: vlpcal-site`, `version: 1`)
 

@@ -515,3 +515,17 @@ def test_a_camera_whose_clock_runs_ahead_heard_first_does_not_stop_the_others(rn
 def test_tracker_spots_is_a_whole_number(spots):
     with pytest.raises(ValueError, match="spots: expected a whole number"):
         Tracker(square_rig(), spots=spots)
+
+
+def test_live_track_whose_cameras_never_answer_exits_1_as_locate(tmp_path):
+    """No camera sends a frame: one line naming each and why, exit 1 (the cameras, not the
+    input: as locate and survey capture; track said 2), nothing written."""
+    from vlpcal.deployment import save
+
+    save(square_rig(), tmp_path / "d.yaml")
+    res = subprocess.run([sys.executable, "-m", "vlpcal", "track", "-d", str(tmp_path / "d.yaml"),
+                          "--camera", "C1=http://127.0.0.1:9/x", "--out", str(tmp_path / "t.csv"),
+                          "--duration", "5"], capture_output=True, text=True, timeout=60)
+    errors = [line for line in res.stderr.splitlines() if line.startswith("Error")]
+    assert res.returncode == 1 and len(errors) == 1 and "C1: connection refused" in errors[0]
+    assert not (tmp_path / "t.csv").exists()

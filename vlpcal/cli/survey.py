@@ -1072,7 +1072,8 @@ def _print_suspects(suspects, points, held_out: bool) -> None:
 
     for s in suspects:
         echo(f"warning: {suspect_words(s, held_out)} Check it and correct it in {points} "
-             "(or delete its line), then calibrate again.")
+             f"(or delete its line and its folder frames/{s.point_id}), then calibrate "
+             "again.")
 
 
 def _check_wand_fits(wand, dep, to_wave: bool = False) -> None:

@@ -467,7 +467,8 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     if not n:
         live.remove()
         why = "; ".join(f"{c}: {st.ended.get(c, 'no frames')}" for c in sources)
-        raise UserError(f"no frames from any camera, nothing tracked ({why})")
+        raise click.ClickException(  # (exit 1, as locate's: the cameras, not the input)
+            f"no frames from any camera, nothing tracked ({why})")
     for cid in sources:
         say(f"camera {cid}: {st.frames[cid]} frames"
             + (f", {frames.stamped[cid]} with X-Timestamp (host − its clock: "
