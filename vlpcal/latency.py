@@ -124,6 +124,8 @@ SEARCH_STEP = 0.25
 #: second's about then met them there, at least :data:`SEARCH_LEAST` of them, and clearly more
 #: than at any skew :data:`SEARCH_APART` frame periods away
 SEARCH_MET, SEARCH_LEAST, SEARCH_APART = 0.8, 20, 2.0
+#: … and when the skews that meet about as well span less than this share of those searched
+SEARCH_WIDEST = 0.25
 
 
 def pair_skew(times_a, dirs_a, times_b, dirs_b, baseline, f_b: float, gate: float,
@@ -164,7 +166,9 @@ def pair_skew(times_a, dirs_a, times_b, dirs_b, baseline, f_b: float, gate: floa
         hi += 1
     apart = SEARCH_APART * period
     elsewhere = counts[(coarse < coarse[lo] - apart) | (coarse > coarse[hi] + apart)]
-    rival = int(elsewhere.max()) if len(elsewhere) else 0
+    if hi - lo > SEARCH_WIDEST * len(coarse) or not len(elsewhere):
+        return None  # (as well met at skews far apart: the LED barely moved across the planes)
+    rival = int(elsewhere.max())
     fine = np.arange(coarse[lo] - step, coarse[hi] + step + 1e-12, 0.05 * period)
     fc, fn = met(fine)
     j = int(np.argmax(fc))
