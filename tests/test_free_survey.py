@@ -177,11 +177,12 @@ def test_survey_calibrate_on_a_simulated_free_survey_end_to_end(tmp_path):
     tp = report["test_points"]
     assert tp["points"] > 50 and tp["fixed"] > 0.5
     assert tp["mean"] < 0.02 and len(tp["per_point"]) == tp["points"]
-    # `show` gives the next person the fit's own prediction (no held-out points in the file)
+    # `show` gives the next person the fit's own prediction and the test points' error
     res = subprocess.run(run + ["show", str(tmp_path / "cal.yaml")], capture_output=True,
                          text=True, timeout=60)
     said = f"predicted mean 3D error of fixes: {report['predicted_error_m'] * 1000:.1f} mm"
     assert res.returncode == 0 and said in res.stdout, res.stdout
+    assert "(test points;" in res.stdout and "no test points held out" not in res.stdout
     folder = read_frames_folder(tmp_path / "sim/frames")
     truth = np.loadtxt(tmp_path / "sim/frames.truth.csv", delimiter=",", skiprows=1,
                        usecols=(1, 2, 3))

@@ -227,6 +227,9 @@ def test_simulate_and_calibrate_a_wand_survey_from_the_command_line(tmp_path):
     assert f"wand: 500 mm long, missed by {mean_mm:.2f} mm on average" in run.output, \
         run.output
     assert "position error: 2.0 mm (assumed)" in run.output, run.output
+    # the test points held out are said (a newcomer read "no test points held out")
+    assert "held-out mean 3D error" in run.output and "(test points;" in run.output, run.output
+    assert "no test points held out" not in run.output
     assert "from marks: 5" in run.output and "from references" not in run.output
     assert f"frame fixed to about {report['datum_floor_m'] * 1000:.1f} mm" in run.output
     import re

@@ -105,10 +105,11 @@ def _provenance(dep, prov) -> None:
             _say(f"  frame fixed to about {float(prov['datum_floor_m']) * 1000:.1f} mm by "
                        "its references or marks (the datum floor: no calibration in that frame "
                        "does better on average)")
-        if prov.get("predicted_error_m") is not None and not prov.get("held_out_mean_m"):
+        if prov.get("predicted_error_m") is not None:
             _say(f"  predicted mean 3D error of fixes: "
-                       f"{float(prov['predicted_error_m']) * 1000:.1f} mm (from the fit's "
-                       "own uncertainty; no test points held out)")
+                 f"{float(prov['predicted_error_m']) * 1000:.1f} mm (from the fit's own "
+                 "uncertainty" + ("" if prov.get("held_out_mean_m")
+                                  else "; no test points held out") + ")")
         held = prov.get("held_out_mean_m")
         if isinstance(held, dict) and held:
             best = min(held, key=lambda k: held[k] if held[k] is not None else math.inf)

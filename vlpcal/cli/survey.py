@@ -762,6 +762,11 @@ def _report_test_points(result, test) -> None:
     ids, X, uv = test
     result.test_points = tp = test_point_errors(result.deployment, X, uv, ids)
     fixed = round(tp["fixed"] * tp["points"])
+    prov = result.deployment.extra.get("provenance")
+    if fixed and isinstance(prov, dict):  # what `show` tells: the points held out
+        held = prov.get("held_out_mean_m")
+        prov["held_out_mean_m"] = {**(held if isinstance(held, dict) else {}),
+                                   "test points": tp["mean"]}
     said = {"no_spot": "seen by no camera", "one_camera": "seen by one camera only",
             "inconsistent": "whose spots no camera pair agreed on",
             "degenerate": "whose rays barely meet",
