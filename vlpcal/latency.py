@@ -49,6 +49,10 @@ class LatencyEstimate:
         self._start = np.zeros(cameras)  #: s: the prior's centre
         self.windows = 0
         self.held = False  #: held where a run before put them (:meth:`restart`)
+        #: the corrections follow the windows' estimate (else only a search or a run before
+        #: sets them: a live stream's windows, with frames late or dropped under load, are
+        #: not trusted to move a camera's times)
+        self.follow = True
 
     def restart(self, applied, information=None) -> None:
         """Start again from latencies ``applied`` (s; a search of the spots found them): what
@@ -94,6 +98,8 @@ class LatencyEstimate:
         # gains; from latencies found before, the estimate is the best word
         sure = np.abs(value - self._start) > APPLIED_SIGMAS * np.sqrt(
             self._relative(cov).diagonal()) if not self._start.any() else True
+        if not self.follow:  # (the windows' word weighs in the sigmas only)
+            return
         want = np.where(sure & measured, value, self._start)
         # a window's word is linear in the latencies only near the times its rays were
         # placed at: the correction moves by a frame period at most per solve

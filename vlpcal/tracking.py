@@ -301,6 +301,7 @@ class Tracker:
         #: how late each camera's capture times run behind the others' (:mod:`vlpcal.latency`):
         #: its frames are placed at their times less this
         self.latency = LatencyEstimate(len(self.cameras), PRIOR_PERIODS * period, period)
+        self.latency.follow = False  # (a recording searched first follows: search_times)
         #: camera → its latest frames with one spot: (time, the spot's world direction)
         self._one_spot: dict = {}
         self._searched = False
@@ -503,6 +504,7 @@ class Tracker:
         are returned (and nothing applied), as their times place no frame right."""
         if self.spots != 1:  # (several LEDs: a frame with one spot may be either one's)
             return []
+        self.latency.follow = True  # a whole recording: its windows move the corrections
         logs: dict = {}
         for t, cid, uvs in frames:
             k = self._camera(cid)
