@@ -55,3 +55,19 @@ def tls_broker(tmp_path):
     b = Broker(tmp_path / "tls", tls=True)
     yield b
     b.stop()
+
+
+def track_live(server, deployment, out, duration, camera_ids):
+    """``vlpcal track`` on ``server``'s (a StreamServer's) cameras for ``duration`` s into
+    ``out``; the server closed after. The finished process."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "vlpcal", "track", "-d", str(deployment), "--out", str(out),
+           "--duration", str(duration)]
+    for cid in camera_ids:
+        cmd += ["--camera", f"{cid}={server.url(cid)}"]
+    try:
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    finally:
+        server.close()

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import track_live
 
 from vlpcal.latency import camera_latencies
 
@@ -85,14 +86,7 @@ def test_a_camera_on_a_slower_link_live_is_found_and_its_rows_stay_honest(robot,
 
     server = StreamServer(robot / "streams", latency={"C2": 0.104}, latency_jitter=0.002,
                           start=1.5)
-    cmd = RUN + ["track", "-d", str(robot / "truth.yaml"), "--out", str(tmp_path / "t.csv"),
-                 "--duration", "11.5"]
-    for cid in ("C1", "C2", "C3"):
-        cmd += ["--camera", f"{cid}={server.url(cid)}"]
-    try:
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    finally:
-        server.close()
+    res = track_live(server, robot / "truth.yaml", tmp_path / "t.csv", 11.5, ("C1", "C2", "C3"))
     assert res.returncode == 0, res.stderr
     said = [line for line in res.stderr.splitlines() if "capture times are" in line]
     assert len(said) == 1 and "camera C2's" in said[0], res.stderr

@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import track_live
 
 from vlpcal.deployment import Deployment
 from vlpcal.geometry import paper_camera
@@ -248,14 +249,7 @@ def test_track_live_from_four_mjpeg_cameras_on_their_own_clocks(tmp_path):
     seconds = 6.0
     simulate_streams(scene, tmp_path / "s", path, seconds, timings)
     server = StreamServer(tmp_path / "s", latency=0.001, latency_jitter=0.002, start=1.5)
-    cmd = [sys.executable, "-m", "vlpcal", "track", "-d", str(tmp_path / "d.yaml"), "--out",
-           str(tmp_path / "t.csv"), "--duration", str(seconds + 2)]
-    for cid in timings:
-        cmd += ["--camera", f"{cid}={server.url(cid)}"]
-    try:
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    finally:
-        server.close()
+    res = track_live(server, tmp_path / "d.yaml", tmp_path / "t.csv", seconds + 2, timings)
     assert res.returncode == 0, res.stderr
     utc = time.time() - time.monotonic()  # the host's monotonic clock is shared
     rows = list(csv.DictReader(open(tmp_path / "t.csv")))
