@@ -121,12 +121,33 @@ class OneLineErrors(click.Group):
             importlib.import_module(f"{__package__}.{COMMANDS[name]}")
         return self.commands.get(name)
 
+    def main(self, *args, **kwargs):
+        """After a stop, once outputs are cleaned and the exit said, the process ends at once:
+        a native thread still running (a decoder's, a figure's) would crash the interpreter's
+        finalisation and turn a clean exit 1 into an abort."""
+        try:
+            return super().main(*args, **kwargs)
+        except SystemExit as e:
+            if not STOP["asked"]:
+                raise
+            import os
+            import sys
+
+            code = e.code if isinstance(e.code, int) else 1
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    stream.flush()
+                except (OSError, ValueError):
+                    pass
+            os._exit(code)
+
     def invoke(self, ctx):
         import warnings
 
         from ..reading import one_line
         from ..writing import OutputError
 
+        STOP["asked"] = False  # (a stop counts for the command it came in)
         _stop_on_signals()
         warnings.showwarning = _show_warning
         # numbers are checked where files are read and numeric edge cases end in statuses:
