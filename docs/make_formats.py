@@ -101,7 +101,8 @@ Every file vlpcal reads or writes, in one place. The contracts (kept exactly; ot
 on them): metres and radians everywhere (reports may print cm and degrees); the world frame is
 right-handed with z up and the floor at z = 0; pixels are OpenCV's (u = column, v = row, the
 centre of the top-left pixel at (0, 0)); a camera's pose is `x_cam = R · (X_world − position)`,
-`R = Rodrigues(rotation)`, so OpenCV's `rvec = rotation` and `tvec = −R · position`.
+`R = Rodrigues(rotation)`, so OpenCV's `rvec = rotation` and `tvec = −R · position`
+([conventions.md](conventions.md) has them in full, with times and the reference model).
 
 ## Deployment file (`format: vlpcal-deployment`, `version: 1`)
 
