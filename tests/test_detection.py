@@ -263,7 +263,7 @@ def test_quiet_stderr_interleaved_across_threads_restores_the_real_stderr():
     do) leave file descriptor 2 on the real stderr, not on the null device."""
     import os
 
-    from vlpcal.detection import _QuietStderr
+    from vlpcal.detection.decoding import _QuietStderr
 
     before = os.fstat(2)
     a, b = _QuietStderr(), _QuietStderr()
@@ -281,7 +281,7 @@ def test_quiet_stderr_interleaved_across_threads_restores_the_real_stderr():
 def test_row_medians_are_numpys_in_value_and_dtype(dtype, k, rng):
     """The detector's row medians (a partition, kept off np.median, whose NaN check imports
     numpy.ma at every start) equal np.median's, dtype included."""
-    from vlpcal.detection import _medians
+    from vlpcal.detection.windows import _medians
 
     a = (rng.random((300, k)) * 255).astype(dtype)
     expected, got = np.median(a, axis=1), _medians(a)

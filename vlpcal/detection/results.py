@@ -1,0 +1,117 @@
+"""What a detector returns: :class:`Spot` for one frame, :class:`SpotBatch` for ``N`` frames,
+the reasons a frame gives no spot, and the thresholds every detector shares."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Reasons a frame gives no spot.
+NO_SPOT, TOO_DIM, AT_EDGE, CORRUPT = "no_spot", "too_dim", "at_edge", "corrupt_frame"
+#: a frame of another size than the camera's, and no frame at all (None in a batch)
+WRONG_SIZE, MISSING = "wrong_size", "missing"
+REASONS = (NO_SPOT, TOO_DIM, AT_EDGE, CORRUPT, WRONG_SIZE, MISSING)
+_REASON_CODE = {None: 0, NO_SPOT: 1, TOO_DIM: 2, AT_EDGE: 3, CORRUPT: 4, WRONG_SIZE: 5,
+                MISSING: 6}
+_CODE_REASON = {v: k for k, v in _REASON_CODE.items()}
+
+
+
+@dataclass(frozen=True)
+class DetectorSettings:
+    """Thresholds shared by the detectors; defaults suit 8-bit frames of a small LED.
+
+    The noise level is estimated per frame from a pixel subsample (see ``_noise``).
+    """
+
+    #: below this peak-over-background in noise sigmas there is nothing to detect
+    min_snr: float = 6.0
+    #: below this peak-over-background (DN) the spot is too faint to trust its sub-pixel centre
+    min_contrast: float = 12.0
+    #: the centroid threshold: background + this share of the peak's height above background
+    threshold: float = 0.15
+    #: half size of the window of ``centroid`` (11×11)
+    window: int = 5
+    #: a pixel at or above this value is saturated (JPEG ringing keeps 255 from surviving)
+    saturation: float = 250.0
+    #: spot radius (second-moment, px) beyond which ``blob`` starts to doubt a blob is the LED
+    led_radius: float = 1.5
+    #: a blob whose core (pixels above half its height) has a larger radius (px) is not a point
+    #: source: a lamp, a sunlit patch (an LED's core stays under ~2.5 px even saturated 8×)
+    max_core_radius: float = 3.0
+
+
+DEFAULTS = DetectorSettings()
+
+
+@dataclass(frozen=True)
+class Spot:
+    """One frame's detection. ``u, v`` are NaN when ``reason`` says why there is no spot."""
+
+    u: float
+    v: float
+    peak: float
+    area: int
+    saturated: bool
+    reason: str | None = None
+    #: how many blobs competed; > 1 means the detector had to choose (see ``note``)
+    blobs: int = 1
+    note: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.reason is None
+
+
+@dataclass
+class SpotBatch:
+    """Detections for ``N`` frames as arrays (NaN ``u, v`` where ``reason`` is set)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    peak: np.ndarray
+    area: np.ndarray
+    saturated: np.ndarray
+    reason_code: np.ndarray
+    blobs: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.u)
+
+    @property
+    def uv(self) -> np.ndarray:
+        return np.stack([self.u, self.v], axis=-1)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.reason_code == 0
+
+    @property
+    def reasons(self) -> list[str | None]:
+        return [_CODE_REASON[int(c)] for c in self.reason_code]
+
+    def __getitem__(self, i: int) -> Spot:
+        n = int(self.blobs[i])
+        return Spot(
+            float(self.u[i]), float(self.v[i]), float(self.peak[i]), int(self.area[i]),
+            bool(self.saturated[i]), _CODE_REASON[int(self.reason_code[i])], n,
+            f"chose 1 of {n} blobs" if n > 1 else "",
+        )
+
+    @classmethod
+    def empty(cls, n: int) -> SpotBatch:
+        nan = np.full(n, np.nan)
+        return cls(nan, nan.copy(), np.zeros(n), np.zeros(n, int), np.zeros(n, bool),
+                   np.zeros(n, np.int8), np.zeros(n, int))
+
+
+
+def _finish(u, v, peak, area, saturated, code, blobs=None) -> SpotBatch:
+    bad = code != 0
+    u = np.where(bad, np.nan, u).astype(float)
+    v = np.where(bad, np.nan, v).astype(float)
+    blobs = np.ones(len(u), int) if blobs is None else blobs
+    return SpotBatch(u, v, np.asarray(peak, float), np.asarray(area, int),
+                     np.asarray(saturated, bool), code, np.where(bad, 0, blobs))
+
