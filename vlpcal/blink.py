@@ -1,4 +1,4 @@
-"""LED identity from blink codes (issue 16): each LED lights to its own on/off pattern, repeated,
+"""LED identity from blink codes: each LED lights to its own on/off pattern, repeated,
 at a stated bit rate; a track's spots (lit) and the frames where a camera should have seen it but
 did not (dark) are read against every pattern at every phase, and the pattern they fit best,
 clearly better than any other, names the LED.

@@ -1,4 +1,4 @@
-"""A rigid body's pose from its LEDs' rays at their own capture times (issue 29).
+"""A rigid body's pose from its LEDs' rays at their own capture times.
 
 Motion capture tracks rigid bodies: several markers on one object give its pose. Here a body
 carries LEDs at known places in its frame (the deployment's ``bodies:``), and each camera

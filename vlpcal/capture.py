@@ -4,10 +4,10 @@ stream, and keep every accepted point on disk before the next prompt.
 At each point the LED is placed, a short burst is grabbed from every camera, the LED is found
 in each frame, and what each camera saw is shown (pixel, peak, saturation, "not seen", "two
 blobs", "no frames") before the point is accepted, redone, skipped or the person goes back.
-The bundle (DESIGN.md's survey bundle) is written by :class:`~vlpcal.datasets.SurveyAppender`:
-append-only, resumable after any interruption. Every few points a quick pose fit per camera
-tells whether the survey is good enough yet, like the per-camera feedback of motion-capture
-wanding.
+The bundle (docs/formats.md#survey-bundle-a-folder) is written by
+:class:`~vlpcal.datasets.SurveyAppender`: append-only, resumable after any interruption. Every
+few points a quick pose fit per camera tells whether the survey is good enough yet, like the
+per-camera feedback of motion-capture wanding.
 """
 
 from __future__ import annotations
@@ -430,7 +430,7 @@ class CaptureSession:
 
 
 class FreeRecorder:
-    """Records a free survey live (issue 15): while a person carries the LED through the room,
+    """Records a free survey live: while a person carries the LED through the room,
     one frame set every ``1 / rate`` s is searched for the LED and its spots are committed
     (:class:`~vlpcal.datasets.FreeAppender`) when a camera saw one clear spot; every
     ``report_every`` s ``say`` hears how much of each camera's image the LED has crossed and

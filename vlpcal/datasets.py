@@ -1,4 +1,4 @@
-"""Folders of frames on disk (DESIGN.md): survey bundles and ``locate`` frame folders.
+"""Folders of frames on disk (docs/formats.md): survey bundles and ``locate`` frame folders.
 
 The one module that knows both layouts::
 
@@ -275,7 +275,7 @@ class SurveyBundle:
     #: there: their spots are averaged)
     frames: dict = field(default_factory=dict)
     observations: dict = field(default_factory=dict)  # (point_id, camera_id) → (u, v)
-    #: the free survey (issue 15): moments when the LED was somewhere unknown, in order
+    #: the free survey: moments when the LED was somewhere unknown, in order
     free_ids: list = field(default_factory=list)
     free_frames: dict = field(default_factory=dict)  # (set_id, camera_id) → Path
     #: (set_id, camera_id) → [(u, v, led or None)]: one spot, or a wand's two
@@ -349,7 +349,8 @@ def read_points(path, allow_empty: bool = False, unmeasured: bool = False
                 ) -> tuple[list[str], np.ndarray]:
     """A ``point_id,x,y,z`` file (a survey's ``points.csv``, or ``survey plan``'s output):
     ids in file order and ``N×3`` positions, m. With ``unmeasured``, a cell may be empty: that
-    coordinate was not measured (NaN; a frame mark such as ``X,,0,0``, DESIGN.md)."""
+    coordinate was not measured (NaN; a frame mark such as ``X,,0,0``,
+    docs/formats.md#survey-bundle-a-folder)."""
     path = Path(path)
     ids, xyz, seen = [], [], set()
     rows = _read_csv(path, POINTS_COLUMNS, MAX_POINTS, "points",
@@ -569,9 +570,9 @@ MAX_CAPTURE_TIME = 1e10
 
 @dataclass
 class AsyncFrames:
-    """An asynchronous frames folder (issue 16): ``<camera_id>/<frame_no>.jpg`` and
-    ``times.csv`` (``camera_id,frame_no,t``: capture time, s, on one clock). ``events``: (t,
-    camera id, frame number) in time order; frames are read on demand."""
+    """An asynchronous frames folder: ``<camera_id>/<frame_no>.jpg`` and ``times.csv``
+    (``camera_id,frame_no,t``: capture time, s, on one clock; docs/formats.md, track input).
+    ``events``: (t, camera id, frame number) in time order; frames are read on demand."""
 
     root: Path
     events: list
@@ -790,7 +791,7 @@ class SurveyAppender:
 
 
 class FreeAppender:
-    """A free survey's spots written moment by moment (issue 15): ``free/observations.csv``
+    """A free survey's spots written moment by moment: ``free/observations.csv``
     (``set_id,camera_id,u,v``), append-only, each set's lines flushed to disk before the next;
     resumable: a line cut by a crash is dropped on opening and numbering goes on (``F000001``
     …). A bundle whose ``free/`` holds frames from elsewhere is refused."""

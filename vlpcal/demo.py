@@ -14,8 +14,8 @@
    the paper's pipeline (NI-P spots, pair method, fusions (a), (b), (c)) and vlpcal's, on the
    same frames, with the cameras as planned and as calibrated.
 
-Everything lands in one folder, written in DESIGN.md's formats, so that each step can be
-redone by hand with the command that :data:`REDO` names.
+Everything lands in one folder, written in vlpcal's formats (docs/formats.md), so that each
+step can be redone by hand with the command that :data:`REDO` names.
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
-"""The deployment file (DESIGN.md ``format: vlpcal-deployment``, ``version: 1``): load, check, save.
+"""The deployment file (``format: vlpcal-deployment``, ``version: 1``): load, check, save.
 
-The one module that knows the file. Required keys exactly as DESIGN.md; every other top-level
-block (detector settings, fusion policy, region maps, corrections, LEDs' blink codes,
-provenance) is optional and
-kept as it was read (``Deployment.extra``), so a tool that does not know a block never drops it.
-Errors name the file, the key path (``cameras[2].fx``) and what was expected
-(:class:`DeploymentError`). Writes go through :mod:`vlpcal.writing` (staged, then renamed).
+The one module that knows the file (docs/formats.md). Required keys exactly as the contract has
+them; every other top-level block (detector settings, fusion policy, region maps, corrections,
+LEDs' blink codes, provenance) is optional and kept as it was read (``Deployment.extra``), so a
+tool that does not know a block never drops it. Errors name the file, the key path
+(``cameras[2].fx``) and what was expected (:class:`DeploymentError`). Writes go through
+:mod:`vlpcal.writing` (staged, then renamed).
 """
 
 from __future__ import annotations
@@ -541,10 +541,10 @@ def _records(value, block: str, keys: tuple, noun: str, most: int | None = None)
 
 
 def _check_zones(value, camera_ids: set, room: list) -> None:
-    """``zones:`` a list of ``{id, polygon, cameras}``: a site split among locator processes
-    (issue 17); a camera on a border belongs to both zones. The zones tile the room: each
-    over part of its floor, none overlapping another, together covering it (up to
-    :data:`ZONE_SLACK`), so that every fix in the room is one zone's to publish (issue 31)."""
+    """``zones:`` a list of ``{id, polygon, cameras}``: a site split among locator processes;
+    a camera on a border belongs to both zones. The zones tile the room: each over part of its
+    floor, none overlapping another, together covering it (up to :data:`ZONE_SLACK`), so that
+    every fix in the room is one zone's to publish (docs/formats.md, the deployment file)."""
     ids, polygons = [], []
     for where, z in _records(value, "zones", ZONE_KEYS, "zone", MAX_ZONES):
         if isinstance(z["polygon"], list) and len(z["polygon"]) > MAX_ZONE_POINTS:
@@ -636,7 +636,7 @@ class Body:
 
 def _check_bodies(value, led_ids: set) -> None:
     """``bodies:`` a list of ``{id, leds: {LED id: [x, y, z]}}``: rigid bodies carrying LEDs
-    that ``leds:`` names (issue 29); each LED on one body, at least two apart on each."""
+    that ``leds:`` names; each LED on one body, at least two apart on each."""
     carried: dict = {}
     for where, b in _records(value, "bodies", BODY_KEYS, "body"):
         if str(b["id"]) in led_ids:
@@ -676,7 +676,7 @@ MAX_LEDS = 64
 
 
 def _check_leds(value) -> None:
-    """``leds:`` a list of ``{id, pattern, bit_rate}``: the LEDs' blink codes (issue 16)."""
+    """``leds:`` a list of ``{id, pattern, bit_rate}``: the LEDs' blink codes."""
     codes = []
     for where, d in _records(value, "leds", LED_KEYS, "LED", MAX_LEDS):
         if not isinstance(d["pattern"], str):

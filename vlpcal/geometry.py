@@ -1,6 +1,6 @@
 """Camera model: OpenCV pinhole with Brown–Conrady distortion, posed in the world frame.
 
-Conventions (DESIGN.md, fixed): metres and radians; world z up, floor at z = 0; pixels are
+Conventions (docs/conventions.md, fixed): metres and radians; world z up, floor at z = 0; pixels are
 OpenCV's (u, v) = (column, row) with the centre of the top-left pixel at (0, 0);
 ``x_cam = R · (X_world − position)`` with ``R = Rodrigues(rotation)``, so OpenCV's
 ``rvec = rotation`` and ``tvec = −R · position``; ``dist = [k1, k2, p1, p2, k3]``.
@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: The paper's camera (Table 2, section 3.1): OV2640 at 160 × 120 px seeing ~240 × 180 cm of
-#: floor from 2.3 m, hence f ≈ 160 · 2.3 / 2.4 ≈ 153.3 px (see FIELD-NOTES: the 4.8 mm datasheet
-#: lens would give ~218 px; the stated coverage is what we follow).
+#: floor from 2.3 m, hence f ≈ 160 · 2.3 / 2.4 ≈ 153.3 px (the 4.8 mm lens of the
+#: datasheet would give ~218 px; the stated coverage is what we follow).
 PAPER_WIDTH, PAPER_HEIGHT, PAPER_F = 160, 120, 153.3
 #: Rodrigues vector of a camera looking straight down with image-right along world +x.
 NADIR = (math.pi, 0.0, 0.0)
@@ -181,7 +181,7 @@ def _undistort_one(xd: float, yd: float, dist, iterations: int, tol: float,
 
 @dataclass(frozen=True)
 class Camera:
-    """One installed camera: intrinsics, OpenCV distortion and pose (DESIGN.md contract).
+    """One installed camera: intrinsics, OpenCV distortion and pose (docs/conventions.md#pose).
 
     Immutable; refinements return new cameras (``dataclasses.replace``).
     """
@@ -218,7 +218,7 @@ class Camera:
     # -- the contract's dict form -------------------------------------------------------------
     @classmethod
     def from_dict(cls, d: dict) -> Camera:
-        """Build from the deployment file's camera mapping (keys as in DESIGN.md)."""
+        """Build from the deployment file's camera mapping (docs/formats.md)."""
         return cls(
             id=str(d["id"]), width=d["width"], height=d["height"], fx=d["fx"], fy=d["fy"],
             cx=d["cx"], cy=d["cy"], dist=d.get("dist", (0, 0, 0, 0, 0)),

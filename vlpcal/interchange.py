@@ -1,10 +1,10 @@
 """Cameras to and from other tools: aniposelib/anipose TOML and OpenCV FileStorage YAML.
 
-Both carry the same pinhole-plus-distortion model as vlpcal (DESIGN.md): ``rotation`` is
-OpenCV's ``rvec`` (world → camera) and ``translation`` its ``tvec = −R · position``, so a point
-maps as ``x_cam = R · X + tvec``; ``dist`` is ``[k1, k2, p1, p2, k3]``. What the other tools
-leave unsaid, the files written here state in their metadata: the length unit and the world
-frame (z up, floor at z = 0).
+Both carry the same pinhole-plus-distortion model as vlpcal (docs/conventions.md#pose):
+``rotation`` is OpenCV's ``rvec`` (world → camera) and ``translation`` its ``tvec = −R ·
+position``, so a point maps as ``x_cam = R · X + tvec``; ``dist`` is ``[k1, k2, p1, p2, k3]``.
+What the other tools leave unsaid, the files written here state in their metadata: the length
+unit and the world frame (z up, floor at z = 0).
 
 aniposelib (``CameraGroup.load``) orders cameras by *sorting the section names as text*, so
 ``cam_10`` comes before ``cam_2`` and the order of more than ten cameras is lost. Files written

@@ -122,12 +122,12 @@ def _stamp(text: str) -> float | None:
 
 
 class ClockSync:
-    """A camera's capture times on the host's clock (issue 16). A frame cannot arrive before
-    it was captured: arrival − capture is the clock offset plus a latency that is never below
-    its minimum, so the lower envelope of arrival − capture follows the offset. Per
+    """A camera's capture times on the host's clock (docs/conventions.md#time). A frame cannot
+    arrive before it was captured: arrival − capture is the clock offset plus a latency that is
+    never below its minimum, so the lower envelope of arrival − capture follows the offset. Per
     ``bucket`` s of the camera's clock the smallest arrival − capture is kept (over the last
-    ``span`` s); a line through them gives offset and drift. The common minimum latency stays
-    in the offset: every camera's frames are placed that much late, alike.
+    ``span`` s); a line through them gives offset and drift. The common minimum latency stays in
+    the offset: every camera's frames are placed that much late, alike.
 
     A stamp that does not fit — its frame would have arrived :data:`JUMP` s or more from where
     the clock says (a glitch, a reboot that restarted the camera's clock) — is not believed: the
@@ -263,7 +263,7 @@ def group_by_arrival(events, camera_ids, tolerance: float = 0.05) -> list[dict]:
     """:class:`LiveGrouper`'s rule on recorded times: ``events`` (t, camera id, item) in time
     order become sets, each closed when every camera has sent, when a camera sends its
     second, or ``tolerance`` s after its first. Returns camera id → (t, item) per set (what
-    ``vlpcal locate`` live triangulates as one moment: the benchmark of issue 16)."""
+    ``vlpcal locate`` live triangulates as one moment: the baseline of benchmarks/tracking.py)."""
     sets: list = []
     pending: dict = {}
     started = 0.0
@@ -443,7 +443,8 @@ class FrameIntervals:
 
 class TimedFrames:
     """Frames from live sources one at a time, each at its capture time on the host's clock
-    (issue 16), in capture-time order — what :class:`~vlpcal.tracking.Tracker` takes.
+    (docs/conventions.md#time), in capture-time order — what :class:`~vlpcal.tracking.Tracker`
+    takes.
 
     ``sources``: camera id → factory of an iterator of ``(frame, stamp)``, the stamp the
     camera's capture time on its own clock (``X-Timestamp``) or None (then the arrival time

@@ -48,7 +48,7 @@ class Fix:
         return self.status == OK
 
     def row(self) -> dict:
-        """The output row: DESIGN.md's columns first."""
+        """The output row: the contract's columns first (docs/formats.md, locate output)."""
         def num(v, nd):
             return "" if not np.isfinite(v) else round(float(v), nd)
 

@@ -1,4 +1,4 @@
-"""Fixes out to the robots, spots in from the cameras: MQTT (issue 17).
+"""Fixes out to the robots, spots in from the cameras: MQTT (docs/mqtt.md).
 
 ``mqtt://[user[:password]@]host[:port]/prefix`` (``mqtts://`` for TLS) names a broker and a topic
 prefix. A :class:`Publisher` sends one JSON message per fix or track update on

@@ -340,7 +340,8 @@ def predicted_rms_error(cameras: list[Camera], X, used, pixel_noise: float) -> n
     """Predicted RMS 3D error (m) of points ``X`` (N×3) solved from the observations ``used``
     (C×N): ``sqrt(trace(F⁻¹))`` with ``F = Σᵢ JᵢᵀJᵢ / σ²`` over the cameras used, Jᵢ the 2×3
     pixel Jacobian and σ = ``pixel_noise`` px (the Cramér–Rao bound for Gaussian spot noise;
-    DESIGN.md's reference accuracy model). NaN where fewer than two cameras were used.
+    the reference model, docs/conventions.md#reference-model). NaN where fewer than two
+    cameras were used.
     """
     X = np.asarray(X, dtype=float)
     F = np.zeros((len(X), 6))

@@ -1,4 +1,4 @@
-"""Writing what a command makes: one discipline for every output (issue 14).
+"""Writing what a command makes: one discipline for every output.
 
 Each output is a *set* of files (a deployment and its map; a calibration, its report and
 figure; a folder of frames). :class:`OutputSet` stages every member beside its target under a

@@ -1,4 +1,5 @@
-"""``--publish`` / ``--spots``: the command line's side of MQTT (issue 17, :mod:`vlpcal.mqtt`)."""
+"""``--publish`` / ``--spots``: the command line's side of MQTT (:mod:`vlpcal.mqtt`,
+docs/mqtt.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The live page (``vlpcal view``, and ``--view`` on ``track``): a deployment's plan, its
-cameras' frames and the tracks, in a browser (issue 30)."""
+cameras' frames and the tracks, in a browser (docs/view.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
-"""A real Mosquitto for tests and benchmarks (issue 17: no mock broker): Debian's ``mosquitto``
-started on 127.0.0.1 at a free port, optionally with a password file or TLS."""
+"""A real Mosquitto for tests and benchmarks (no mock broker: the tests meet a real broker's
+behaviour): Debian's ``mosquitto`` started on 127.0.0.1 at a free port, optionally with a
+password file or TLS."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ def make_certificates(folder) -> Path:
 
 
 class Broker:
-    """A real Mosquitto on 127.0.0.1 at a free port (issue 17: no mock broker), optionally with
+    """A real Mosquitto on 127.0.0.1 at a free port, optionally with
     a password file or TLS (certificates from :func:`make_certificates`; ``self.ca``);
     :meth:`restart` stops it and starts it again on the same port."""
 

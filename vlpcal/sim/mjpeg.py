@@ -1,4 +1,4 @@
-"""Simulated cameras served live (issue 16): an asynchronous frames folder
+"""Simulated cameras served live: an asynchronous frames folder
 (:func:`~.streams.simulate_streams`) played as MJPEG streams on 127.0.0.1, one per camera at
 ``/<camera_id>``, like an ESP32-CAM's ``:81/stream``: each frame sent at its capture time (from
 when the server starts playing) plus a network latency, its part carrying ``X-Timestamp``, the

@@ -1,4 +1,4 @@
-"""A simulated site's cameras that publish their spots (issue 17): the reference publisher for
+"""A simulated site's cameras that publish their spots: the reference publisher for
 ``vlpcal locate --spots``. Each true camera captures at its own rate and phase
 (:class:`~.streams.Timing`); where it sees the robot's LED it publishes the spot — its true
 projection with the spot noise a camera's own detector leaves — on ``prefix/spots/<camera_id>``

@@ -1,6 +1,6 @@
-"""Cameras that are not synchronised, watching a moving LED (issue 16): each camera captures at
+"""Cameras that are not synchronised, watching a moving LED: each camera captures at
 its own rate and phase, with jitter and dropped frames, and its clock runs with its own offset
-and drift. Written as DESIGN.md's asynchronous frames folder:
+and drift. Written as an asynchronous frames folder (docs/formats.md):
 
     DIR/<camera_id>/<frame_no>.jpg
     DIR/times.csv            camera_id,frame_no,t   (capture time, s, on one clock)

@@ -1,5 +1,5 @@
-"""Simulated data on disk in DESIGN.md's formats: survey bundles, ``locate`` frame folders and
-deployment files (nominal, and the true cameras for evaluation)."""
+"""Simulated data on disk in vlpcal's formats (docs/formats.md): survey bundles, ``locate``
+frame folders and deployment files (nominal, and the true cameras for evaluation)."""
 
 from __future__ import annotations
 
@@ -200,7 +200,7 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
                          height: float | None = None, overwrite: bool = False,
                          carrier_radius: float | None = None, wand: float | None = None,
                          marks=None, truth=None, route=None):
-    """A free survey bundle (issue 15): the ``references`` (true positions) taped to
+    """A free survey bundle: the ``references`` (true positions) taped to
     ± ``profile.tape`` per axis with a burst of :data:`~vlpcal.survey.spots.REST_FRAMES`
     frames each (the LED rests there), and ``n_free`` free sets of the LED moved
     along :func:`free_path` (its positions unrecorded, as in life; a robot's body hides the
@@ -212,13 +212,13 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
     then B). A camera that sees either LED keeps its frame. The references show one LED.
 
     ``marks``: ``(ids, measured)``: the references' point ids (N) and which coordinates the
-    survey records (``N×3`` booleans) — frame marks (DESIGN.md): an unmeasured coordinate is
-    written NaN (an empty cell). A measured coordinate that is 0 (the origin mark, the x mark's
-    y and z, the floor) is set by definition, not read off a tape: it is written 0 exactly. A
-    mark is where the LED stood (its x and y define the frame), but the floor under it is not
-    a plane: a height of 0 is off by ± :data:`FLOOR_UNEVENNESS`. Any other measured coordinate
-    is taped (written ± ``profile.tape``). Without ``marks``: ids ``R01``…, every coordinate
-    taped.
+    survey records (``N×3`` booleans) — frame marks (docs/formats.md#survey-bundle-a-folder): an
+    unmeasured coordinate is written NaN (an empty cell). A measured coordinate that is 0 (the
+    origin mark, the x mark's y and z, the floor) is set by definition, not read off a tape: it
+    is written 0 exactly. A mark is where the LED stood (its x and y define the frame), but the
+    floor under it is not a plane: a height of 0 is off by ± :data:`FLOOR_UNEVENNESS`. Any other
+    measured coordinate is taped (written ± ``profile.tape``). Without ``marks``: ids ``R01``…,
+    every coordinate taped.
 
     ``route``: a planned route (:class:`~vlpcal.survey.plan.FreeRoute`, in the scene's frame)
     the LED — or the wand's centre — follows (:func:`route_path`) instead of wandering the

@@ -1,4 +1,4 @@
-"""The live page (issue 30): what the cameras see, where the LEDs and robots are, and the
+"""The live page (docs/view.md): what the cameras see, where the LEDs and robots are, and the
 plan they are seen on — in a browser, served by vlpcal itself (no build step, no outside URL).
 
 :mod:`.hub` is the one place a running command puts what it sees (never waiting on a page);

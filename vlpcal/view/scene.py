@@ -1,7 +1,7 @@
 """A deployment or site as the page draws it: the floor to scale, obstacles, each camera with
 its id and its image's footprint at the lowest and highest LED height, and the reference
-model's maps (DESIGN.md) at each height — how many cameras see a point, which, and its
-predicted error — so a person can hover a point and read them."""
+model's maps (docs/conventions.md#reference-model) at each height — how many cameras see a
+point, which, and its predicted error — so a person can hover a point and read them."""
 
 from __future__ import annotations
 
