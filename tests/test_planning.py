@@ -53,7 +53,7 @@ MM_ROOM = [[0, 0], [3600, 0], [3600, 1800], [0, 1800]]
 
 
 @pytest.mark.parametrize("path,value,fragment", [
-    # a new user's slips (issue 31), each judged against the rest of the scene
+    # a new user's slips of unit, each judged against the rest of the scene
     (["site", "ceiling_height"], 280,
      "site.ceiling_height: 280 m over a room 3.6 × 1.8 m (a ceiling 78 times the room's size): "
      "centimetres? millimetres? (metres expected)"),

@@ -1,5 +1,9 @@
 """The grid families (linear, triangular, square with two spacings) as cameras on a ceiling, the
-candidates they make, a camera's footprint and the mounting grid."""
+candidates they make and the mounting grid.
+
+shapely is imported inside :func:`ceiling_area`: importing planning for its types (as the
+viewer and the demo do) loads no GEOS library.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,7 @@ from dataclasses import dataclass
 
 from ..geometry import NADIR, Camera, rodrigues, rotation_vector
 from .reference import Evaluation
-from .site import FAMILIES, Site
+from .site import FAMILIES, Site, footprint
 
 
 def grid_cameras(site: Site, family: str, nx: int, ny: int, spacing: tuple, origin: tuple,
@@ -78,12 +82,6 @@ def rank_key(c: Candidate) -> tuple:
     """Passing layouts first (fewer cameras, then lower p95), then the closest to passing."""
     ev = c.evaluation
     return (0, c.count, ev.p95) if ev.meets else (1, -ev.coverage, ev.p95)
-
-
-def footprint(site: Site) -> tuple[float, float]:
-    """Width and depth (m) of a nadir camera's view at the highest LED height."""
-    z = site.ceiling_height - max(site.requirements.heights)
-    return site.camera.width / site.camera.fx * z, site.camera.height / site.camera.fy * z
 
 
 def ceiling_area(site: Site):

@@ -11,6 +11,9 @@ from the coverage plus the covered points past the error bound beyond the 5 % a 
 zero means the layout meets the requirements. It is computed from the closed-form reference
 model (:mod:`.nadir`) with cached per-camera contributions, so a move costs one pass over the
 sample points. Cameras stay on the mounting grid inside the room polygon (no snapping after).
+
+shapely is imported inside the functions that use it: importing planning for its types (as the
+viewer and the demo do) loads no GEOS library.
 """
 
 from __future__ import annotations
@@ -21,7 +24,9 @@ import numpy as np
 
 from ..triangulation import trace_adjugate_det
 from .families import ceiling_cameras
+from .lattice import Mounting
 from .nadir import YAWS, NadirModel
+from .site import footprint
 
 #: single-camera moves: grid steps in eight directions at three lengths
 DIRECTIONS = [(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
@@ -39,8 +44,6 @@ class Layout:
     def __init__(self, model: NadirModel, step: float, cells, yaws, cache=None,
                  dtype=np.float64):
         from shapely.geometry import Polygon
-
-        from .lattice import Mounting
 
         self.model, self.step = model, step
         self.mount = Mounting(model.site, step)
@@ -197,8 +200,6 @@ def fewer_cameras(search: NadirModel, exact: NadirModel, step: float, xy, yaws,
     ``search`` model (a coarser sample grid, for speed); a repaired layout is kept only when
     it meets the ``exact`` model too (repaired there if it must be). Returns the cameras of
     the smallest layout found that meets the requirements by the exact model."""
-    from .families import footprint
-
     caches = ({}, {})
     lay = Layout(search, step, _cells(search, step, xy), yaws, caches[0], np.float32)
     reach = float(np.hypot(*footprint(search.site))) * REACH

@@ -8,19 +8,23 @@ other row shifted by a/2 (rows along x or along y), ``linear`` a single row (alo
 A lattice's cameras are its points inside the room polygon (cameras hang from the ceiling;
 keep-out areas are floor obstacles). Layouts are visited by ascending camera count; once one
 meets the requirements, only layouts with as few cameras are judged further.
+
+shapely is imported inside the functions that use it: importing planning for its types (as the
+viewer and the demo do) loads no GEOS library.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from .families import Candidate, ceiling_area, ceiling_cameras, footprint
+from .families import Candidate, ceiling_area, ceiling_cameras
 from .nadir import YAWS, NadirModel
 from .reference import evaluate
-from .site import Site
+from .site import Site, footprint
 
 #: spacings searched, as shares of the footprint at the highest LED height along that axis
 SPACING_RANGE = (0.25, 1.1)
@@ -198,8 +202,6 @@ def lattice_search(site: Site, families=("square",), step: float = 0.05,
     cameras than this (a known answer to beat or match). ``screen``: a model on a coarser
     sample grid that drops layouts more than :data:`SCREEN_SLACK` short of the coverage
     first (a heuristic: the exhaustive baseline runs without it)."""
-    import time
-
     t0 = time.perf_counter()
     model = model or NadirModel(site)
     mount = Mounting(site, step)

@@ -6,8 +6,9 @@ above a point, the image offset is ``x_n = M·δ/d`` (δ the floor offset from t
 2×2 signed permutation of its yaw), visibility is an interval on each image axis, and every
 entry of ``JᵀJ`` is a polynomial of degree ≤ 2 in δ. So the Fisher matrix of a layout at a
 point is a fixed combination of six sums over the cameras that see it, Σ δₓᵖ δᵧᑫ (p + q ≤ 2),
-and on a lattice each sum is columns × rows (FIELD-NOTES): a batch of lattices is a few
-matrix products. For an undistorted camera model this is :func:`.reference.evaluate` exactly
+and on a lattice each sum factors into a product over its columns and its rows (visibility
+along x depends on δₓ alone, along y on δᵧ alone): a batch of lattices is a few matrix
+products. For an undistorted camera model this is :func:`.reference.evaluate` exactly
 (tested); with distortion it is the undistorted approximation, and every layout the planner
 exports is judged by :func:`.reference.evaluate` itself.
 """
@@ -21,7 +22,7 @@ import numpy as np
 
 from ..triangulation import trace_adjugate_det
 from .families import ceiling_cameras
-from .reference import MARGIN_PX, sample_grid, sample_levels
+from .reference import MARGIN_PX, sample_grid, sample_levels, sample_step
 from .site import Site
 
 #: the camera yaws the model knows, rad
@@ -49,8 +50,6 @@ class NadirModel:
         search whose points are a subset of the exact model's)."""
         self.site = site
         r = site.requirements
-        from .reference import sample_step
-
         self.step = (sample_step(site) if step is None else step) * every
         xs, ys, inside = sample_grid(site, step)
         self.xs, self.ys, self.inside = xs[::every], ys[::every], inside[::every, ::every]

@@ -1,6 +1,6 @@
 """The CasADi optimiser over camera poses: for a given number of cameras, every camera's
 position on the ceiling, yaw and tilt, solved by IPOPT on a smooth form of the reference
-model (DESIGN.md).
+model (:mod:`.reference`).
 
 The smooth model is the reference model with its steps softened: a camera sees a sample point
 by a smooth step of the point's margin inside the image (width :data:`EDGE_SHARE` of it), a point is
@@ -12,19 +12,22 @@ and the good share at least 95 % of the covered share plus ``t`` (the p95 bound)
 hide points by a mask fixed from the start poses. The exact model (:func:`.reference.evaluate`)
 judges every answer; this model only steers.
 
-Kept off the runtime path: casadi is imported only here, and only when a solve is built.
+casadi is imported only here, and only when a solve is built: it is large, and the runtime
+path (locating, tracking) never needs it.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..triangulation import trace_adjugate_det
-from .reference import MARGIN_PX, unobstructed
-from .site import Site
+from .poses import posed_cameras
+from .reference import MARGIN_PX, sample_levels, sample_points, sample_step, unobstructed
+from .site import Site, floor, footprint
 
 #: width of the smooth step at the image's edges, as a share of the image's short side
 #: (3 px of a 160 × 120 image)
@@ -130,10 +133,6 @@ class PoseProblem:
         iterate every :data:`JUDGE_EVERY` iterations; a result stops the solve there (the
         exact model need not wait for the smooth one to converge). ``deadline``
         (``time.perf_counter()``): the solve stops there (:attr:`Solve.late`)."""
-        import time
-
-        from .poses import posed_cameras
-
         t0 = time.perf_counter()
         n, site = self.n, self.site
         start = np.asarray(start, float).reshape(n, 5)
@@ -210,8 +209,6 @@ def _judge_class():
             return ca.Sparsity(0, 0)
 
         def eval(self, arg):
-            import time
-
             # a signal (Ctrl-C, SIGTERM) lands here, in the only Python IPOPT runs: stop the
             # solve and let the caller raise it, not count the solve as one that failed
             try:
@@ -239,9 +236,6 @@ def _fine_step(site: Site) -> tuple[float, float]:
     """The smooth model's grid step before any cap (the reference model's, coarser where a
     camera's footprint spans many cells: about :data:`CELLS_PER_FOOTPRINT` along its short
     side) and the floor area it samples, all levels (m, m²)."""
-    from .families import footprint
-    from .reference import floor, sample_levels, sample_step
-
     step = max(sample_step(site), min(footprint(site)) / CELLS_PER_FOOTPRINT)
     return step, floor(site.room, site.keep_out).area * len(sample_levels(site))
 
@@ -255,8 +249,6 @@ def optimiser_step(site: Site, cameras: int = 1) -> float:
 
 def optimiser_points(site: Site, cameras: int = 1) -> np.ndarray:
     """The smooth model's sample points (N×3), on :func:`optimiser_step`'s grid."""
-    from .reference import sample_points
-
     return sample_points(site, optimiser_step(site, cameras))
 
 

@@ -1,10 +1,15 @@
 """The whole plan, as ``vlpcal plan`` runs it: every lattice of the site's families on the
 mounting grid, then a local search beyond lattices from the best one; every exported layout
-judged by the reference model itself."""
+judged by the reference model itself.
+
+shapely is imported inside :func:`_tilted_footprint`: importing planning for its types (as the
+viewer and the demo do) loads no GEOS library.
+"""
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -12,11 +17,12 @@ import numpy as np
 from ..deployment import Deployment, provenance
 from .families import Candidate, ceiling_cameras, mount_step, rank_key
 from .free import fewer_cameras, snap
-from .lattice import lattice_search
+from .lattice import SPACING_RANGE, Mounting, lattice_search
 from .nadir import YAWS, NadirModel
 from .optimiser import too_coarse
+from .poses import pose_of, posed_cameras, tilts
 from .reference import evaluate
-from .site import CameraMounting, Site
+from .site import CameraMounting, Site, floor, footprint
 from .tilted import TiltedPlan, tilted_plan
 
 #: the searches' coarse models keep every n-th sample point along each axis (the exact model
@@ -69,8 +75,6 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
        what-if at :data:`HINT_TILT` (:attr:`Plan.tilted`), not as a candidate, unless
        ``tilt_hint`` is false.
     """
-    import time
-
     t0 = time.perf_counter()
     say = progress or (lambda m: None)
     fewest = fewest_possible(site)
@@ -149,7 +153,7 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
         closest = _densest(site, step)
     if not candidates and closest is not None and mended is None and site.mounting \
             and site.mounting.max_tilt > 0:
-        # no level lattice meets at all (a narrow ceiling, a low --max-cameras): tilted
+        # no level lattice meets at all (a narrow ceiling, a low max_cameras): tilted
         # cameras may, from the densest lattice — given a bounded time, as the answer may
         # be that nothing meets
         say(f"  mend: the CasADi optimiser from the densest lattice ({closest.count} cameras)")
@@ -183,9 +187,6 @@ def fewest_possible(site: Site) -> int:
     """A lower bound on the cameras any layout needs: the highest LED height must be seen by
     ``min_cameras`` cameras over at least ``3·coverage − 2`` of its floor (the other two
     heights can at most make up the rest), and each camera sees at most its footprint there."""
-    from .families import footprint
-    from .reference import floor
-
     r = site.requirements
     area = floor(site.room, site.keep_out)
     fw, fd = footprint(site)
@@ -199,8 +200,6 @@ def _tilted_footprint(site: Site) -> float:
     highest LED height, over the directions it may lean (a tilted view is larger: its far
     side is further away); infinite when its view reaches the horizon."""
     from shapely.geometry import Polygon
-
-    from .poses import posed_cameras
 
     tilt = site.mounting.max_tilt
     most = 0.0
@@ -241,9 +240,6 @@ def _on_grid(site: Site, model: NadirModel, step: float, cand: Candidate):
 def _densest(site: Site, step: float) -> Candidate | None:
     """When nothing meets: the square lattice at the smallest spacings searched, judged (the
     closest a lattice comes to the coverage)."""
-    from .families import footprint
-    from .lattice import SPACING_RANGE, Mounting
-
     fw, fd = footprint(site)
     a, b = max(step, SPACING_RANGE[0] * fw), max(step, SPACING_RANGE[0] * fd)
     mount = Mounting(site, step)
@@ -266,8 +262,6 @@ def planned_deployment(site: Site, cand: Candidate, rank: int = 1, source: str =
     layout = {"family": cand.family, "cameras": cand.count, "rank": rank,
               "mounting_grid_m": float(mount_step(site))}
     if cand.family == "tilted":
-        from .poses import pose_of, tilts
-
         layout.update({"started_from": cand.seed, "optimiser": "CasADi (IPOPT)",
                        "max_tilt_deg": round(math.degrees(float(max(tilts(
                            [pose_of(c) for c in cand.cameras])))), 3)})

@@ -1,11 +1,15 @@
-"""The reference model (DESIGN.md, the contract) that judges every layout: sample points of the
-room minus keep-out at the lowest, middle and highest LED height; a point is seen by a camera
-when it projects inside the image (2 px margin) in front of it; the predicted error of a point
-seen by ≥ 2 cameras is ``sqrt(trace(F⁻¹))``, ``F = Σ JᵢᵀJᵢ / σ²``; an obstacle (a keep-out with
-a height) hides a point from a camera when it stands across the segment between them; a
-layout meets the
+"""The reference model that judges every layout — the one contract ``plan``, ``check`` and the
+maps share (docs/formats.md, "Site file"): sample points of the room minus keep-out at the
+lowest, middle and highest LED height; a point is seen by a camera when it projects inside the
+image (2 px margin) in front of it; the predicted error of a point seen by ≥ 2 cameras is
+``sqrt(trace(F⁻¹))``, ``F = Σ JᵢᵀJᵢ / σ²``; an obstacle (a keep-out with a height) hides a
+point from a camera when it stands across the segment between them; a layout meets the
 requirements when at least ``coverage`` of the points are seen by ``min_cameras`` cameras and
-the 95th percentile of their predicted error is within ``max_error_p95``."""
+the 95th percentile of their predicted error is within ``max_error_p95``.
+
+shapely is imported inside the functions that use it: importing planning for its types (as the
+viewer and the demo do) loads no GEOS library.
+"""
 
 from __future__ import annotations
 
@@ -16,32 +20,16 @@ import numpy as np
 
 from ..geometry import Camera
 from ..triangulation import predicted_rms_error
-from .site import Site
+from .site import SAMPLE_STEP, Site, floor, footprint
 
-#: sample grid spacing of the reference model, m (DESIGN.md: at most 10 cm)
-SAMPLE_STEP = 0.10
 #: px: a point is seen when it projects at least this far inside the image
 MARGIN_PX = 2.0
 
 
-def floor(room, keep_out):
-    """The floor to serve: the room polygon minus the union of the keep-out areas (one union,
-    so thousands of small keep-outs stay fast)."""
-    from shapely import union_all
-    from shapely.geometry import Polygon
-
-    area = Polygon(room)
-    if keep_out:
-        area = area.difference(union_all([Polygon(p).buffer(0) for p in keep_out]))
-    return area
-
-
 def sample_step(site: Site) -> float:
-    """The sample grid's step: :data:`SAMPLE_STEP` (the contract's "at most 10 cm"), finer for
-    a scene whose camera footprint is under 1.2 m, so that a footprint spans at least 12
-    cells at any scale."""
-    from .families import footprint
-
+    """The sample grid's step: :data:`~.site.SAMPLE_STEP` (the contract's "at most 10 cm"),
+    finer for a scene whose camera footprint is under 1.2 m, so that a footprint spans at least
+    12 cells at any scale."""
     return min(SAMPLE_STEP, min(footprint(site)) / 12)
 
 
@@ -155,7 +143,7 @@ def seen_by(site: Site, cameras: list[Camera], points) -> np.ndarray:
 
 
 def evaluate(site: Site, cameras: list[Camera], step: float | None = None) -> Evaluation:
-    """Judge a layout with the reference model (DESIGN.md), independently of any optimiser."""
+    """Judge a layout with the reference model, independently of any optimiser."""
     pts = sample_points(site, step)
     seen = seen_by(site, cameras, pts)
     views = seen.sum(axis=0)

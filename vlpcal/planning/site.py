@@ -1,5 +1,10 @@
-"""The site file (DESIGN.md ``format: vlpcal-site``, ``version: 1``): a room, a camera model and
-requirements, read as strictly as a deployment."""
+"""The site file (``format: vlpcal-site``, ``version: 1``; docs/formats.md, "Site file"): a
+room, a camera model and requirements, read as strictly as a deployment; and what the rest of
+planning reads off a site: the floor to serve and a level camera's footprint on it.
+
+shapely is imported inside the functions that draw polygons: importing planning for its types
+(as the viewer and the demo do) loads no GEOS library.
+"""
 
 from __future__ import annotations
 
@@ -16,7 +21,15 @@ from ..deployment import (
     check_intrinsics,
 )
 from ..geometry import NADIR, Camera
-from ..reading import SLIP_UNITS, room_sides, room_slip, shown, slipped_units
+from ..reading import (
+    SLIP_UNITS,
+    ReadError,
+    load_yaml,
+    room_sides,
+    room_slip,
+    shown,
+    slipped_units,
+)
 
 FORMAT, VERSION = "vlpcal-site", 1
 FAMILIES = ("linear", "triangular", "square", "free")
@@ -27,6 +40,9 @@ MOUNTING_KEYS = ("max_tilt", "wall_clearance")
 OBSTACLE_KEYS = ("polygon", "height")
 #: degrees: the steepest tilt a site may allow (past it a ceiling camera looks at the walls)
 TILT_LIMIT = 75.0
+#: m: the reference model samples the floor on a grid this fine or finer (the format's
+#: contract, "at most 10 cm"); a site must hold at least one such cell of floor
+SAMPLE_STEP = 0.10
 
 
 class SiteError(DeploymentError):
@@ -44,8 +60,8 @@ class Requirements:
 
 @dataclass(frozen=True)
 class CameraMounting:
-    """How cameras may hang (DESIGN.md ``mounting:``): tilted up to ``max_tilt`` from straight
-    down, at least ``wall_clearance`` inside the walls."""
+    """How cameras may hang (the site file's ``mounting:``): tilted up to ``max_tilt`` from
+    straight down, at least ``wall_clearance`` inside the walls."""
 
     max_tilt: float = 0.0  #: rad
     wall_clearance: float = 0.0  #: m
@@ -74,6 +90,25 @@ class Site:
     #: None: level cameras only (the plan then says what tilting would save)
     mounting: CameraMounting | None = None
     obstacles: list = field(default_factory=list)  #: Obstacle, the keep-outs with a height
+
+
+def floor(room, keep_out):
+    """The floor to serve: the room polygon minus the union of the keep-out areas (one union,
+    so thousands of small keep-outs stay fast)."""
+    from shapely import union_all
+    from shapely.geometry import Polygon
+
+    area = Polygon(room)
+    if keep_out:
+        area = area.difference(union_all([Polygon(p).buffer(0) for p in keep_out]))
+    return area
+
+
+def footprint(site: Site) -> tuple[float, float]:
+    """Width and depth (m) of a nadir camera's view at the highest LED height: the scale that
+    the mounting grid, the lattices' spacings and the sample grid are set against."""
+    z = site.ceiling_height - max(site.requirements.heights)
+    return site.camera.width / site.camera.fx * z, site.camera.height / site.camera.fy * z
 
 
 def site_from_dict(doc, source: str = "<site>") -> Site:
@@ -242,8 +277,6 @@ def _check_floor(room, keep_out) -> None:
     area = Polygon(room)
     if not area.is_valid or area.area <= 0:
         raise SiteError("site.room: expected a simple polygon (its edges must not cross)")
-    from .reference import floor
-
     for i, poly in enumerate(keep_out):
         if not Polygon(poly).buffer(0).intersects(area):
             raise SiteError(f"site.keep_out[{i}]: lies wholly outside the room (a typo, or "
@@ -252,8 +285,6 @@ def _check_floor(room, keep_out) -> None:
     if area.is_empty or not area.area > 1e-9 * Polygon(room).area:
         raise SiteError("site.keep_out: the keep-out areas cover the whole room: no floor is "
                         "left to plan for")
-    from .reference import SAMPLE_STEP
-
     if area.area < SAMPLE_STEP ** 2:
         raise SiteError(f"site.room: less floor than one cell of the reference model's "
                         f"{SAMPLE_STEP * 100:g} cm grid (metres expected)")
@@ -261,8 +292,6 @@ def _check_floor(room, keep_out) -> None:
 
 def load_site(path) -> Site:
     """Read and check a site file (read within :mod:`vlpcal.reading`'s bounds)."""
-    from ..reading import ReadError, load_yaml
-
     path = Path(path)
     try:
         doc = load_yaml(path, "a site YAML file")

@@ -7,6 +7,9 @@ Each count is tried from several starts: the last layout that met less its least
 camera (by the exact model), and grids of that many cameras over the ceiling whose outer
 cameras lean inward (the grid families as seeds). The first start whose snapped answer meets
 wins the count.
+
+shapely is imported inside the functions that use it: importing planning for its types (as the
+viewer and the demo do) loads no GEOS library.
 """
 
 from __future__ import annotations
@@ -18,11 +21,12 @@ from enum import Enum
 
 import numpy as np
 
+from ..triangulation import trace_adjugate_det
 from .families import Candidate, ceiling_area
 from .nadir import PAIRS
 from .optimiser import PoseProblem, Solve, optimiser_step
 from .poses import pose_of, posed_cameras, snapped
-from .reference import evaluate, sample_points
+from .reference import evaluate, sample_points, seen_by
 from .site import Site
 
 #: the grid seeds tried per count, best aspect first
@@ -58,6 +62,8 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     time up to ``most``, until a layout meets. Then the counts tried gallop down (1, 2, 4, …
     fewer while each meets) and bisect between the fewest that met and the most that did
     not."""
+    from shapely.geometry import Polygon
+
     t0 = time.perf_counter()
     say = progress or (lambda m: None)
     mending = not start.evaluation.meets
@@ -67,8 +73,6 @@ def tilted_plan(site: Site, start: Candidate, step: float, max_tilt: float,
     points = sample_points(site, coarse)
     area = ceiling_area(site)
     bounds = area.bounds
-    from shapely.geometry import Polygon
-
     corner = Polygon(site.room).bounds[:2]  # the mounting grid's origin
     out = TiltedPlan(None, start=start.count, repaired=mending)
     kind = "tilted" if max_tilt > 0 else "free"
@@ -177,8 +181,6 @@ def _repaired(attempt, start, most: int):
 def _information(site: Site, cams, points):
     """Each camera's share of the reference model at ``points``: which it sees (C×N) and its
     Fisher entries ``JᵀJ / σ²`` there (C×N×6, zero where unseen)."""
-    from .reference import seen_by
-
     seen = seen_by(site, cams, points)
     info = np.zeros(seen.shape + (6,))
     for k, cam in enumerate(cams):
@@ -192,8 +194,6 @@ def _information(site: Site, cams, points):
 def _met(site: Site, views, info) -> np.ndarray:
     """Per point (…×N): seen by enough cameras within the error bound, from the summed views
     (…×N) and Fisher entries (…×N×6)."""
-    from ..triangulation import trace_adjugate_det
-
     r = site.requirements
     tr, det = trace_adjugate_det(*np.moveaxis(info, -1, 0))
     with np.errstate(invalid="ignore", divide="ignore"):
