@@ -247,9 +247,9 @@ class Step:
 
 
 class CaptureSession:
-    """Runs a capture: ``ask(kind, text) -> Step`` and ``say(line)`` are the person (a
-    terminal, or ``--yes``); ``kind`` is ``place`` (go, skip, back, extra, quit), ``accept``
-    (accept, redo, skip, back, quit) or ``retry`` (redo, skip, back, quit).
+    """Runs a capture: ``ask(kind, text) -> Step`` and ``say(line)`` are the person (a terminal,
+    or a script when ``unattended``); ``kind`` is ``place`` (go, skip, back, extra, quit),
+    ``accept`` (accept, redo, skip, back, quit) or ``retry`` (redo, skip, back, quit).
     ``on_point(id, xyz)`` moves a scripted rig before each burst."""
 
     def __init__(self, dep: Deployment, plan_ids: list, plan_xyz, appender, burst: Burst,
@@ -272,7 +272,7 @@ class CaptureSession:
         self.spots: dict = {}  # point id → C×2 spots of the accepted points
         self.recent: list = []  # ids accepted in this session, latest last (for "back")
         self.unattended = unattended
-        self.stalled: str | None = None  # the point where no camera sent frames (--yes)
+        self.stalled: str | None = None  # the point where no camera sent frames (unattended)
 
     def _load_spots(self) -> None:
         """Spots of the points already in the bundle (a resumed session), as the calibration

@@ -25,6 +25,7 @@ import shutil
 import stat
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 
 import numpy as np
@@ -35,8 +36,22 @@ POINTS_COLUMNS = ("point_id", "x", "y", "z")
 OBSERVATION_COLUMNS = ("camera_id", "u", "v")
 
 
+class Layout(Enum):
+    """A folder layout vlpcal reads: what a folder given in the wrong place looks like."""
+
+    SURVEY_BUNDLE = "survey bundle"  #: ``points.csv`` and ``frames/<point_id>/…``
+    LOCATE_FRAMES = "locate frames folder"  #: ``<frame_id>/<camera_id>.jpg``
+
+
 class DatasetError(ValueError):
-    """A survey bundle or frames folder that does not follow the layout (one-line message)."""
+    """A survey bundle or frames folder that does not follow the layout (one-line message).
+
+    ``looks_like``: the layout the folder has instead, when it has one (the message says so),
+    so that a caller can name what reads it (the command line names its command)."""
+
+    def __init__(self, message: str, looks_like: Layout | None = None):
+        super().__init__(message)
+        self.looks_like = looks_like
 
 
 def natural_key(text: str):
@@ -105,8 +120,8 @@ MAX_CSV_BYTES = 32 << 20
 #: an asynchronous folder's ``times.csv`` lists at most this many frames (an hour of four
 #: cameras at 30 fps is 432 000)
 MAX_TIMES_FRAMES = 500_000
-#: a free survey's ``free/observations.csv`` holds at most this many spots (survey capture
-#: --free stops at 100 000 sets; a calibration uses at most 5000 of them)
+#: a free survey's ``free/observations.csv`` holds at most this many spots (a free capture
+#: stops at 100 000 sets; a calibration uses at most 5000 of them)
 MAX_FREE_SPOTS = 800_000
 #: a ``frame_id,camera_id,u,v`` (or a bundle's ``point_id,…``) file holds at most this many
 #: spots (an hour of four cameras at 30 fps is 432 000)
@@ -385,14 +400,15 @@ def read_survey_bundle(root) -> SurveyBundle:
         raise DatasetError(f"{root}: not a folder (expected a survey bundle with points.csv)")
     path = root / "points.csv"
     if not path.is_file():
+        missing, layout = f"{path}: missing (a survey bundle needs points.csv)", None
         if (root.parent / "points.csv").is_file():
-            hint = (f": {root} looks like a folder inside a bundle ({root.name}/); give the "
-                    f"bundle, {root.parent}")
+            missing += (f": {root} looks like a folder inside a bundle ({root.name}/); give the "
+                        f"bundle, {root.parent}")
         elif any(root.glob("*/*.jpg")):
-            hint = ": it holds frames only, like a locate frames folder (vlpcal locate --frames)"
-        else:
-            hint = ""
-        raise DatasetError(f"{path}: missing (a survey bundle needs points.csv){hint}")
+            missing += (" — it holds frames only, like a locate frames folder "
+                        "(<frame_id>/<camera_id>.jpg)")
+            layout = Layout.LOCATE_FRAMES
+        raise DatasetError(missing, layout)
     # a free survey's references may leave coordinates unmeasured (frame marks)
     ids, xyz = read_points(path, unmeasured=(root / "free").is_dir())
     known = set(ids)
@@ -557,9 +573,10 @@ def read_frames_folder(root) -> FramesFolder:
         raise DatasetError(f"{where}: cannot be read ({e.strerror or e}); expected a folder of "
                            "<frame_id>/<camera_id>.jpg") from None
     if not files:
-        hint = (" — it looks like a survey bundle (points.csv): that goes to vlpcal survey "
-                "calibrate --survey" if (root / "points.csv").is_file() else "")
-        raise DatasetError(f"{root}: no frames (expected <frame_id>/<camera_id>.jpg){hint}")
+        bundle = (root / "points.csv").is_file()
+        raise DatasetError(f"{root}: no frames (expected <frame_id>/<camera_id>.jpg)"
+                           + (" — it looks like a survey bundle (points.csv)" if bundle else ""),
+                           Layout.SURVEY_BUNDLE if bundle else None)
     order = lambda t: (natural_key(t), t)  # noqa: E731  (ties such as 1 and 01: by text)
     return FramesFolder(root, sorted(ids, key=order), sorted(cams, key=order), files)
 
@@ -620,10 +637,11 @@ def read_async_frames(root) -> AsyncFrames:
         raise DatasetError(f"{root}: not a folder (expected <camera_id>/<frame_no>.jpg and "
                            "times.csv with camera_id,frame_no,t inside)")
     if not times.is_file():
-        hint = (" — it looks like a locate frames folder (<frame_id>/<camera_id>.jpg): that "
-                "goes to vlpcal locate --frames" if any(root.glob("*/*.jpg")) else "")
+        frames = any(root.glob("*/*.jpg"))
         raise DatasetError(f"{root}: no times.csv (expected <camera_id>/<frame_no>.jpg and "
-                           f"times.csv with camera_id,frame_no,t){hint}")
+                           "times.csv with camera_id,frame_no,t)"
+                           + (" — it looks like a locate frames folder (<frame_id>/<camera_id>.jpg)"
+                              if frames else ""), Layout.LOCATE_FRAMES if frames else None)
     events, seen, names = [], set(), {}
     rows = _read_csv(times, ("camera_id", "frame_no", "t"), MAX_TIMES_FRAMES, "frames",
                      "over an hour of four cameras at 30 fps: split the recording")
@@ -691,9 +709,9 @@ class SurveyAppender:
         self.state = self.root / ".capture"
         self.journal = self.state / "journal.csv"
         if self.root.is_dir() and any(self.root.iterdir()) and not self.state.is_dir():
-            raise DatasetError(f"{self.root}: a folder that survey capture did not start (a "
-                               "survey plan's points.csv is read with --points): choose a new "
-                               "folder for the survey")
+            raise DatasetError(f"{self.root}: a folder that survey capture did not start (the "
+                               "points to capture are read from their own file, not from the "
+                               "survey's folder): choose a new folder for the survey")
         self.root.mkdir(parents=True, exist_ok=True)
         self.state.mkdir(exist_ok=True)
         self.frames.mkdir(exist_ok=True)

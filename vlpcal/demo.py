@@ -164,7 +164,7 @@ def check_target(out: Path) -> None:
         ours = False
     if not ours:
         raise DemoError(f"{out}: exists and was not written by vlpcal demo (choose another "
-                        "--out, or remove it)")
+                        "folder, or remove it)")
 
 
 def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
@@ -187,7 +187,7 @@ def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
             foreign = sorted(set(os.listdir(out)) - set(os.listdir(stage)))
             if foreign:
                 raise DemoError(f"{given}: holds {foreign[0]}, which the demo does not write; "
-                                "move it out (or choose another --out): nothing was replaced")
+                                "move it out (or choose another folder): nothing was replaced")
     result.folder = given
     result.seconds = time.perf_counter() - t_start
     return result
@@ -250,7 +250,8 @@ def _run(root: Path, seed: int, say) -> DemoResult:
     free = calibrate_free_survey(planned, free_bundle.xyz, uv_ref, free_bundle.point_ids,
                                  uv_free, sources={"deployment": "planned.yaml",
                                                    "survey": "survey"})
-    free.test_points = test_point_errors(free.deployment, measured, uv, bundle.point_ids)
+    free = replace(free, test_points=test_point_errors(free.deployment, measured, uv,
+                                                       bundle.point_ids))
     write_calibration(root / "calibrated.yaml", free, free_notes + more,
                       header="Calibrated by vlpcal demo (vlpcal survey calibrate, free "
                              "survey).")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import re
 import sys
+from enum import Enum
 
 import numpy as np
 
@@ -30,8 +31,22 @@ CONVENTION = ("x_cam = R(rotation) * X_world + translation (OpenCV rvec, tvec); 
               "pixel at (0, 0)")
 
 
+class Remedy(Enum):
+    """What would mend a camera file that cannot be read, in this module's words (the value,
+    which ends the message); a command says it with its own options."""
+
+    STATE_UNITS = ": state it with the units argument, m, cm or mm"
+    OPENCV_LAYOUT = " (expected what to_opencv_yaml writes)"
+
+
 class InterchangeError(ValueError):
-    """A camera file from another tool that cannot be read (one line: file, item, expected)."""
+    """A camera file from another tool that cannot be read (one line: file, item, expected).
+
+    ``problem``: the message without its ``remedy`` (a :class:`Remedy`, or None)."""
+
+    def __init__(self, problem: str, remedy: Remedy | None = None):
+        super().__init__(problem + (remedy.value if remedy else ""))
+        self.problem, self.remedy = problem, remedy
 
 
 def _tvec(cam: Camera) -> np.ndarray:
@@ -101,10 +116,11 @@ def from_anipose_toml(text: str, source: str = "<toml>", units: str | None = Non
                                f"given ({shown(units)}) disagrees: leave it out")
     units = units or stated
     if not isinstance(units, (str, type(None))) or units not in UNITS:
-        raise InterchangeError(
-            f"{source}: the length unit is not stated in [metadata] (aniposelib does not "
-            f"record it): state it with --units m, cm or mm" if units is None else
-            f"{source}: unknown length unit {shown(units)} (expected m, cm or mm)")
+        if units is None:
+            raise InterchangeError(f"{source}: the length unit is not stated in [metadata] "
+                                   "(aniposelib does not record it)", Remedy.STATE_UNITS)
+        raise InterchangeError(f"{source}: unknown length unit {shown(units)} (expected m, cm "
+                               "or mm)")
     sections = []
     for key, value in doc.items():
         m = re.fullmatch(r"cam_(\d+)", key)
@@ -219,8 +235,8 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
     from .reading import MAX_DEPTH, nesting_depth
 
     if nesting_depth(text) > MAX_DEPTH:
-        raise InterchangeError(f"{source}: nested deeper than {MAX_DEPTH} levels (expected "
-                               "what vlpcal export --to opencv writes)")
+        raise InterchangeError(f"{source}: nested deeper than {MAX_DEPTH} levels",
+                               Remedy.OPENCV_LAYOUT)
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
         node = fs.getNode("cameras")
@@ -229,11 +245,11 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
         ok = False
     if not ok:
         raise InterchangeError(f"{source}: not an OpenCV FileStorage file with a 'cameras' "
-                               "sequence (expected what vlpcal export --to opencv writes)")
+                               "sequence", Remedy.OPENCV_LAYOUT)
     kind = fs.getNode("format").string()
     if kind.startswith("vlpcal"):
-        raise InterchangeError(f"{source}: a {kind} file, not an OpenCV camera file (expected "
-                               "what vlpcal export --to opencv writes)")
+        raise InterchangeError(f"{source}: a {kind} file, not an OpenCV camera file",
+                               Remedy.OPENCV_LAYOUT)
     unit = fs.getNode("units").string() or "m"
     if unit not in UNITS:
         raise InterchangeError(f"{source}: units: expected m, cm or mm, got {shown(unit)}")

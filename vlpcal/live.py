@@ -201,7 +201,7 @@ def device_frames(device: str) -> Iterator:
 
 
 def open_source(spec: str, stamps: bool = False) -> Callable[[], Iterator]:
-    """A factory of frames for a ``--camera`` value: an http(s) URL or a video device
+    """A factory of frames for a camera's source (``spec``): an http(s) URL or a video device
     (``/dev/videoN`` or its number); anything else is refused (ValueError), before OpenCV's
     backends would try it as a file or a stream of their own. With ``stamps``, frames come
     as ``(frame, capture stamp or None)`` (:func:`mjpeg_frames`; a device has none)."""

@@ -31,6 +31,19 @@ class UserError(click.ClickException):
         super().__init__(one_line(message))
 
 
+#: the command that reads each folder layout (:class:`~vlpcal.datasets.Layout`'s name), said
+#: when a folder of that layout is given to another command
+READER = {"SURVEY_BUNDLE": "vlpcal survey calibrate --survey",
+          "LOCATE_FRAMES": "vlpcal locate --frames"}
+
+
+def dataset_error(e) -> UserError:
+    """A :class:`~vlpcal.datasets.DatasetError` as a user error: a folder of another layout
+    than the command reads is named with the command that reads it."""
+    layout = getattr(e, "looks_like", None)
+    return UserError(f"{e}: that goes to {READER[layout.name]}" if layout else str(e))
+
+
 class Misfit(UserError):
     """The frames do not fit the deployment: the run stopped (exit 2)."""
 

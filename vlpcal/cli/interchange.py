@@ -53,6 +53,12 @@ def export_cameras(deployment_path, fmt, out, units):
          f"{', ' + units if fmt == 'anipose' else ', m'})")
 
 
+#: what mends a camera file ``import`` cannot read (:class:`vlpcal.interchange.Remedy`'s
+#: name), said with the command's options
+IMPORT_REMEDY = {"STATE_UNITS": ": state it with --units m, cm or mm",
+                 "OPENCV_LAYOUT": " (expected what vlpcal export --to opencv writes)"}
+
+
 @main.command("import")
 @click.option("--cameras", "cameras_path", required=True, type=click.Path(dir_okay=False),
               help="aniposelib TOML (.toml) or the OpenCV YAML vlpcal export writes (.yaml).")
@@ -120,7 +126,8 @@ def import_cameras(cameras_path, base_path, out, units):
                                    "for OpenCV FileStorage)")
         check_world_frame(cams, base.ceiling_height, str(path), base.room)
     except InterchangeError as e:
-        raise UserError(str(e)) from None
+        raise UserError(e.problem + IMPORT_REMEDY[e.remedy.name] if e.remedy else str(e)) \
+            from None
     extra = {k: v for k, v in base.extra.items() if k != "provenance"}
     if not same_cameras(cams, base.cameras):
         # a region map and pixel corrections were learned for the base's cameras: with other

@@ -15,6 +15,7 @@ from .common import (
     _load_deployment,
     _output_file,
     _same_file,
+    dataset_error,
     echo,
     main,
 )
@@ -314,7 +315,7 @@ def _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet) -> in
     try:
         folder = read_frames_folder(frames_dir)
     except DatasetError as e:
-        raise UserError(str(e)) from None
+        raise dataset_error(e) from None
     _check_the_deployment_fits(loc, frames_dir, folder.camera_ids, notes, folder)
     unknown = sorted(set(folder.camera_ids) - set(loc.camera_ids))
     if unknown:

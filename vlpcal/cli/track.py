@@ -14,6 +14,7 @@ from .common import (
     _load_deployment,
     _output_file,
     _same_file,
+    dataset_error,
     echo,
     main,
 )
@@ -203,7 +204,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     try:
         folder = read_async_frames(frames_dir)
     except DatasetError as e:
-        raise UserError(str(e)) from None
+        raise dataset_error(e) from None
     unknown = sorted(set(folder.camera_ids) - {c.id for c in dep.cameras})
     if unknown:
         raise UserError(f"{frames_dir}: cameras {', '.join(unknown)} are not in "
