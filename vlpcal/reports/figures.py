@@ -1,9 +1,9 @@
-"""Reports: the figures (PNG) and report files that commands and the demo write beside their
-results. matplotlib is imported inside each function, so the runtime path never loads it."""
+"""The figures (PNG) that commands and the demo write beside their results. matplotlib is
+imported inside each function (through :func:`_pyplot`): it takes most of a second to load,
+and the runtime path never draws."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -27,35 +27,6 @@ def save_figure(fig, path, dpi: int = 110) -> None:
         fig.savefig(path, dpi=dpi, format="png")
     finally:
         plt.close(fig)
-
-
-def test_point_errors(dep, X, uv, ids) -> dict:
-    """Held-out evidence a calibration never saw (issue 15): measured test points ``X`` (N×3)
-    and their spots ``uv`` (C×N×2, as :func:`~vlpcal.survey.survey_spots` gives them: the
-    deployment's pixel corrections applied) located with the calibrated deployment ``dep`` by
-    its :class:`~vlpcal.locator.Locator` — its fusion, region map, residual limit and its
-    judgement of what is no position in the room (``outside_room``, ``degenerate``), so that a
-    point counts as fixed exactly when ``locate`` with the same file would fix it (issue 31);
-    the errors of the fixed ones against the measured positions, whose own tape is in them.
-    Returns the report's ``test_points`` entry (``statuses``: how many points got each status
-    other than ``ok``)."""
-    from collections import Counter
-
-    from .locator import Locator
-    from .survey import error_stats
-
-    X = np.asarray(X, float)
-    uv = np.asarray(uv, float)
-    offsets = dep.pixel_offsets  # the locator applies them itself, to the spots as detected
-    raw = uv + np.array([offsets.get(c.id, (0.0, 0.0)) for c in dep.cameras])[:, None, :]
-    fixes = Locator(dep).locate_pixels(raw)
-    err = np.linalg.norm(fixes.X - X, axis=1)
-    views = np.isfinite(uv).all(axis=2).sum(axis=0)
-    status = [str(s) for s in fixes.status]
-    return {"points": len(X), **error_stats(err), "seen_by_fewer_than_two": int((views < 2).sum()),
-            "statuses": dict(Counter(s for s in status if s != "ok")),
-            "per_point": [{"point_id": p, "error_m": float(e) if np.isfinite(e) else None,
-                           "status": st} for p, e, st in zip(ids, err, status)]}
 
 
 #: a survey map's panel numbers its points up to this many
@@ -364,7 +335,7 @@ def _lens_panel(ax, rows) -> None:
     """Per camera, the held-out error that chose its lens model, for each model fitted: the 3D
     error of held-out survey points (cm) where the choice was made by it, else the camera's
     held-out reprojection error (px); the chosen model filled, the others hollow."""
-    from .survey import LENS_MODELS
+    from ..survey import LENS_MODELS
 
     in_3d = any(c.get("held_out_3d_m") is not None
                 for r in rows for c in r.get("lens_candidates", {}).values())
@@ -499,30 +470,6 @@ def plan_maps(path, site, cand) -> None:
                  + ("; hatched: an obstacle that hides what is behind it (its height)"
                     if site.obstacles else ""), fontsize=10)
     save_figure(fig, path, dpi=110)
-
-
-def write_calibration(out, result, notes=(), header: str = "") -> tuple[Path, Path, Path]:
-    """A survey calibration's files: the calibrated deployment ``out``, ``.report.json`` and
-    ``.png`` beside it, as one :class:`~vlpcal.writing.OutputSet` (an error or a kill leaves
-    the previous set whole). Returns the deployment, report and figure paths. ``result`` is
-    a ``survey.SurveyResult``."""
-    from .deployment import dumps
-    from .writing import OutputSet
-
-    out = Path(out)
-    paths = out.with_suffix(".report.json"), out.with_suffix(".png"), out  # the deployment last
-    with OutputSet(*paths) as (report, png, dep):
-        dep.write_text(dumps(result.deployment, header=header), encoding="utf-8")
-        report.write_text(json.dumps(result.report(notes), indent=2), encoding="utf-8")
-        if hasattr(result, "calibration"):  # a free survey's
-            free_calibration_figure(png, result)
-        else:
-            calibration_figure(png, result.stats, result.per_point, result.points,
-                               result.deployment.cameras,
-                               [r for r in result.cameras if r.get("lens_candidates")],
-                               result.cameras, f"{out.name}: survey calibration of "
-                               f"{result.deployment.name}, held-out error")
-    return paths[2], paths[0], paths[1]
 
 
 def free_calibration_figure(path, result) -> None:
