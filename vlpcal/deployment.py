@@ -154,7 +154,7 @@ class Deployment:
         X = np.atleast_2d(np.asarray(X, float))
         result = np.zeros(len(X), bool)
         if len(X) == 1 and self._point_surely_inside(*X[0].tolist()):
-            return result  # one point (a tracker's fit): judged in plain Python, ~1 µs
+            return result  # one point (a tracker's fit): plain Python, no numpy call overhead
         # no position is never outside, a position surely inside neither: the others need
         # the geometry library
         doubt = np.isfinite(X).all(axis=1) & ~self._surely_inside(X)
@@ -191,8 +191,8 @@ class Deployment:
         return inside & ((up & before).sum(axis=1) % 2 == 1)
 
     def _point_surely_inside(self, x: float, y: float, z: float) -> bool:
-        """:meth:`_surely_inside` for one point, in plain Python (numpy's calls on one point
-        cost ~20 µs; this ~1 µs): the same even–odd count by the same products."""
+        """:meth:`_surely_inside` for one point, in plain Python (on one point, numpy's
+        per-call overhead is most of the cost): the same even–odd count by the same products."""
         if not 0.0 <= z <= self.ceiling_height:
             return False
         odd = False
@@ -694,7 +694,8 @@ def _check_leds(value) -> None:
 
 
 #: bytes: a deployment file is at most this large (a camera's line is ~250 bytes: thousands
-#: of cameras fit), checked before the YAML parser spends its ~4 s and ~120 MB a megabyte
+#: of cameras fit), checked before the YAML parser reads it (its time and memory grow fast
+#: with the file)
 MAX_DEPLOYMENT_BYTES = 1 << 20
 
 

@@ -433,8 +433,8 @@ class FrameIntervals:
 
     def period(self, default: float = 0.1, least: int = 3) -> float:
         """s: the slowest camera's median interval, of the cameras with ``least`` intervals
-        (``default`` before any has). (statistics' median: numpy's imports numpy.ma, 9 ms,
-        mid-stream.)"""
+        (``default`` before any has). (statistics' median: numpy's would import numpy.ma
+        mid-stream, a pause a live run would feel.)"""
         import statistics
 
         meds = [statistics.median(v) for v in self._gaps.values() if len(v) >= least]

@@ -62,7 +62,8 @@ class Fix:
 #: camera status by detection reason code (0: the spot was found)
 _CAMERA_STATUS = np.array([OK, *REASONS], dtype=object)
 #: sets this few are measured a frame at a time (:func:`~vlpcal.detection.detect_frame`, the
-#: same spots and reasons): a stack's numpy calls cost ~0.6 ms whatever its size
+#: same spots and reasons): a stack's numpy calls cost the same whatever its size, more than a
+#: few frames measured one by one (benchmarks/locator.py)
 _FRAME_BY_FRAME = 4
 
 ROW_COLUMNS = ("frame_id", "x", "y", "z", "status", "cameras", "sigma_m", "residual_px",
@@ -97,8 +98,8 @@ class FixBatch:
         return (self[i] for i in range(len(self)))
 
     def rows(self) -> list[dict]:
-        """``[fix.row() for fix in self]``, built over the batch at once (a fix's row costs
-        tens of µs one by one: a folder of thousands of sets spent more writing than locating).
+        """``[fix.row() for fix in self]``, built over the batch at once (row by row, a folder
+        of thousands of sets spent more time writing than locating).
         Equal to it: tested."""
         def nums(a, nd):  # Fix.row's rounding (Python's, which numpy's can differ from)
             return [round(v, nd) if v - v == 0 else "" for v in a.tolist()]
