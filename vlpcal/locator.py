@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -21,10 +22,30 @@ from .detection import REASONS, detect_frame, detect_spots
 from .fusion import OK, fuse
 from .triangulation import predicted_rms_error
 
-#: fix statuses beyond the fusion's (ok, one_camera, degenerate, no_spot): the most telling
-#: per-camera reason when no fix was possible
-FIX_STATUSES = ("ok", "one_camera", "degenerate", "corrupt_frame", "wrong_size", "too_dim",
-                "at_edge", "no_spot", "no_frames", "inconsistent", "outside_room")
+
+class FixStatus(str, Enum):
+    """A fix's status: ``ok``, or why the frame set has no fix (docs/conventions.md#fix-statuses).
+    The value is the files' spelling; a member equals its string and prints as it, so rows,
+    messages and callers that compare strings are unchanged."""
+
+    OK = "ok"
+    ONE_CAMERA = "one_camera"  #: one camera saw the LED
+    DEGENERATE = "degenerate"  #: the rays barely cross: a predicted error as large as the room
+    CORRUPT_FRAME = "corrupt_frame"  #: beyond the fusion's: the most telling per-camera reason
+    WRONG_SIZE = "wrong_size"
+    TOO_DIM = "too_dim"
+    AT_EDGE = "at_edge"
+    NO_SPOT = "no_spot"
+    NO_FRAMES = "no_frames"  #: no camera sent a frame
+    INCONSISTENT = "inconsistent"  #: no two cameras agree (a reflection, a lamp)
+    OUTSIDE_ROOM = "outside_room"  #: under the floor, over the ceiling or past the walls
+
+    __str__ = str.__str__  # "ok", not "FixStatus.OK" (as enum.StrEnum, which needs 3.11)
+    __format__ = str.__format__
+
+
+#: every fix status, as the files spell them
+FIX_STATUSES = tuple(s.value for s in FixStatus)
 #: per-camera statuses: ``ok`` or a detection reason (``no_spot``, ``too_dim``, ``at_edge``,
 #: ``corrupt_frame``, ``wrong_size``, ``missing``), or ``dropped`` (robust fusion rejected it)
 
@@ -200,24 +221,25 @@ class Locator:
             res.X[vague] = np.nan
             res.used[:, vague] = False
             sigma[vague] = np.nan
-            status[vague] = "degenerate"
+            status[vague] = FixStatus.DEGENERATE
         out = self._outside(res.X, sigma)
         if out.any():  # e.g. a floor reflection taken for the LED: a fix under the floor
             res.X[out] = np.nan
             res.used[:, out] = False
             sigma[out] = np.nan
-            status[out] = "outside_room"
+            status[out] = FixStatus.OUTSIDE_ROOM
         seen = np.isfinite(uv).all(axis=2)
         dropped = seen & ~res.used & np.isfinite(res.X).all(axis=1)[None, :]
         if self.fusion == "robust":
             camera_status = np.where(dropped, "dropped", camera_status)
         # without a fix, say the most telling reason the cameras gave
-        none = status == "no_spot"
+        none = status == FixStatus.NO_SPOT
         if none.any():
-            for reason in ("too_dim", "at_edge", "wrong_size", "corrupt_frame"):
-                hit = none & (camera_status == reason).any(axis=0)
+            for reason in (FixStatus.TOO_DIM, FixStatus.AT_EDGE, FixStatus.WRONG_SIZE,
+                           FixStatus.CORRUPT_FRAME):
+                hit = none & (camera_status == reason.value).any(axis=0)
                 status[hit] = reason
-            status[none & (camera_status == "missing").all(axis=0)] = "no_frames"
+            status[none & (camera_status == "missing").all(axis=0)] = FixStatus.NO_FRAMES
         ids = list(frame_ids) if frame_ids is not None else [None] * N
         return FixBatch(self.camera_ids, ids, res.X, status, res.used, res.residual, sigma,
                         camera_status)
