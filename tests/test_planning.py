@@ -358,6 +358,23 @@ def test_a_hall_beyond_the_camera_limit_is_refused_at_once(tmp_path):
     assert not (tmp_path / "p.yaml").exists()
 
 
+def test_a_plan_too_large_for_its_limit_names_the_parameter_and_the_command_its_option(
+        tmp_path):
+    from click.testing import CliRunner
+
+    from vlpcal.cli import main
+    from vlpcal.planning import plan_site
+    from vlpcal.planning.report import no_plan_message
+
+    site = load_site(SITE_PATH)
+    plan = plan_site(site, max_cameras=2)
+    said = no_plan_message(site, plan, 2)
+    assert not plan.candidates and "raise max_cameras," in said and "--" not in said
+    res = CliRunner().invoke(main, ["plan", "--site", str(SITE_PATH), "--out",
+                                    str(tmp_path / "p.yaml"), "--max-cameras", "2"])
+    assert res.exit_code == 1 and "raise --max-cameras," in res.output
+
+
 @pytest.mark.parametrize("case", ["distorted lens", "tiny scene", "free only", "small room",
                                   "no sample point"])
 def test_what_plan_exports_meets_its_site_or_it_says_why(tmp_path, case):

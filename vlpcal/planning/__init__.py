@@ -10,7 +10,9 @@
 - :mod:`.poses`: a ceiling camera's pose (position, yaw, tilt) as an installer sets it;
 - :mod:`.optimiser`: the CasADi optimiser over poses, on a smooth form of the reference model;
 - :mod:`.tilted`: fewer cameras by tilting them, the optimiser's search;
-- :mod:`.plan`: the whole plan, as ``vlpcal plan`` runs it, and its deployment.
+- :mod:`.plan`: the whole plan, as ``vlpcal plan`` runs it, and its deployment;
+- :mod:`.check`: a given layout judged against a site;
+- :mod:`.report`: the plan's and the check's terminal reports, as lines of text.
 """
 
 from .families import (
