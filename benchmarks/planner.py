@@ -2,7 +2,7 @@
 
 The baseline: every rectangular lattice (spacings a ≠ b on a 5 cm grid from 0.25 to 1.1
 footprints, offsets on a 5 cm grid within one period, camera yaw 0° and 90°), its cameras
-clipped to the room, judged by the reference model (DESIGN.md) in closed form; layouts are
+clipped to the room, judged by the reference model (docs/formats.md) in closed form; layouts are
 visited by ascending camera count, and once one meets the requirements only layouts with as
 few cameras are judged. Its winner is judged again by `evaluate` (the model's reference
 implementation). The planner: `plan_site` as `vlpcal plan` runs it (lattices of every family
@@ -72,9 +72,17 @@ import numpy as np
 from _common import table, write_json
 
 from vlpcal.planning import evaluate, lattice_search, plan_site, site_from_dict
-from vlpcal.planning.poses import posed_cameras
-from vlpcal.planning.reference import MARGIN_PX, sample_points
+from vlpcal.planning.poses import pose_of, posed_cameras, rotation, tilts
+from vlpcal.planning.reference import (
+    MARGIN_PX,
+    sample_grid,
+    sample_levels,
+    sample_points,
+    sample_step,
+    unobstructed,
+)
 from vlpcal.planning.site import CameraMounting
+from vlpcal.triangulation import trace_adjugate_det
 
 C160 = {"width": 160, "height": 120, "fx": 153.3, "fy": 153.3, "cx": 79.5, "cy": 59.5,
         "dist": [0, 0, 0, 0, 0]}
@@ -218,8 +226,6 @@ class _Model:
         projected in one batch (the same test as ``Camera.project``), else one by one."""
         todo = [k for k in dict.fromkeys(keys) if k not in self._seen]
         if todo and not any(self.site.camera.dist):
-            from vlpcal.planning.poses import rotation
-
             m = self.site.camera
             R = np.stack([self._rotation(k[2:], rotation) for k in todo])
             C = np.array([(k[0], k[1], self.site.ceiling_height) for k in todo])
@@ -250,8 +256,6 @@ class _Model:
 
     def _clear_at(self, key) -> np.ndarray:
         """Which points no obstacle hides from a camera hung at the pose's (x, y)."""
-        from vlpcal.planning.reference import unobstructed
-
         if key[:2] not in self._clear:
             C = (key[0], key[1], self.site.ceiling_height)
             self._clear[key[:2]] = unobstructed(C, self.points, self.site.obstacles)
@@ -271,8 +275,6 @@ class _Model:
 
     def verdict(self, keys, views=None) -> tuple[float, float]:
         """(coverage, p95 m) of the layout of poses ``keys``, as :func:`evaluate` has them."""
-        from vlpcal.triangulation import trace_adjugate_det
-
         r = self.site.requirements
         if views is None:
             views = np.sum([self.seen(k) for k in keys], axis=0)
@@ -299,8 +301,6 @@ def tilted_lower_bound(s) -> int:
     A/s² + P/(2s) + 1 on a grid of step s (Nosarzewska), the largest footprint a camera tilted
     by up to 30° in any direction has (image border sampled, 1° steps)."""
     from shapely.geometry import Polygon
-
-    from vlpcal.planning.reference import sample_grid, sample_levels, sample_step
 
     r = s.requirements
     m = s.camera
@@ -444,8 +444,6 @@ def run_tilted(s, level: dict, baseline: bool = True) -> dict:
     best = plan.candidates[0] if plan.candidates else None
     # the optimiser's work: mending a lattice that fails in shadows, then the tilted search
     stages = [t for t in (getattr(plan, "mended", None), plan.tilted) if t is not None]
-    from vlpcal.planning.poses import pose_of, tilts
-
     row = {"site": s.name, "level_cameras": level["plan_cameras"],
            "level_family": level["plan_family"],
            "level_verified": level["plan_candidates_verified"],
