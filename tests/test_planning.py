@@ -72,8 +72,8 @@ MM_ROOM = [[0, 0], [3600, 0], [3600, 1800], [0, 1800]]
                                            "millimetres?"),
 ])
 def test_a_value_in_another_unit_is_named_as_a_unit_slip(path, value, fragment):
-    """A ceiling of 280 (cm meant) was planned as a 280 m hall ("relax the requirements"),
-    max_error_p95: 2 taken as 2 m: a value the rest of the scene says is in another unit
+    """A ceiling of 280 (cm meant) would plan a 280 m hall ("relax the requirements"),
+    max_error_p95: 2 be taken as 2 m: a value the rest of the scene says is in another unit
     is one line naming it and the units that would fit."""
     import copy
 

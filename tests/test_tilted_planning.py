@@ -20,7 +20,7 @@ from vlpcal.planning.site import Obstacle
 
 C160 = {"width": 160, "height": 120, "fx": 153.3, "fy": 153.3, "cx": 79.5, "cy": 59.5,
         "dist": [0, 0, 0, 0, 0]}
-#: the issue's bay: 6 × 3.6 m at 2.8 m, LED 0–0.5 m, two cameras over 95 %, p95 ≤ 2 cm
+#: a bay: 6 × 3.6 m at 2.8 m, LED 0–0.5 m, two cameras over 95 %, p95 ≤ 2 cm
 BAY = {"format": "vlpcal-site", "version": 1,
        "site": {"name": "bay", "ceiling_height": 2.8,
                 "room": [[0, 0], [6, 0], [6, 3.6], [0, 3.6]]},
@@ -116,7 +116,7 @@ def test_snapped_poses_are_what_a_bracket_sets():
 
 
 def test_tilting_plans_the_bay_with_at_most_nine_cameras(tmp_path):
-    """The issue's bay: 12 level cameras; tilted up to 30° the optimiser's plan needs ≤ 9,
+    """The bay: 12 level cameras; tilted up to 30° the optimiser's plan needs ≤ 9,
     on the mounting grid, within the tilt, and `vlpcal check` accepts what it exports."""
     (tmp_path / "bay.yaml").write_text(yaml.safe_dump(BAY))
     out = tmp_path / "plan.yaml"
@@ -207,7 +207,7 @@ def test_a_room_with_a_pillar_and_a_shelf_plans_a_layout_that_meets_in_their_sha
 
 
 def test_a_tilted_plan_is_hung_surveyed_by_tape_and_tracks_within_what_it_predicted(tmp_path):
-    """Issue 27's end to end: a tilted plan → `simulate -d` (hung with a careful install's
+    """End to end: a tilted plan → `simulate -d` (hung with a careful install's
     errors) → the tape survey → `locate` of test frames and `track` of a robot, both within
     the plan's predicted mean error (at its 0.3 px spot noise) and within 3 × the true
     cameras on the same frames."""

@@ -32,8 +32,8 @@ SPACING_RANGE = (0.25, 1.1)
 SCREEN_SLACK = 0.02
 #: lattices judged at once, at most (memory: 6 × levels × batch × sample points floats)
 BATCH = 96
-#: values per batch array (6 × levels × batch × sample points: 64 MB of floats; counting only
-#: the points let a 15 m room's plan reach 700 MB): a large room judges fewer lattices at once
+#: values per batch array (6 × levels × batch × sample points: 64 MB of floats): a large room
+#: judges fewer lattices at once, so that its memory does not grow with the room
 BATCH_VALUES = 2 ** 23
 
 

@@ -137,7 +137,7 @@ def site_from_dict(doc, source: str = "<site>") -> Site:
                           within=(0, MAX_LENGTH), unit=" m")
         room = _polygon(site["room"], "site.room")
         slip = room_slip(float(ceiling), room)
-        if slip:  # a ceiling of 280 (cm meant) planned a 280 m hall: "relax the requirements"
+        if slip:  # a ceiling of 280 (cm meant) would plan a 280 m hall, not name the slip
             raise SiteError(slip)
         items = site.get("keep_out") or []
         if not isinstance(items, list):
