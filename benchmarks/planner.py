@@ -2,7 +2,7 @@
 
 The baseline: every rectangular lattice (spacings a ≠ b on a 5 cm grid from 0.25 to 1.1
 footprints, offsets on a 5 cm grid within one period, camera yaw 0° and 90°), its cameras
-clipped to the room, judged by the reference model (docs/formats.md) in closed form; layouts are
+clipped to the room, judged by the reference model (docs/conventions.md) in closed form; layouts are
 visited by ascending camera count, and once one meets the requirements only layouts with as
 few cameras are judged. Its winner is judged again by `evaluate` (the model's reference
 implementation). The planner: `plan_site` as `vlpcal plan` runs it (lattices of every family

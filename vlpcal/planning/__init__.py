@@ -2,7 +2,7 @@
 
 - :mod:`.site`: the site file (room, camera model, requirements), read strictly; the floor to
   serve and a camera's footprint on it;
-- :mod:`.reference`: the reference model that judges every layout (docs/formats.md);
+- :mod:`.reference`: the reference model that judges every layout (docs/conventions.md);
 - :mod:`.families`: the grid families as cameras and the mounting grid;
 - :mod:`.nadir`: the reference model in closed form for level cameras, batched;
 - :mod:`.lattice`: the exhaustive search over a family's lattices clipped to the room;

@@ -1,5 +1,5 @@
 """The reference model that judges every layout — the one contract ``plan``, ``check`` and the
-maps share (docs/formats.md, "Site file"): sample points of the room minus keep-out at the
+maps share (docs/conventions.md, "Reference model"): sample points of the room minus keep-out at the
 lowest, middle and highest LED height; a point is seen by a camera when it projects inside the
 image (2 px margin) in front of it; the predicted error of a point seen by ≥ 2 cameras is
 ``sqrt(trace(F⁻¹))``, ``F = Σ JᵢᵀJᵢ / σ²``; an obstacle (a keep-out with a height) hides a
