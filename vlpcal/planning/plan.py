@@ -48,7 +48,7 @@ class Plan:
     tried: int  # layouts judged
     seconds: float
     closest: Candidate | None = None  # when nothing meets: the densest lattice tried
-    missing: dict = field(default_factory=dict)  # family → why it has no candidate
+    missing: dict[str, str] = field(default_factory=dict)  # family → why it has no candidate
     #: the CasADi optimiser's search below the best level layout (when it ran)
     tilted: TiltedPlan | None = None
     #: rad: the tilt ``tilted`` allowed; for a site without ``mounting:`` it is
@@ -56,6 +56,8 @@ class Plan:
     tilt: float = 0.0
     #: the optimiser's mending of the best lattice when none met the exact model
     mended: TiltedPlan | None = None
+    #: why no layout can meet the requirements, known before any search (else empty)
+    refused: str = ""
 
 
 def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool = True) -> Plan:
@@ -79,20 +81,20 @@ def plan_site(site: Site, max_cameras: int = 60, progress=None, tilt_hint: bool 
     say = progress or (lambda m: None)
     fewest = fewest_possible(site)
     if fewest > max_cameras:  # before any sample point is made: a hall of 10⁴ m² stays quick
-        return Plan([], 0, time.perf_counter() - t0, None,
-                    {"all": f"at least {fewest} cameras are needed (the served share of the "
-                            "floor, times the cameras per point, over a camera's footprint)"})
+        return Plan([], 0, time.perf_counter() - t0,
+                    refused=f"at least {fewest} cameras are needed (the served share of the "
+                            "floor, times the cameras per point, over a camera's footprint)")
     step = mount_step(site)
     model = NadirModel(site)
     if model.n_points == 0:
-        return Plan([], 0, time.perf_counter() - t0, None,
-                    {"all": "no point of the reference model's sample grid falls on the floor "
-                            "(a room narrower than one grid cell?)"})
+        return Plan([], 0, time.perf_counter() - t0,
+                    refused="no point of the reference model's sample grid falls on the floor "
+                            "(a room narrower than one grid cell?)")
     if model.inside.size > MAX_SAMPLE_CELLS:
-        return Plan([], 0, time.perf_counter() - t0, None,
-                    {"all": f"the reference model's {model.step * 100:g} cm grid has "
+        return Plan([], 0, time.perf_counter() - t0,
+                    refused=f"the reference model's {model.step * 100:g} cm grid has "
                             f"{model.inside.size:,} cells per height, more than the "
-                            f"{MAX_SAMPLE_CELLS:,} a plan handles here: plan the room in parts"})
+                            f"{MAX_SAMPLE_CELLS:,} a plan handles here: plan the room in parts")
     screen = NadirModel(site, every=SCREEN_EVERY)
     grids = [f for f in ("square", "triangular", "linear") if f in site.families]
     if "free" in site.families and "square" not in grids:

@@ -94,9 +94,9 @@ def no_plan_message(site: Site, plan: Plan, max_cameras: int,
     """Why a plan has no candidate, and what would help; ``max_cameras_name``: what the
     caller calls the limit on cameras (a command names its option)."""
     r = site.requirements
-    if "all" in plan.missing:
+    if plan.refused:
         return (f"no layout of up to {max_cameras} cameras can meet the requirements: "
-                f"{plan.missing['all']}; raise {max_cameras_name}, relax the requirements or "
+                f"{plan.refused}; raise {max_cameras_name}, relax the requirements or "
                 "use a camera with a wider view" + unit_doubt(site))
     m = plan.mended
     kind = "tilted" if site.mounting and site.mounting.max_tilt > 0 else "level"
