@@ -1,9 +1,6 @@
 """The installer's commands: plan a layout for a site, judge any layout against it
 (``vlpcal plan``, ``vlpcal check``). The reports they print are
 :mod:`vlpcal.planning.report`'s.
-
-The survey package is imported inside :func:`_echo_linkage`: it is large, and only ``plan``'s
-last line needs it.
 """
 
 from __future__ import annotations
@@ -21,6 +18,8 @@ from ..planning.report import (
     verdict_line,
 )
 from ..reports import plan_maps
+from ..survey import SurveyError
+from ..survey.linkage import link_cameras
 from ..writing import OutputSet
 from .common import UserError, _load_deployment, _output_file, _stop_asked, echo, main
 
@@ -94,9 +93,6 @@ def _echo_linkage(dep) -> None:
     floor to 40 % of the ceiling can link, judged from the geometry (one line when all are);
     those it cannot, named with what would link them — told now, while cameras can still be
     moved, not after a survey's measuring."""
-    from ..survey import SurveyError
-    from ..survey.linkage import link_cameras
-
     try:
         lines = link_cameras(dep).sentences()
     except SurveyError as e:
