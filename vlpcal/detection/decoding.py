@@ -140,16 +140,26 @@ def decode_gray(data, shape=None) -> np.ndarray | None:
     if len(buf) < 4 or not buf.startswith(b"\xff\xd8") or not (
             buf.endswith(b"\xff\xd9") or buf.rstrip(b"\x00").endswith(b"\xff\xd9")):
         return None
-    size = jpeg_size(buf)
-    if size is None or (tuple(shape) != size if shape is not None
-                        else size[0] * size[1] > MAX_PIXELS):
-        return None
-    try:
-        with _QuietStderr():
-            img = _cv2.imdecode(np.frombuffer(buf, np.uint8), _cv2.IMREAD_GRAYSCALE)
-    except _cv2.error:
-        return None
+    with _QuietStderr():
+        img, _ = _decode_jpeg(buf, tuple(shape) if shape is not None else None)
     return img
+
+
+def _decode_jpeg(buf: bytes, want):
+    """A JPEG's bytes (its start and end markers already checked) → ``(8-bit grayscale image or
+    None, reason code)``: ``wrong_size`` when the size its header declares is not ``want``
+    (H, W) — more than :data:`MAX_PIXELS` without it —, ``corrupt_frame`` without a frame
+    header, both before anything is decoded (a small file may declare a huge image); None and
+    0 when OpenCV cannot decode it. The caller quiets libjpeg (:class:`_QuietStderr`)."""
+    size = jpeg_size(buf)
+    if size is None:
+        return None, _REASON_CODE[CORRUPT]
+    if size != want if want is not None else size[0] * size[1] > MAX_PIXELS:
+        return None, _REASON_CODE[WRONG_SIZE]
+    try:
+        return _cv2.imdecode(np.frombuffer(buf, np.uint8), _cv2.IMREAD_GRAYSCALE), 0
+    except _cv2.error:
+        return None, 0
 
 
 #: frames decoded into one stack at a time: ~5 MB at 160 × 120, which stays in the CPU's cache
@@ -223,17 +233,11 @@ def _decode_into(frames, codes, want, stack, images):
             codes[i] = _REASON_CODE[MISSING]
             continue
         if type(f) is bytes and f[:2] == b"\xff\xd8" and f[-2:] == b"\xff\xd9":
-            # a whole JPEG: decode it here (decode_gray's checks, inlined for speed), after
-            # its header's size is checked (a small file may declare a huge image)
-            size = jpeg_size(f)
-            if size is None or (size != want if want is not None
-                                else size[0] * size[1] > MAX_PIXELS):
-                codes[i] = _REASON_CODE[WRONG_SIZE if size is not None else CORRUPT]
+            # a whole JPEG: decode_gray's steps but the marker checks, with the reason kept
+            im, code = _decode_jpeg(f, want)
+            if code:
+                codes[i] = code
                 continue
-            try:
-                im = _cv2.imdecode(np.frombuffer(f, np.uint8), _cv2.IMREAD_GRAYSCALE)
-            except _cv2.error:
-                im = None
         else:
             im = decode_gray(f) if isinstance(f, (bytes, bytearray, memoryview)) else as_gray(f)
         if stack is not None and im is not None and im.shape == want \

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .blob import _core_centroid, _detect_blob, _detect_frame_blob, _segment
+from .blob import _detect_blob, _detect_frame_blob, _detect_several_blob
 from .decoding import _CHUNK, _decode_frame, _to_stack, as_gray
 from .peaks import _detect_centroid, _detect_peak
 from .results import (
@@ -18,7 +18,6 @@ from .results import (
     Spot,
     SpotBatch,
 )
-from .windows import _median, _peak
 
 DEFAULT_DETECTOR = "blob"
 
@@ -107,30 +106,7 @@ def _detect_several(frames, k, method, settings, shape, codes_out) -> np.ndarray
         codes_out[:] = codes
     if stack is None or not (codes == 0).any():
         return out
-    where = np.flatnonzero(codes == 0)
-    s = settings
-    r, c, peak, bg, sigma, code = _peak(stack, s)
-    n, h, w = stack.shape
-    rows = np.full((n, k), -1)
-    cols = np.zeros((n, k), int)
-    for i in np.flatnonzero(code == 0):
-        img = stack[i]
-        fbg = _median(img[::4, ::4].ravel())
-        floor = max(s.min_contrast, s.min_snr * sigma[i])
-        found = _segment(img, fbg, fbg + max(s.threshold * (peak[i] - fbg), 3 * sigma[i]),
-                         floor, s, k)
-        if found is not None:
-            m = len(found[0])
-            rows[i, :m], cols[i, :m] = found[0], found[1]
-    for j in range(k):
-        idx = np.flatnonzero(rows[:, j] >= 0)
-        if not len(idx):
-            continue
-        u, v, _, _, edge = _core_centroid(stack[idx], rows[idx, j], cols[idx, j], s)
-        with np.errstate(invalid="ignore"):
-            edge |= (u < 1.0) | (v < 1.0) | (u > w - 2.0) | (v > h - 2.0)
-        out[where[idx], j, 0] = np.where(edge, np.nan, u)
-        out[where[idx], j, 1] = np.where(edge, np.nan, v)
+    out[codes == 0] = _detect_several_blob(stack, k, settings)
     return out
 
 
@@ -167,10 +143,9 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
         if every_reason and why[0] is None:
             why = [detect_spots([frame], method, settings, shape)[0].reason]
         return uv[0], why[0]
-    out = np.full((k, 2), np.nan)
     img, own, code = _decode_frame(frame, tuple(shape) if shape is not None else None)
     if img is None:
-        return out, _CODE_REASON[code]
+        return np.full((k, 2), np.nan), _CODE_REASON[code]
     if img.dtype != np.uint8 or not img.flags.c_contiguous:  # a float frame: the batch
         if k == 1:
             spot = detect_spots(img[None], "blob", settings)[0]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .results import _REASON_CODE, AT_EDGE, NO_SPOT, DetectorSettings, SpotBatch, _finish
-from .windows import _neighbours, _peak, _windows
+from .windows import _neighbours, _peak, _threshold, _windows
 
 
 def _vertex(p1, p, p2, printed: bool = False):
@@ -80,7 +80,7 @@ def _window_centroid(stack, r, c, thr, half):
 def _detect_centroid(stack, s: DetectorSettings) -> SpotBatch:
     """``centroid``: the thresholded centroid in a window around the brightest pixel."""
     r, c, peak, bg, sigma, code = _peak(stack, s)
-    thr = bg + np.maximum(s.threshold * (peak - bg), 3.0 * sigma)
+    thr = _threshold(peak, bg, sigma, s)
     u, v, tot, area, _, touches, frame_edge = _window_centroid(stack, r, c, thr, s.window)
     code[(code == 0) & touches & frame_edge] = _REASON_CODE[AT_EDGE]
     code[(code == 0) & ~(tot > 0)] = _REASON_CODE[NO_SPOT]
