@@ -51,6 +51,7 @@ from .results import (
     TOO_DIM,
     WRONG_SIZE,
     DetectorSettings,
+    Reason,
     Spot,
     SpotBatch,
 )
@@ -58,6 +59,6 @@ from .results import (
 __all__ = [
     "AT_EDGE", "CORRUPT", "DEFAULT_DETECTOR", "DEFAULTS", "DETECTORS", "MAX_PIXELS", "MIN_SIZE",
     "MISSING", "NO_SPOT", "REASONS", "SIZE_SAMPLE", "TOO_DIM", "WRONG_SIZE", "DetectorSettings",
-    "Spot", "SpotBatch", "as_gray", "decode_gray", "detect_frame", "detect_several",
+    "Reason", "Spot", "SpotBatch", "as_gray", "decode_gray", "detect_frame", "detect_several",
     "detect_spot", "detect_spots", "jpeg_size", "spread", "usual_size",
 ]

@@ -23,7 +23,7 @@ from functools import cache
 import numpy as np
 
 from .decoding import _cv2
-from .results import _REASON_CODE, AT_EDGE, NO_SPOT, DetectorSettings, SpotBatch, _finish
+from .results import _REASON_CODE, DetectorSettings, Reason, SpotBatch, _finish
 from .windows import (
     _cut,
     _median,
@@ -327,13 +327,13 @@ def _detect_blob(stack, s: DetectorSettings, scratch: bool = False) -> SpotBatch
     for i in np.flatnonzero((code == 0) & ~lone):
         found = _choose(stack[i], peak[i], sigma[i], s)
         if found is None:  # nothing point-like: a lamp alone, or noise
-            code[i] = _REASON_CODE[NO_SPOT]
+            code[i] = _REASON_CODE[Reason.NO_SPOT]
         else:
             r[i], c[i], top[i], blobs[i] = found[0][0], found[1][0], found[2][0], found[3]
     u, v, _, area, edge = _core_centroid(stack, r, c, s)
     edge |= ~_on_sensor(u, v, h, w) & np.isfinite(u)
-    code[(code == 0) & edge] = _REASON_CODE[AT_EDGE]
-    code[(code == 0) & ~np.isfinite(u)] = _REASON_CODE[NO_SPOT]
+    code[(code == 0) & edge] = _REASON_CODE[Reason.AT_EDGE]
+    code[(code == 0) & ~np.isfinite(u)] = _REASON_CODE[Reason.NO_SPOT]
     return _finish(u, v, top, area, top >= s.saturation, code, blobs)
 
 
@@ -375,14 +375,14 @@ def _detect_frame_blob(img: np.ndarray, k: int, s: DetectorSettings, own: bool):
     else:
         found = _choose(img, peak, sigma, s, k)
         if found is None:  # nothing point-like: a lamp alone, or noise
-            return out, _REASON_CODE[NO_SPOT]
+            return out, _REASON_CODE[Reason.NO_SPOT]
         spots = list(zip(found[0].tolist(), found[1].tolist()))
     for j, (r, c) in enumerate(spots):
         u, v, edge = _core_centroid_one(img, r, c, s)
         if u == u and not edge and _on_sensor(u, v, h, w):
             out[j] = u, v
         elif j == 0:  # off the sensor in part (the batch's at_edge), or not measurable
-            code = _REASON_CODE[AT_EDGE if edge or u == u else NO_SPOT]
+            code = _REASON_CODE[Reason.AT_EDGE if edge or u == u else Reason.NO_SPOT]
     return out, code
 
 

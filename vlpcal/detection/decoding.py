@@ -8,7 +8,7 @@ import threading
 
 import numpy as np
 
-from .results import _REASON_CODE, CORRUPT, MISSING, WRONG_SIZE
+from .results import _REASON_CODE, Reason
 
 
 class _LazyCv2:
@@ -153,9 +153,9 @@ def _decode_jpeg(buf: bytes, want):
     0 when OpenCV cannot decode it. The caller quiets libjpeg (:class:`_QuietStderr`)."""
     size = jpeg_size(buf)
     if size is None:
-        return None, _REASON_CODE[CORRUPT]
+        return None, _REASON_CODE[Reason.CORRUPT_FRAME]
     if size != want if want is not None else size[0] * size[1] > MAX_PIXELS:
-        return None, _REASON_CODE[WRONG_SIZE]
+        return None, _REASON_CODE[Reason.WRONG_SIZE]
     try:
         return _cv2.imdecode(np.frombuffer(buf, np.uint8), _cv2.IMREAD_GRAYSCALE), 0
     except _cv2.error:
@@ -198,18 +198,19 @@ def _to_stack(frames, shape=None):
     if isinstance(frames, np.ndarray) and frames.ndim == 3:
         codes = np.zeros(len(frames), np.int8)
         if shape is not None and frames.shape[1:] != tuple(shape):
-            codes[:] = _REASON_CODE[WRONG_SIZE]
+            codes[:] = _REASON_CODE[Reason.WRONG_SIZE]
         elif min(frames.shape[1:], default=0) < MIN_SIZE:
-            codes[:] = _REASON_CODE[CORRUPT]
+            codes[:] = _REASON_CODE[Reason.CORRUPT_FRAME]
         elif frames.dtype.kind == "f":
-            codes[~np.isfinite(frames).all(axis=(1, 2))] = _REASON_CODE[CORRUPT]
+            codes[~np.isfinite(frames).all(axis=(1, 2))] = _REASON_CODE[Reason.CORRUPT_FRAME]
         good = codes == 0
         return (frames if good.all() else frames[good]), codes
     n = len(frames)
     codes = np.zeros(n, np.int8)
     want = tuple(shape) if shape is not None else None
     if want is not None and min(want) < MIN_SIZE:  # no spot can be measured in so small an image
-        codes[:] = [_REASON_CODE[MISSING if f is None else CORRUPT] for f in frames]
+        codes[:] = [_REASON_CODE[Reason.MISSING if f is None else Reason.CORRUPT_FRAME]
+                    for f in frames]
         return None, codes
     # with the size known, decoded frames go straight into the stack; else they are collected
     stack = np.empty((n, *want), np.uint8) if want is not None else None
@@ -230,7 +231,7 @@ def _decode_into(frames, codes, want, stack, images):
     when a float frame came)."""
     for i, f in enumerate(frames):
         if f is None:
-            codes[i] = _REASON_CODE[MISSING]
+            codes[i] = _REASON_CODE[Reason.MISSING]
             continue
         if type(f) is bytes and f[:2] == b"\xff\xd8" and f[-2:] == b"\xff\xd9":
             # a whole JPEG: decode_gray's steps but the marker checks, with the reason kept
@@ -246,11 +247,11 @@ def _decode_into(frames, codes, want, stack, images):
             continue
         if im is None or im.ndim != 2 or min(im.shape) < MIN_SIZE or (
                 im.dtype.kind == "f" and not np.isfinite(im).all()):
-            codes[i] = _REASON_CODE[CORRUPT]
+            codes[i] = _REASON_CODE[Reason.CORRUPT_FRAME]
             continue
         want = want or im.shape
         if im.shape != want:
-            codes[i] = _REASON_CODE[WRONG_SIZE]
+            codes[i] = _REASON_CODE[Reason.WRONG_SIZE]
         elif stack is not None:  # another dtype (a float frame): widen the stack once
             stack = stack.astype(np.result_type(stack.dtype, im.dtype))
             stack[i] = im
@@ -271,8 +272,8 @@ def _decode_frame(frame, want):
     """One live frame decoded and checked as a batch's frames are (the same reasons for the
     same frames): ``(image or None, own, reason code)``; ``own``: the image was decoded here,
     so its caller may change it for a moment and restore it."""
-    if want is not None and min(want) < MIN_SIZE:
-        return None, False, _REASON_CODE[CORRUPT]  # no spot can be measured in so small an image
+    if want is not None and min(want) < MIN_SIZE:  # no spot can be measured in so small an image
+        return None, False, _REASON_CODE[Reason.CORRUPT_FRAME]
     img = _decode_whole(frame, want)
     if img is not None:
         return img, True, 0

@@ -10,11 +10,9 @@ from .peaks import _detect_centroid, _detect_peak
 from .results import (
     _CODE_REASON,
     _REASON_CODE,
-    CORRUPT,
     DEFAULTS,
-    MISSING,
-    WRONG_SIZE,
     DetectorSettings,
+    Reason,
     Spot,
     SpotBatch,
 )
@@ -76,10 +74,7 @@ def detect_several(frames, k: int, method: str = DEFAULT_DETECTOR,
     if reasons:
         codes = np.zeros(len(frames), np.int8)
         uv = _detect_several(frames, k, method, settings, shape, codes)
-        return uv, [_CODE_REASON[int(c)] if c in (_REASON_CODE[CORRUPT],
-                                                   _REASON_CODE[WRONG_SIZE],
-                                                   _REASON_CODE[MISSING]) else None
-                    for c in codes]
+        return uv, [_CODE_REASON[int(c)] if c in _UNMEASURED else None for c in codes]
     return _detect_several(frames, k, method, settings, shape, None)
 
 
@@ -117,7 +112,7 @@ def detect_spot(frame, method: str = DEFAULT_DETECTOR,
         raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
     img = as_gray(frame)
     if img is None:
-        return Spot(np.nan, np.nan, 0.0, 0, False, CORRUPT, 0)
+        return Spot(np.nan, np.nan, 0.0, 0, False, Reason.CORRUPT_FRAME, 0)
     return detect_spots(img[None], method, settings)[0]
 
 
@@ -161,5 +156,6 @@ def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
 
 
 #: the reasons :func:`detect_frame` gives without ``every_reason``: no frame to measure
-_UNMEASURED = (_REASON_CODE[CORRUPT], _REASON_CODE[WRONG_SIZE], _REASON_CODE[MISSING])
+_UNMEASURED = tuple(_REASON_CODE[r] for r in (Reason.CORRUPT_FRAME, Reason.WRONG_SIZE,
+                                               Reason.MISSING))
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .results import _REASON_CODE, AT_EDGE, NO_SPOT, DetectorSettings, SpotBatch, _finish
+from .results import _REASON_CODE, DetectorSettings, Reason, SpotBatch, _finish
 from .windows import _neighbours, _peak, _threshold, _windows
 
 
@@ -47,7 +47,7 @@ def _detect_peak(stack, s: DetectorSettings, method: str) -> SpotBatch:
         u = c + _vertex(p1, p, p2, printed)
         v = r + _vertex(p3, p, p4, printed)
         edge = (c == 0) | (c == w - 1) | (r == 0) | (r == h - 1)
-        code[(code == 0) & edge] = _REASON_CODE[AT_EDGE]
+        code[(code == 0) & edge] = _REASON_CODE[Reason.AT_EDGE]
     area = (stack.reshape(n, -1) > (bg + s.threshold * (peak - bg))[:, None]).sum(axis=1)
     return _finish(u, v, peak, area, peak >= s.saturation, code)
 
@@ -82,7 +82,7 @@ def _detect_centroid(stack, s: DetectorSettings) -> SpotBatch:
     r, c, peak, bg, sigma, code = _peak(stack, s)
     thr = _threshold(peak, bg, sigma, s)
     u, v, tot, area, _, touches, frame_edge = _window_centroid(stack, r, c, thr, s.window)
-    code[(code == 0) & touches & frame_edge] = _REASON_CODE[AT_EDGE]
-    code[(code == 0) & ~(tot > 0)] = _REASON_CODE[NO_SPOT]
+    code[(code == 0) & touches & frame_edge] = _REASON_CODE[Reason.AT_EDGE]
+    code[(code == 0) & ~(tot > 0)] = _REASON_CODE[Reason.NO_SPOT]
     return _finish(u, v, peak, area, peak >= s.saturation, code)
 

@@ -4,25 +4,43 @@ the reasons a frame gives no spot, and the thresholds every detector shares."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
-#: Reasons a frame gives no spot.
-NO_SPOT, TOO_DIM, AT_EDGE, CORRUPT = "no_spot", "too_dim", "at_edge", "corrupt_frame"
-#: a frame of another size than the camera's, and no frame at all (None in a batch)
-WRONG_SIZE, MISSING = "wrong_size", "missing"
-REASONS = (NO_SPOT, TOO_DIM, AT_EDGE, CORRUPT, WRONG_SIZE, MISSING)
-_REASON_CODE = {None: 0, NO_SPOT: 1, TOO_DIM: 2, AT_EDGE: 3, CORRUPT: 4, WRONG_SIZE: 5,
-                MISSING: 6}
-_CODE_REASON = {v: k for k, v in _REASON_CODE.items()}
 
+class Reason(StrEnum):
+    """Why a frame gives no spot. A ``str``: the value is how files, statuses and messages
+    spell it, and compares equal to that string."""
+
+    #: nothing stands above the background's noise
+    NO_SPOT = "no_spot"
+    #: a spot too faint to trust its sub-pixel centre
+    TOO_DIM = "too_dim"
+    #: the spot's centre on or within a pixel of the frame's border: part of it is off the sensor
+    AT_EDGE = "at_edge"
+    #: not a whole image: damaged or truncated bytes, too small a frame, a NaN
+    CORRUPT_FRAME = "corrupt_frame"
+    #: a frame of another size than the camera's
+    WRONG_SIZE = "wrong_size"
+    #: no frame at all (None in a batch)
+    MISSING = "missing"
+
+
+#: the reasons by their former module-level names
+NO_SPOT, TOO_DIM, AT_EDGE = Reason.NO_SPOT, Reason.TOO_DIM, Reason.AT_EDGE
+CORRUPT, WRONG_SIZE, MISSING = Reason.CORRUPT_FRAME, Reason.WRONG_SIZE, Reason.MISSING
+REASONS = tuple(Reason)
+#: a reason as the int8 code :class:`SpotBatch` stores (0: a spot), and back
+_REASON_CODE = {None: 0, **{reason: code for code, reason in enumerate(Reason, 1)}}
+_CODE_REASON = {v: k for k, v in _REASON_CODE.items()}
 
 
 @dataclass(frozen=True)
 class DetectorSettings:
     """Thresholds shared by the detectors; defaults suit 8-bit frames of a small LED.
 
-    The noise level is estimated per frame from a pixel subsample (see ``_noise``).
+    The noise level is estimated per frame, from the ring of pixels around the brightest one.
     """
 
     #: below this peak-over-background in noise sigmas there is nothing to detect
@@ -54,7 +72,7 @@ class Spot:
     peak: float
     area: int
     saturated: bool
-    reason: str | None = None
+    reason: Reason | None = None
     #: how many blobs competed; > 1 means the detector had to choose (see ``note``)
     blobs: int = 1
     note: str = ""
@@ -88,7 +106,7 @@ class SpotBatch:
         return self.reason_code == 0
 
     @property
-    def reasons(self) -> list[str | None]:
+    def reasons(self) -> list[Reason | None]:
         return [_CODE_REASON[int(c)] for c in self.reason_code]
 
     def __getitem__(self, i: int) -> Spot:

@@ -14,7 +14,7 @@ from functools import cache
 
 import numpy as np
 
-from .results import _REASON_CODE, NO_SPOT, TOO_DIM, DetectorSettings
+from .results import _REASON_CODE, DetectorSettings, Reason
 
 #: half size of the square ring (15×15) whose median is the background under the spot
 _RING = 7
@@ -69,11 +69,11 @@ def _classify(peak, bg, sigma, s: DetectorSettings):
     noise sigmas, ``too_dim`` under ``min_contrast``, else 0 (arrays, or one frame's floats)."""
     excess = peak - bg
     if not isinstance(excess, np.ndarray):
-        return (_REASON_CODE[NO_SPOT] if excess < s.min_snr * sigma
-                else _REASON_CODE[TOO_DIM] if excess < s.min_contrast else 0)
+        return (_REASON_CODE[Reason.NO_SPOT] if excess < s.min_snr * sigma
+                else _REASON_CODE[Reason.TOO_DIM] if excess < s.min_contrast else 0)
     code = np.zeros(len(peak), np.int8)
-    code[excess < s.min_contrast] = _REASON_CODE[TOO_DIM]
-    code[excess < s.min_snr * sigma] = _REASON_CODE[NO_SPOT]
+    code[excess < s.min_contrast] = _REASON_CODE[Reason.TOO_DIM]
+    code[excess < s.min_snr * sigma] = _REASON_CODE[Reason.NO_SPOT]
     return code
 
 
