@@ -5,6 +5,10 @@ plus two harder extras (a wide reflection touching the LED, a bright lamp elsewh
 frame). Spots are pixel-integrated Gaussians with random sub-pixel positions, sizes and
 brightness, with noise, 8-bit quantisation and JPEG at quality 60–90 (vlpcal.sim).
 
+Speed per frame three ways: the batch (``detect_spots`` on the decoded stack), one decoded frame
+a call (``detect_spot``), and the live path (``detect_frame`` on the JPEG bytes, decode
+included, one frame a call).
+
 Prints one table per set and the verdict for "the default beats nip by ≥ 2× on RMS error over
 the acceptance set"; writes benchmarks/out/detectors.json.
 
@@ -20,7 +24,14 @@ import _common  # noqa: F401  (one-core setup before numpy)
 import numpy as np
 
 from vlpcal import sim
-from vlpcal.detection import DEFAULT_DETECTOR, DETECTORS, decode_gray, detect_spot, detect_spots
+from vlpcal.detection import (
+    DEFAULT_DETECTOR,
+    DETECTORS,
+    decode_gray,
+    detect_frame,
+    detect_spot,
+    detect_spots,
+)
 
 ACCEPTANCE_SETS = ("unsaturated", "saturated", "reflection")
 
@@ -91,17 +102,22 @@ def main(argv=None) -> int:
             few = stack[:200]
             single_s = best_time(lambda fs=few, mm=m: [detect_spot(f, mm) for f in fs], 3)
             single = single_s / len(few) * 1e6
+            live_s = best_time(lambda js=jpegs[:200], mm=m: [
+                detect_frame(j, 1, mm, shape=(120, 160)) for j in js], 3)
+            live = live_s / len(jpegs[:200]) * 1e6
             rows.append({"detector": m, "rms_px": float(np.sqrt(e2.mean())),
                          "bias_u_px": float(np.nanmean(du)), "bias_v_px": float(np.nanmean(dv)),
                          "p95_px": float(np.sqrt(np.percentile(e2, 95))),
-                         "no_spot": int(lost.sum()), "us_batch": batch, "us_single": single})
+                         "no_spot": int(lost.sum()), "us_batch": batch, "us_single": single,
+                         "us_live": live})
         results[name] = rows
         print(f"\n{name} ({args.frames} frames of 160 × 120, JPEG q 60–90)")
         print(table(rows, [("detector", "detector", ""), ("rms_px", "RMS px", ".4f"),
                            ("bias_u_px", "bias u", "+.4f"), ("bias_v_px", "bias v", "+.4f"),
                            ("p95_px", "p95 px", ".3f"), ("no_spot", "missed", "d"),
                            ("us_batch", "µs/frame batch", ".1f"),
-                           ("us_single", "µs/frame single", ".1f")]))
+                           ("us_single", "µs/frame single", ".1f"),
+                           ("us_live", "µs/frame live", ".1f")]))
     overall = {m: float(np.sqrt(np.concatenate(sq[m]).mean())) for m in DETECTORS}
     ratio = overall["nip"] / overall[DEFAULT_DETECTOR]
     print(f"\nover the acceptance sets ({', '.join(ACCEPTANCE_SETS)}): RMS px "

@@ -1,26 +1,40 @@
-"""Spot detection: a camera frame (JPEG bytes or an image array) → the LED's sub-pixel centre.
+"""Spot detection: camera frames (JPEG bytes or image arrays) → the LED's sub-pixel centre.
 
-Detectors by name (:data:`DETECTORS`):
+Two entries, one contract (every detector, both entries):
 
-- ``highest``: the brightest pixel (the paper's baseline, section 3.2 (a)).
+- the batch, :func:`detect_spots`: ``N`` frames (an ``N×H×W`` array, or a sequence of JPEG
+  bytes / ``H×W`` / ``H×W×3`` arrays / None) → :class:`SpotBatch` of ``N`` (``u, v``: ``N``
+  px, NaN where ``reason_code`` ≠ 0; ``.uv`` ``N×2``; ``batch[i]`` is frame i's
+  :class:`Spot`). Its two forms: :func:`detect_spot`, one frame → its :class:`Spot` (the
+  batch of one), and :func:`detect_several`, ``N`` frames, ``k`` LEDs in view → ``N×k×2`` px,
+  most LED-like first, NaN rows where a frame holds fewer (with ``reasons``: and a
+  :class:`Reason` or None per frame).
+- the live frame, :func:`detect_frame`: one frame → ``(k×2 px, Reason or None)``, row for row
+  what :func:`detect_several` gives for ``[frame]`` (with ``every_reason``: the reason
+  :func:`detect_spots` gives it), measured on the frame itself without building a stack.
+
+A frame without a usable spot carries a :class:`Reason` instead of raising: ``no_spot``,
+``too_dim``, ``at_edge``, ``corrupt_frame``, ``wrong_size`` or ``missing``. Pixels are
+OpenCV's (u = column, v = row, the top-left pixel's centre at (0, 0); docs/conventions.md).
+
+Detectors by name (:data:`DETECTORS`; the paper's are compared in its section 3.2):
+
+- ``highest``: the brightest pixel (the paper's baseline, (a)).
 - ``mean2``: the mean position of the two brightest pixels (the paper's "mean integer", (b)).
-- ``nip``: the paper's NI-P (section 2.1) as DESIGN.md states it: the 3-point parabola vertex
-  around the brightest pixel, per axis.
+- ``nip``: the paper's NI-P (section 2.1), the 3-point parabola vertex around the brightest
+  pixel, per axis (docs/conventions.md, "The paper's methods").
 - ``nip_eq5``: NI-P with the paper's eq. 5 exactly as printed, whose offset is twice the
-  parabola vertex's (see ``_vertex``); kept to reproduce the paper, not for use.
+  parabola vertex's; kept to reproduce the paper, not for use.
 - ``gauss``: the 3-point parabola through the logarithms (exact for a sampled Gaussian).
 - ``centroid``: background-subtracted, thresholded, intensity-weighted centroid in an 11×11
   window around the brightest pixel.
-- ``blob`` (the default, :data:`DEFAULT_DETECTOR`): picks the LED among the bright blobs by
-  brightness and compactness (a floor reflection is dimmer and wider, a lamp wider) and says
-  when it had to choose, then takes a thresholded centroid over a local background plane:
-  unbiased on saturated flat tops, where every 3-point fit is pulled ~0.3 px toward the first
-  flat pixel (FIELD-NOTES), and little moved by the flank of a nearby reflection.
+- ``blob`` (the default, :data:`DEFAULT_DETECTOR`): picks the LED among the bright blobs and
+  says when it had to choose, then takes a thresholded centroid over a local background plane
+  (:mod:`.blob`).
 
-Every detector returns the same fields (:class:`Spot` for one frame, :class:`SpotBatch` for an
-``N×H×W`` stack); a frame without a usable spot carries a reason instead of raising:
-``no_spot``, ``too_dim``, ``at_edge`` or ``corrupt_frame``. Pixels are OpenCV's (u = column,
-v = row, the top-left pixel's centre at (0, 0)).
+Modules: :mod:`.results` (what comes out), :mod:`.decoding` (frames in), :mod:`.windows` (the
+steps all detectors share), :mod:`.peaks` (the detectors that start at the brightest pixel),
+:mod:`.blob`, :mod:`.entries` (the public functions).
 """
 
 from .decoding import (

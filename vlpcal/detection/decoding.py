@@ -1,10 +1,17 @@
 """Frames in: JPEG bytes, image arrays or None → 8-bit grayscale images, a stack of them, and a
-reason code for each frame that cannot be measured."""
+reason code for each frame that cannot be measured.
+
+A frame is judged before it is decoded where it can be: its markers (a truncated JPEG decodes
+to grey with only a warning) and the size its header declares (a small file may declare a huge
+image). OpenCV (``cv2``) is imported on first use, through :data:`_cv2`, which every module of
+the package shares: importing the package stays light for commands that never decode.
+"""
 
 from __future__ import annotations
 
 import os
 import threading
+from collections import Counter
 
 import numpy as np
 
@@ -75,8 +82,6 @@ def usual_size(frames) -> tuple[int, int] | None:
     not counted) declare in their headers, or None when no size is: a camera's size judged
     from its frames, not from its first one — one damaged frame set (a 1 kB JPEG declaring
     32000 × 32000) is its own rows' status, not the camera's size."""
-    from collections import Counter
-
     sizes = Counter(size for size in (jpeg_size(f) if isinstance(f, (bytes, bytearray))
                                       else None for f in frames) if size is not None)
     if not sizes:
@@ -180,15 +185,12 @@ def as_gray(image) -> np.ndarray | None:
         return decode_gray(image)
     img = np.asarray(image)
     if img.ndim == 3 and img.shape[2] in (3, 4):
-        import cv2
-
-        img = cv2.cvtColor(img[..., :3].astype(np.float32), cv2.COLOR_BGR2GRAY)
+        img = _cv2.cvtColor(img[..., :3].astype(np.float32), _cv2.COLOR_BGR2GRAY)
     if img.ndim != 2 or min(img.shape) < MIN_SIZE:
         return None
     if img.dtype.kind == "f" and not np.isfinite(img).all():
         return None
     return img
-
 
 
 def _to_stack(frames, shape=None):

@@ -1,4 +1,6 @@
-"""The public entries: frames in, spots out, for a batch and for a live frame."""
+"""The public entries: frames in, spots out — :func:`detect_spots` for a batch (with its forms
+:func:`detect_spot` and :func:`detect_several`), :func:`detect_frame` for a live frame. Their
+shared contract is in the package's docstring (:mod:`vlpcal.detection`)."""
 
 from __future__ import annotations
 
@@ -17,28 +19,34 @@ from .results import (
     SpotBatch,
 )
 
+#: the detectors by name (the package's docstring says what each does)
+DETECTORS = ("highest", "mean2", "nip", "nip_eq5", "gauss", "centroid", "blob")
+#: the one that copes with saturation, reflections and lamps (:mod:`.blob`)
 DEFAULT_DETECTOR = "blob"
 
-DETECTORS = ("highest", "mean2", "nip", "nip_eq5", "gauss", "centroid", "blob")
+
+def _check(method: str) -> None:
+    if method not in DETECTORS:
+        raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
 
 
 def detect_spots(frames, method: str = DEFAULT_DETECTOR,
                  settings: DetectorSettings = DEFAULTS, shape=None) -> SpotBatch:
-    """Detect the spot in every frame.
+    """The batch entry: the spot in every frame, ``N`` frames → :class:`SpotBatch` of ``N``.
 
-    ``frames``: an ``N×H×W`` array, or a sequence of JPEG bytes / image arrays / None. A frame
-    that does not decode, is too small or holds a NaN gets ``corrupt_frame``; one whose size is
-    not ``shape`` (H, W; default: the first good frame's) ``wrong_size``; None ``missing``.
-    (A colour image counts as one frame only inside a sequence.)
+    ``frames``: an ``N×H×W`` array, or a sequence of ``N`` JPEG bytes / ``H×W`` or ``H×W×3``
+    image arrays / None. A frame that does not decode, is too small or holds a NaN gets
+    ``corrupt_frame``; one whose size is not ``shape`` (H, W; default: the first good frame's)
+    ``wrong_size``; None ``missing``. (A colour image counts as one frame only inside a
+    sequence.)
     """
-    if method not in DETECTORS:
-        raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
+    _check(method)
     if not isinstance(frames, np.ndarray) and len(frames) > _CHUNK:
         if shape is None:  # every chunk measures against the same size: the first good frame's
             first = next((im for im in (as_gray(f) for f in frames if f is not None)
                           if im is not None and im.ndim == 2), None)
             shape = None if first is None else first.shape
-        # decoded and measured a cache-sized chunk at a time (~25 % faster than one big stack)
+        # decoded and measured a chunk at a time, which stays in the CPU's cache
         parts = [detect_spots(frames[k:k + _CHUNK], method, settings, shape)
                  for k in range(0, len(frames), _CHUNK)]
         return SpotBatch(*(np.concatenate([getattr(p, name) for p in parts]) for name in
@@ -65,11 +73,11 @@ def detect_spots(frames, method: str = DEFAULT_DETECTOR,
 
 def detect_several(frames, k: int, method: str = DEFAULT_DETECTOR,
                    settings: DetectorSettings = DEFAULTS, shape=None, reasons: bool = False):
-    """Up to ``k`` spots in every frame, most LED-like first (several LEDs in view, issue 16):
-    ``N×k×2`` pixels, NaN where a frame holds fewer. ``blob`` ranks the frame's blobs by
-    height and compactness (:func:`_segment`) and measures each as it measures one; the other
+    """The batch with several LEDs in view: up to ``k`` spots in every frame, most LED-like
+    first, ``N`` frames → ``N×k×2`` px, NaN rows where a frame holds fewer. ``blob`` ranks each
+    frame's blobs by height and compactness and measures each as it measures one; the other
     detectors find one spot. Frames as :func:`detect_spots` takes them. With ``reasons``,
-    ``(spots, reason per frame)``: None, or why a frame could not be measured (``corrupt_frame``,
+    ``(spots, N reasons)``: None, or why a frame could not be measured (``corrupt_frame``,
     ``wrong_size``, ``missing``; a frame without a spot has None and NaN rows)."""
     if reasons:
         codes = np.zeros(len(frames), np.int8)
@@ -79,8 +87,8 @@ def detect_several(frames, k: int, method: str = DEFAULT_DETECTOR,
 
 
 def _detect_several(frames, k, method, settings, shape, codes_out) -> np.ndarray:
-    if method not in DETECTORS:
-        raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
+    """:func:`detect_several`, each frame's reason code written into ``codes_out``."""
+    _check(method)
     k = max(1, int(k))
     n_all = len(frames)
     out = np.full((n_all, k, 2), np.nan)
@@ -107,27 +115,27 @@ def _detect_several(frames, k, method, settings, shape, codes_out) -> np.ndarray
 
 def detect_spot(frame, method: str = DEFAULT_DETECTOR,
                 settings: DetectorSettings = DEFAULTS) -> Spot:
-    """Detect the spot in one frame (JPEG bytes or an H×W / H×W×3 image array)."""
-    if method not in DETECTORS:
-        raise ValueError(f"unknown detector {method!r}; expected one of {', '.join(DETECTORS)}")
+    """The batch of one: one frame (JPEG bytes or an ``H×W`` / ``H×W×3`` image array) → its
+    :class:`Spot`."""
+    _check(method)
     img = as_gray(frame)
     if img is None:
         return Spot(np.nan, np.nan, 0.0, 0, False, Reason.CORRUPT_FRAME, 0)
     return detect_spots(img[None], method, settings)[0]
 
 
-
 def detect_frame(frame, k: int = 1, method: str = DEFAULT_DETECTOR,
                  settings: DetectorSettings = DEFAULTS, shape=None, every_reason: bool = False):
-    """Up to ``k`` spots of one frame (JPEG bytes or an image array), most LED-like first:
-    ``(k×2 px with NaN rows, reason)`` as :func:`detect_several` gives for ``[frame]``, with
-    ``reason`` None unless the frame could not be measured (``corrupt_frame``, ``wrong_size``).
-    ``every_reason``: the reason :func:`detect_spots` gives the frame's best spot instead
-    (``no_spot``, ``too_dim`` and ``at_edge`` too), as the locator reports each camera.
+    """The live entry: up to ``k`` spots of one frame (JPEG bytes or an image array), most
+    LED-like first, one frame → ``(k×2 px with NaN rows, reason)``, as :func:`detect_several`
+    gives for ``[frame]``: ``reason`` None unless the frame could not be measured
+    (``corrupt_frame``, ``wrong_size``, ``missing``). ``every_reason``: the reason
+    :func:`detect_spots` gives the frame's best spot instead (``no_spot``, ``too_dim`` and
+    ``at_edge`` too), as the locator reports each camera.
 
-    The live path takes frames one at a time, where a stack of one costs what a stack of
-    hundreds does in numpy calls (~0.6 ms). ``blob`` is measured here step by step on the
-    frame itself (:func:`_detect_blob`'s steps, equal to it to rounding: tested); the other
+    A live path takes frames one at a time, where the numpy calls on a stack of one cost what
+    they cost on a stack of hundreds: ``blob`` is measured here on the frame itself, by the
+    batch's steps in their one-frame form (:mod:`.blob`; the same results, tested); the other
     detectors go through the batch."""
     k = max(1, int(k))
     if method != "blob":

@@ -1,5 +1,9 @@
 """The detectors that start at the brightest pixel: ``highest``, ``mean2``, ``nip``,
-``nip_eq5``, ``gauss`` and ``centroid`` (stack ``N×H×W`` → :class:`SpotBatch` of ``N``)."""
+``nip_eq5``, ``gauss`` and ``centroid`` (stack ``N×H×W`` → :class:`SpotBatch` of ``N``).
+
+The first three are the paper's (section 3.2 compares them; NI-P is its section 2.1), kept as
+the baseline every other detector is measured against on the same frames.
+"""
 
 from __future__ import annotations
 
@@ -10,10 +14,12 @@ from .windows import _neighbours, _peak, _threshold, _windows
 
 
 def _vertex(p1, p, p2, printed: bool = False):
-    """NI-P's sub-pixel offset from the brightest pixel P and its neighbours P1, P2.
+    """NI-P's sub-pixel offset from the brightest pixel P and its neighbours P1, P2 (the paper's
+    section 2.1).
 
-    DESIGN.md's NI-P is the 3-point parabola vertex ``(P2 − P1) / (2 (2P − P1 − P2))``. The
-    paper's eq. 5 as printed — lines of slope ±step through P1 and P2, with
+    NI-P is the 3-point parabola vertex ``(P2 − P1) / (2 (2P − P1 − P2))``
+    (docs/conventions.md, "The paper's methods"), exact on a sampled parabola. The paper's
+    eq. 5 as printed — lines of slope ±step through P1 and P2, with
     step = ((P − P1) + (P − P2)) / 2 (eq. 1) — gives twice that offset,
     ``(P2 − P1) / (2P − P1 − P2)`` (``printed=True``, the ``nip_eq5`` detector). 0 where flat.
     """
@@ -24,9 +30,9 @@ def _vertex(p1, p, p2, printed: bool = False):
     return np.clip(off, -limit, limit)
 
 
-
 def _detect_peak(stack, s: DetectorSettings, method: str) -> SpotBatch:
-    """``highest``, ``mean2``, ``nip`` and ``gauss``: all start at the brightest pixel."""
+    """``highest``, ``mean2``, ``nip``, ``nip_eq5`` and ``gauss``: the brightest pixel, and
+    the sub-pixel offset its neighbours give (``at_edge`` when it has none on one side)."""
     n, h, w = stack.shape
     r, c, peak, bg, sigma, code = _peak(stack, s)
     u, v = c.astype(float), r.astype(float)

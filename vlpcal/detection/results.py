@@ -65,7 +65,8 @@ DEFAULTS = DetectorSettings()
 
 @dataclass(frozen=True)
 class Spot:
-    """One frame's detection. ``u, v`` are NaN when ``reason`` says why there is no spot."""
+    """One frame's detection: its centre ``u, v`` (px), or NaN and the ``reason`` there is no
+    spot."""
 
     u: float
     v: float
@@ -84,14 +85,20 @@ class Spot:
 
 @dataclass
 class SpotBatch:
-    """Detections for ``N`` frames as arrays (NaN ``u, v`` where ``reason`` is set)."""
+    """Detections for ``N`` frames as arrays of ``N``: the columns a survey or a locator takes
+    whole (``uv`` ``N×2``), and each frame's :class:`Spot` as ``batch[i]``."""
 
+    #: spot centre, px (docs/conventions.md, "Pixels"); NaN where ``reason_code`` ≠ 0
     u: np.ndarray
     v: np.ndarray
+    #: the spot's brightest value (DN)
     peak: np.ndarray
+    #: pixels above the measuring threshold
     area: np.ndarray
     saturated: np.ndarray
+    #: int8: 0 for a spot, else the :class:`Reason` (``reasons`` gives them)
     reason_code: np.ndarray
+    #: how many blobs competed (0 without a spot)
     blobs: np.ndarray
 
     def __len__(self) -> int:
@@ -122,7 +129,6 @@ class SpotBatch:
         nan = np.full(n, np.nan)
         return cls(nan, nan.copy(), np.zeros(n), np.zeros(n, int), np.zeros(n, bool),
                    np.zeros(n, np.int8), np.zeros(n, int))
-
 
 
 def _finish(u, v, peak, area, saturated, code, blobs=None) -> SpotBatch:

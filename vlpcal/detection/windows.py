@@ -21,8 +21,9 @@ _RING = 7
 
 
 class _Scalar:
-    """The math module under numpy's names: a formula written once for arrays (``np``) runs
-    on one frame's Python floats (this) at a tenth of the cost."""
+    """The math module under numpy's names: a formula written once for arrays (``np``) also
+    runs on one frame's Python floats (this), where numpy's cost per call would outweigh the
+    arithmetic."""
 
     log = staticmethod(math.log)
     sqrt = staticmethod(math.sqrt)
