@@ -1,6 +1,6 @@
 """Fusion: the estimates of several cameras → one fix per point, vectorised over points.
 
-Methods by name (:data:`FUSIONS`), on ``uv`` shaped ``C×N×2`` (NaN = not seen):
+Methods by name (:class:`FusionMethod`), on ``uv`` shaped ``C×N×2`` (NaN = not seen):
 
 - ``mean``: the paper's approach (a), the mean of every camera pair's estimate (section 3.3).
 - ``nearest``: approach (b), the estimate of the pair physically closest to the point (the sum
@@ -20,6 +20,7 @@ two-view least squares (``"lsq"``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from itertools import combinations
 
 import numpy as np
@@ -32,7 +33,21 @@ from .triangulation import (
     triangulate_robust,
 )
 
-FUSIONS = ("mean", "nearest", "region", "all", "robust")
+
+class FusionMethod(StrEnum):
+    """How several cameras' estimates become one fix; the value is the deployment file's
+    ``fusion.method`` spelling (a member equals its string, so files and callers that pass
+    strings are unchanged)."""
+
+    MEAN = "mean"  #: the paper's approach (a): the mean of every pair's estimate
+    NEAREST = "nearest"  #: approach (b): the pair nearest the point
+    REGION = "region"  #: approach (c): the pair a region map names
+    ALL = "all"  #: N-view least squares over every camera that sees the LED
+    ROBUST = "robust"  #: ``all``, inconsistent views dropped
+
+
+#: every fusion method, in the order the file format lists them
+FUSIONS = tuple(FusionMethod)
 PAIR_METHODS = ("paper", "lsq")
 
 #: statuses of a fused point

@@ -11,7 +11,8 @@
 - :mod:`.held_out`: honest accuracy, k-fold by survey point;
 - :mod:`.regions`: the paper's approach (c), the best pair per floor region;
 - :mod:`.plan`: where to put the LED; :mod:`.spots`: the survey's spots as the locator sees
-  them; :mod:`.pipeline`: the whole of ``vlpcal survey calibrate``.
+  them; :mod:`.pipeline`: the whole of ``vlpcal survey calibrate``; :mod:`.results`: what
+  it returns, typed.
 """
 
 from .calibration import (
@@ -24,15 +25,9 @@ from .calibration import (
     refine_jointly,
 )
 from .camera_fit import CameraFit, fit_camera
-from .held_out import HELD_OUT, error_stats, held_out
-from .lens import LENS_MODELS, MIN_POINTS_POSE, lens_params, lens_support
-from .pipeline import (
-    FUSION_OF,
-    FreeSurveyResult,
-    SurveyResult,
-    calibrate_free_survey,
-    calibrate_survey,
-)
+from .held_out import FUSION_CHOICES, HELD_OUT, HeldOutCase, error_stats, held_out
+from .lens import LENS_MODELS, MIN_POINTS_POSE, LensModel, lens_params, lens_support
+from .pipeline import calibrate_free_survey, calibrate_survey
 from .plan import (
     MIN_POINTS_PLANNED,
     FreeRoute,
@@ -42,10 +37,18 @@ from .plan import (
     plan_survey,
 )
 from .regions import learn_region_map, region_cell
+from .results import (
+    FreeCamera,
+    FreeSurveyResult,
+    Precision,
+    SurveyResult,
+    TapeCamera,
+)
 from .spots import WandSpots, free_spots, survey_spots, wand_spots
 
 __all__ = [
-    "FUSION_OF", "HELD_OUT", "LENS_MODELS", "MIN_POINTS_PLANNED", "MIN_POINTS_POSE",
+    "FUSION_CHOICES", "HELD_OUT", "HeldOutCase", "LensModel", "Precision", "TapeCamera",
+    "FreeCamera", "LENS_MODELS", "MIN_POINTS_PLANNED", "MIN_POINTS_POSE",
     "Calibration", "CameraFit", "LensChoice", "SurveyError", "SurveyPlan", "SurveyResult",
     "calibrate", "calibrate_survey", "error_stats", "estimate_precision",
     "fit_camera", "fold_of", "held_out", "learn_region_map", "lens_params", "lens_support",

@@ -394,6 +394,12 @@ def mark_shares(X) -> tuple[np.ndarray, bool]:
     return share, bool((X[measured] == 0.0).all())
 
 
+def progress_steps(references: int, wand: float | None = None, labelled: bool = False) -> int:
+    """The steps :func:`calibrate_free` counts to its ``progress`` from a start (a second start
+    from the free sets adds three): the fits and each reference left out in turn."""
+    return 5 + min(references, MAX_LEFT_OUT) + (3 if wand is not None and not labelled else 0)
+
+
 def calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "auto",
                    point_sigma: float | str = "auto", free_height: float | None = None,
                    room=None, progress=None, wand: float | None = None,
@@ -519,8 +525,7 @@ def _calibrate_free(nominal: list[Camera], X, uv, ids, uv_free, lens: str = "aut
                     "at two heights, and a robot's LED at one height cannot fix a lens alone")
             notes.append(f"lens kept as in the deployment (pose only): {kept}")
     step = 0
-    total = 5 + min(N, MAX_LEFT_OUT) + (3 if wand is not None and not labelled else 0) \
-        + 3 * (len(tries) - 1)
+    total = progress_steps(N, wand, labelled) + 3 * (len(tries) - 1)
 
     def tick():
         nonlocal step

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
+from ..fusion import FusionMethod, fuse
 from ..geometry import Camera
 from .calibration import SurveyError, calibrate, fold_of
 from .regions import learn_region_map
@@ -22,14 +25,26 @@ def error_stats(err_m) -> dict:
             "max": float(e.max()), "fixed": float(ok.mean())}
 
 
-#: held-out comparisons: (label, cameras, fusion)
-HELD_OUT = (("nominal, (a) mean of pairs", "nominal", "mean"),
-            ("nominal, (b) nearest pair", "nominal", "nearest"),
-            ("nominal, all-camera LS", "nominal", "robust"),
-            ("calibrated, (a) mean of pairs", "calibrated", "mean"),
-            ("calibrated, (b) nearest pair", "calibrated", "nearest"),
-            ("calibrated, (c) region map", "calibrated", "region"),
-            ("calibrated, all-camera LS", "calibrated", "robust"))
+class HeldOutCase(NamedTuple):
+    """One row of the held-out comparison: which cameras, which fusion, and its label (the
+    row's name in the table and the report's ``held_out_m`` key)."""
+
+    label: str
+    cameras: str  #: "nominal" or "calibrated"
+    fusion: FusionMethod
+
+
+#: the held-out comparisons, in the table's order; the calibrated ones are the fusions a
+#: calibrated deployment may be given
+HELD_OUT = (HeldOutCase("nominal, (a) mean of pairs", "nominal", FusionMethod.MEAN),
+            HeldOutCase("nominal, (b) nearest pair", "nominal", FusionMethod.NEAREST),
+            HeldOutCase("nominal, all-camera LS", "nominal", FusionMethod.ROBUST),
+            HeldOutCase("calibrated, (a) mean of pairs", "calibrated", FusionMethod.MEAN),
+            HeldOutCase("calibrated, (b) nearest pair", "calibrated", FusionMethod.NEAREST),
+            HeldOutCase("calibrated, (c) region map", "calibrated", FusionMethod.REGION),
+            HeldOutCase("calibrated, all-camera LS", "calibrated", FusionMethod.ROBUST))
+#: the fusions a tape survey chooses among, by held-out mean
+FUSION_CHOICES = tuple(c for c in HELD_OUT if c.cameras == "calibrated")
 
 
 def held_out(nominal: list[Camera], X, uv, ids, room, lens: str | dict = "pose", folds: int = 5,
@@ -48,8 +63,6 @@ def held_out(nominal: list[Camera], X, uv, ids, room, lens: str | dict = "pose",
     Returns label → :func:`error_stats` (metres) over all folds, for :data:`HELD_OUT`; the
     per-point errors go into ``per_point`` (label → N errors, m) when given.
     """
-    from ..fusion import fuse
-
     X = np.asarray(X, float)
     uv = np.asarray(uv, float)
     fold = fold_of(len(X), folds, seed)

@@ -21,14 +21,28 @@ costs the fixes nothing, and whether a model helps is decided by what it does to
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from enum import StrEnum
 
 import numpy as np
 
 from ..geometry import Camera
 from .errors import SurveyError
 
+
+class LensModel(StrEnum):
+    """A nested lens model, simplest first; the value is the spelling of files and reports
+    (a member equals its string: ``LensModel.K1 == "k1"``)."""
+
+    POSE = "pose"  #: rotation and position only, the lens as in the deployment
+    FOCAL = "focal"  #: + fx, fy
+    PRINCIPAL = "principal"  #: + cx, cy
+    K1 = "k1"  #: + the first radial term
+    K2 = "k2"  #: + k2 and the tangential p1, p2
+    FULL = "full"  #: + k3: OpenCV's whole five-term lens
+
+
 #: the nested lens models, simplest first
-LENS_MODELS = ("pose", "focal", "principal", "k1", "k2", "full")
+LENS_MODELS = tuple(LensModel)
 _ADDS = {"pose": (), "focal": ("fx", "fy"), "principal": ("cx", "cy"), "k1": ("k1",),
          "k2": ("k2", "p1", "p2"), "full": ("k3",)}
 _DIST = {"k1": 0, "k2": 1, "p1": 2, "p2": 3, "k3": 4}

@@ -2,27 +2,29 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from .calibration import SurveyError, calibrate
-from .held_out import held_out
+from ..deployment import Deployment, provenance
+from ..fusion import FusionMethod
+from ..geometry import rodrigues
+from .calibration import SurveyError, calibrate, lens_sentence
+from .coverage import camera_words, quarter_counts
+from .free import calibrate_free
+from .held_out import FUSION_CHOICES, held_out
+from .lens import LensModel
+from .marks_frame import cameras_in_marks_frame, polygons_in_marks_frame
 from .regions import learn_region_map
-
-#: held-out label → the fusion the calibrated deployment would then use
-FUSION_OF = {"calibrated, (a) mean of pairs": "mean", "calibrated, (b) nearest pair": "nearest",
-             "calibrated, (c) region map": "region", "calibrated, all-camera LS": "robust"}
-
+from .results import (
+    FreeCamera,
+    FreeSurveyResult,
+    Precision,
+    SurveyResult,
+    TapeCamera,
+    finite_or_none,
+)
 
 #: the calibrated file's residual limit, in held-out residuals of its worst camera
 RESIDUAL_LIMIT = 5.0
-#: calibrated cameras further apart (or nearer) than this ratio of the plan's are doubtful: an
-#: install hung by hand keeps the plan's size to a few per cent; a wand length or a tape read
-#: wrong does not
-PLAN_SCALE_RATIO = 1.25
-#: … or any camera above the ceiling by more than this share of its height
-CEILING_SHARE = 0.03
 
 
 def residual_limit(cal) -> float:
@@ -34,41 +36,6 @@ def residual_limit(cal) -> float:
         px = choice.candidates.get(choice.chosen, {}).get("held_out_px")
         worst = max(worst, px if px is not None else fit.rms_px)
     return RESIDUAL_LIMIT * worst
-
-
-@dataclass
-class SurveyResult:
-    """A calibrated deployment and the report behind it (all lengths in metres)."""
-
-    deployment: object  #: the calibrated :class:`~vlpcal.deployment.Deployment`
-    stats: dict  #: held-out label → :func:`error_stats`
-    per_point: dict  #: held-out label → N errors
-    cameras: list  #: per camera: rms_px, points, outliers, moved, turned, lens and its choice
-    mismeasured: list  #: (point id, m)
-    fusion: str  #: the fusion chosen by held-out mean
-    points: np.ndarray  #: N×3 the survey positions as measured
-    precision: dict = field(default_factory=dict)  #: point_sigma_m, estimated, pixel_sigma_px
-    lens: list = field(default_factory=list)  #: per camera, the lens decision in words
-    folds: int = 5  #: of the held-out check
-    test_points: dict | None = None  #: :func:`vlpcal.reports.test_point_errors`, when given
-    #: the held-out 3D figures behind the lens models, beside plain OpenCV's
-    #: (:class:`~.lens_decision.LensDecision`; None when the lens was forced as "pose")
-    decision: object = None
-    #: points whose held-out error stands far beyond the others' (:class:`~.suspects.Suspect`)
-    suspects: list = field(default_factory=list)
-
-    def report(self, notes=()) -> dict:
-        out = {"held_out_m": self.stats, "folds": self.folds, "cameras": self.cameras,
-               "fusion": self.fusion,
-               "lens": self.lens, "precision": self.precision,
-               "lens_decision": None if self.decision is None else decision_report(
-                   self.decision),
-               "mismeasured": [{"point_id": p, "moved_m": m} for p, m in self.mismeasured],
-               "suspects": [s.to_dict() for s in self.suspects],
-               "notes": list(notes)}
-        if self.test_points is not None:
-            out["test_points"] = self.test_points
-        return out
 
 
 def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
@@ -83,10 +50,6 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
     ``progress(i, n)`` counts each camera's lens models, the joint fit and each fold.
     ``intrinsics=True``: ``lens="full"``.
     """
-    from ..deployment import Deployment, provenance
-    from ..geometry import rodrigues
-    from .calibration import lens_sentence
-
     if intrinsics:
         lens = "full"
     cams = dep.cameras
@@ -105,17 +68,18 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
                      nominal_max_residual=dep.max_residual, starts=cal.cameras,
                      pixel_sigma=cal.pixel_sigma)
     rmap = learn_region_map(cal.cameras, uv, cal.adjusted, dep.room, pair_method=dep.pair_method)
-    best = min(FUSION_OF, key=lambda k: stats[k]["mean"] if stats[k]["mean"] is not None
-               else np.inf)
-    suspects = _suspect_points(cams, X, uv, ids, dep, cal, folds, per_point[best], best, limit)
+    best = min(FUSION_CHOICES, key=lambda c: stats[c.label]["mean"]
+               if stats[c.label]["mean"] is not None else np.inf)
+    suspects = _suspect_points(cams, X, uv, ids, dep, cal, folds, per_point[best.label],
+                               best.label, limit)
     extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
-    extra["fusion"] = {**extra.get("fusion", {}), "method": FUSION_OF[best],
+    # (the file holds plain strings: a YAML writer knows no enum)
+    extra["fusion"] = {**extra.get("fusion", {}), "method": best.fusion.value,
                        "max_residual": limit, "region_map": rmap.to_dict()}
-    precision = {"point_sigma_m": cal.point_sigma, "estimated": cal.point_sigma_estimated,
-                 "pixel_sigma_px": cal.pixel_sigma}
+    precision = Precision(cal.point_sigma, cal.point_sigma_estimated, cal.pixel_sigma)
     extra["provenance"] = provenance(
         "vlpcal survey calibrate", **{"from": {**(sources or {}), "points": len(ids)}},
-        lens={c.camera_id: c.chosen for c in cal.lens}, point_sigma_m=cal.point_sigma,
+        lens={c.camera_id: str(c.chosen) for c in cal.lens}, point_sigma_m=cal.point_sigma,
         point_sigma_estimated=cal.point_sigma_estimated,
         held_out_mean_m={k: v["mean"] for k, v in stats.items()})
     rows, words = [], []
@@ -130,19 +94,18 @@ def calibrate_survey(dep, X, uv, ids, lens: str | dict = "auto", folds: int = 5,
         moved = float(np.linalg.norm(np.subtract(c.position, nom.position)))
         sentence = lens_sentence(choice, c, nom)
         words.append(sentence)
-        rows.append({"camera": c.id, "rms_px": fit.rms_px, "points": fit.used,
-                     "outliers": fit.outliers, "nominal_position_m": list(map(float,
-                                                                            nom.position)),
-                     "moved_m": moved, "moved_cm": moved * 100,
-                     "moved_share": moved / distance, "turned_deg": angle,
-                     "lens_model": fit.model, "lens_forced": choice.forced,
-                     "lens_candidates": choice.candidates, "lens": sentence,
-                     "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
+        rows.append(TapeCamera(
+            camera=c.id, rms_px=fit.rms_px, points=fit.used, outliers=fit.outliers,
+            nominal_position_m=list(map(float, nom.position)), moved_m=moved,
+            moved_cm=moved * 100, moved_share=moved / distance, turned_deg=angle,
+            lens_model=LensModel(fit.model), lens_forced=choice.forced,
+            lens_candidates=choice.candidates, lens=sentence, fx=c.fx, fy=c.fy, cx=c.cx,
+            cy=c.cy, dist=list(c.dist)))
     calibrated = Deployment(dep.name, dep.ceiling_height, dep.room, cal.cameras, dep.keep_out,
                             extra)
-    return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, FUSION_OF[best],
-                        np.asarray(X, float), precision, words, folds, decision=cal.decision,
-                        suspects=suspects)
+    return SurveyResult(calibrated, stats, per_point, rows, cal.mismeasured, best.fusion,
+                        np.asarray(X, float), precision, words, folds, fusion_label=best.label,
+                        decision=cal.decision, suspects=suspects)
 
 
 def _suspect_points(nominal, X, uv, ids, dep, cal, folds, errors, label, limit) -> list:
@@ -184,99 +147,12 @@ def _suspect_points(nominal, X, uv, ids, dep, cal, folds, errors, label, limit) 
     return suspects_of(ids, errors, named, beyond, with_, out)
 
 
-def decision_report(decision) -> dict:
-    """The report's ``lens_decision``: the held-out 3D means (m) of the choice, of plain
-    OpenCV on the same folds, and of every camera with one model."""
-    return {"held_out_3d_m": _finite(decision.held_out_m),
-            "opencv_held_out_3d_m": _finite(decision.opencv_m),
-            "one_model_for_all_m": {m: _finite(v) for m, v in decision.uniform_m.items()},
-            "models": dict(decision.models), "points": decision.points,
-            "cap_m": _finite(decision.cap_m), "opencv_capped": decision.opencv_capped,
-            "starts_disagree": {c: {"model": d.model, "chained_principal_px": list(d.chained),
-                                    "kept_principal_px": list(d.best),
-                                    "cost_ratio": d.cost_ratio}
-                                for c, d in decision.starts_disagree.items()}}
-
-
-@dataclass
-class FreeSurveyResult:
-    """A deployment calibrated from a free survey (issue 15) and the report behind it."""
-
-    deployment: object
-    calibration: object  #: :class:`~.free.FreeCalibration`
-    cameras: list  #: per camera: spread_px, free sets, rejected spots, moved, turned, lens
-    lens: list  #: per camera, the lens decision in words
-    reference_ids: list
-    points: np.ndarray  #: N×3 the references as measured
-    free_sets: int  #: in the bundle
-    free_height: float | None = None
-    fusion: str = "robust"
-    test_points: dict | None = None  #: :func:`vlpcal.reports.test_point_errors`, when given
-    #: the calibrated cameras' size against the plan's: their heights over the floor over the
-    #: plan's (:func:`_heights_ratio`; a hand-hung install: within a few per cent of 1)
-    plan_scale: float = 1.0
-
-    @property
-    def scale_doubtful(self) -> bool:
-        """Whether the calibrated cameras stand a different size from the plan's — further
-        apart or nearer than :data:`PLAN_SCALE_RATIO` allows: a scale from a wrong wand
-        length or tape reading, not an install's error."""
-        return not 1 / PLAN_SCALE_RATIO < self.plan_scale < PLAN_SCALE_RATIO \
-            or self.above_ceiling
-
-    @property
-    def above_ceiling(self) -> bool:
-        """Whether a calibrated camera stands higher above the floor than the ceiling by more
-        than :data:`CEILING_SHARE` of its height: no install puts it there; a scale does."""
-        dep = self.deployment
-        top = max(c.position[2] for c in dep.cameras)
-        return bool(top > (1 + CEILING_SHARE) * dep.ceiling_height)
-
-    def report(self, notes=()) -> dict:
-        cal = self.calibration
-        out = {"free_survey": {"sets": self.free_sets, "used": cal.used_sets,
-                                "dropped_sets": cal.dropped_sets,
-                                "free_height_m": self.free_height},
-               "plan_scale": self.plan_scale, "scale_doubtful": self.scale_doubtful,
-                "references": [{"point_id": p, "left_out_error_m": None if not np.isfinite(e)
-                                else float(e)} for p, e in zip(self.reference_ids,
-                                                               cal.leave_one_out)],
-                "datum_floor_m": cal.datum_floor,
-                "predicted_error_m": _finite(cal.predicted_error),
-                "exact_cameras_error_m": _finite(cal.exact_error),
-                "weakly_fixed": cal.weakly_fixed,
-                "references_disagree": cal.references_disagree,
-                "suspects": [s.to_dict() for s in cal.suspects],
-                "cameras": self.cameras, "lens": self.lens,
-                "fusion": self.fusion,
-                "precision": {"point_sigma_m": cal.point_sigma,
-                              "estimated": cal.point_sigma_estimated,
-                              "pixel_sigma_px": cal.pixel_sigma},
-                "notes": list(notes) + list(cal.notes)}
-        if cal.wand_error is not None:
-            w = cal.wand_error
-            out["wand"] = {"length_m": cal.wand, "held_out_sets": w.sets,
-                           "held_out_discarded": w.discarded,
-                           "length_error_mean_m": _finite(w.mean),
-                           "length_error_p95_m": _finite(w.p95),
-                           "length_error_rms_m": _finite(w.rms),
-                           "per_camera_mean_m": {c: _finite(v) for c, v in
-                                                 w.per_camera.items()}}
-        if self.test_points is not None:
-            out["test_points"] = self.test_points
-        return out
-
-
 def _heights_ratio(nominal, calibrated) -> float:
     """The calibrated cameras' median height above the floor (z = 0 in the references' or the
     marks' frame) over the plan's: a wrong scale shows in every height at once."""
     plan = float(np.median([c.position[2] for c in nominal]))
     got = float(np.median([c.position[2] for c in calibrated]))
     return got / plan if plan > 0 else float("nan")
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if np.isfinite(x) else None
 
 
 def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
@@ -290,13 +166,6 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
     the free spots' spread. With a ``wand`` (m), ``uv_free`` is C×M×2×2 (each camera's two
     spots, in the LEDs' order if ``labelled``). Returns the calibrated deployment and its
     report."""
-    from ..deployment import Deployment, provenance
-    from ..geometry import rodrigues
-    from .calibration import lens_sentence
-    from .coverage import camera_words, quarter_counts
-    from .free import calibrate_free
-    from .marks_frame import cameras_in_marks_frame, polygons_in_marks_frame
-
     cams = dep.cameras
     cal = calibrate_free(cams, X, uv, ids, uv_free, lens=lens, point_sigma=point_sigma,
                          free_height=free_height, room=dep.room, progress=progress, wand=wand,
@@ -308,17 +177,17 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
                             pair_method=dep.pair_method)
     worst = max((v for v in cal.spread_px.values() if np.isfinite(v)), default=1.0)
     extra = {k: v for k, v in dep.extra.items() if k != "provenance"}
-    extra["fusion"] = {**extra.get("fusion", {}), "method": "robust",
+    extra["fusion"] = {**extra.get("fusion", {}), "method": FusionMethod.ROBUST.value,
                        "max_residual": RESIDUAL_LIMIT * worst, "region_map": rmap.to_dict()}
     counted = {"marks" if cal.marks_only else "references": len(ids), "free_sets": n_sets}
     extra["provenance"] = provenance(
         "vlpcal survey calibrate", **{"from": {**(sources or {}), **counted}},
-        lens={c.camera_id: c.chosen for c in cal.lens}, point_sigma_m=cal.point_sigma,
+        lens={c.camera_id: str(c.chosen) for c in cal.lens}, point_sigma_m=cal.point_sigma,
         point_sigma_estimated=cal.point_sigma_estimated, datum_floor_m=cal.datum_floor,
         free_height_m=free_height, wand_m=wand, point_sigma_assumed=cal.point_sigma_assumed,
-        predicted_error_m=_finite(cal.predicted_error),
+        predicted_error_m=finite_or_none(cal.predicted_error),
         wand_error_m=None if cal.wand_error is None else {
-            "mean": _finite(cal.wand_error.mean), "p95": _finite(cal.wand_error.p95),
+            "mean": finite_or_none(cal.wand_error.mean), "p95": finite_or_none(cal.wand_error.p95),
             "held_out_sets": cal.wand_error.sets})
     rows, words = [], []
     # in the marks' frame, each camera's move is judged against the plan moved into it
@@ -334,13 +203,14 @@ def calibrate_free_survey(dep, X, uv, ids, uv_free, lens: str = "auto",
         there = np.isfinite(cal.free_xyz).all(axis=1) & np.isfinite(mine).all(axis=1)
         where = cal.free_xyz[there] if there.any() else cal.references
         distance = float(np.median(np.linalg.norm(where - np.asarray(c.position), axis=1)))
-        rows.append({"camera": c.id, "spread_px": cal.spread_px[c.id], "free_sets_seen": seen,
-                     "coverage": camera_words(nom, mine, dep.room),
-                     "quarter_sightings": quarter_counts(nom, mine).tolist(),
-                     "rejected_spots": cal.rejected[c.id],
-                     "moved_m": moved, "moved_share": moved / max(distance, 1e-300),
-                     "turned_deg": angle, "lens_model": choice.chosen, "lens": sentence,
-                     "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "dist": list(c.dist)})
+        rows.append(FreeCamera(
+            camera=c.id, spread_px=cal.spread_px[c.id], free_sets_seen=seen,
+            coverage=camera_words(nom, mine, dep.room),
+            quarter_sightings=quarter_counts(nom, mine).tolist(),
+            rejected_spots=cal.rejected[c.id], moved_m=moved,
+            moved_share=moved / max(distance, 1e-300), turned_deg=angle,
+            lens_model=LensModel(choice.chosen), lens=sentence, fx=c.fx, fy=c.fy, cx=c.cx, cy=c.cy,
+            dist=list(c.dist)))
     keep_out = dep.keep_out
     if cal.in_marks_frame:  # the deployment in the marks' frame
         keep_out = polygons_in_marks_frame(cams, cal.cameras, dep.keep_out)

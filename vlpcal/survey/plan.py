@@ -524,33 +524,6 @@ def _frame_marks(cams, xy, views, o: int, row, axis: int, floor_marks: int,
     return best
 
 
-def budget_sentence(plan: SurveyPlan, chosen: bool) -> str:
-    """What the plan's predicted calibration costs the fixes, in a surveyor's words (``chosen``:
-    the grid was sized to the budget, not stated)."""
-    from .calibration import format_length
-
-    typical, unlucky = plan.predicted
-    given = f"at ±{format_length(plan.tape)} per axis and {plan.spot_noise:g} px spots"
-    if not np.isfinite(typical):
-        return (f"{given}: no place is triangulated by two cameras (none overlap, or they "
-                "stand at one spot), so what the survey costs the fixes cannot be predicted")
-    said = (f"{given}, calibrating from these points is predicted to add "
-            f"{100 * (typical - 1):.0f} % to the fixes' mean error "
-            f"({100 * (unlucky - 1):.0f} % for an unlucky tape)")
-    if plan.coarser:
-        said += "; coarser grids: " + "; ".join(
-            f"{format_length(st)}: {n} points, +{100 * (a - 1):.0f} % ({100 * (b - 1):.0f} %)"
-            for st, n, a, b in plan.coarser)
-    if plan.meets_budget:
-        return said
-    if chosen:
-        return (f"{said}. A finer grid would pass {MAX_PLANNED_POINTS} points: measure the "
-                "positions more precisely (--tape; the cost falls with the square of it)")
-    return (f"{said}; without --step the grid is made finer until that is at most "
-            f"{100 * TYPICAL_SHARE:.0f} % ({100 * UNLUCKY_SHARE:.0f} %)")
-
-
-
 #: a free survey's reference points: on the floor, and at these shares of the ceiling's
 #: height (a tripod, a pole) — on qvga's three cameras 12 references at 0 and 15 % gave
 #: 1.60 × the datum floor, at 0 and 40 % 1.40 ×, at 0, 20 and 40 % 1.15 ×
@@ -694,3 +667,21 @@ def free_route(deployment, heights=None, margin_px: float = 5.0, obstacles=None)
     return FreeRoute(stops[order], [pairs_at[i] for i in order],
                      [quarters_at[i] for i in order], low, high,
                      at.levels[np.array(tops)[order]], sets, linkage)
+
+
+#: a tape survey this long (min) or longer has a wand survey proposed beside it
+WAND_PROPOSED_MINUTES = 60.0
+#: the wand a proposal assumes, m between its LEDs
+PROPOSED_WAND = 0.5
+
+
+def wand_alternative(deployment, plan: SurveyPlan) -> FreeRoute | None:
+    """Where a tape survey takes hours (:data:`WAND_PROPOSED_MINUTES`), the route a
+    :data:`PROPOSED_WAND` wand would be waved along instead, which needs no tape; None where
+    the tape survey is short or no wand route links the cameras."""
+    if plan.minutes < WAND_PROPOSED_MINUTES:
+        return None
+    try:
+        return free_route(deployment, free_sweep(deployment, PROPOSED_WAND))
+    except SurveyError:
+        return None

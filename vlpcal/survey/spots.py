@@ -188,3 +188,18 @@ def _spots(deployment, ids, frames_of, observations, notes, what) -> np.ndarray:
     for k, cam in enumerate(deployment.cameras):
         uv[k] -= offsets.get(cam.id, (0.0, 0.0))
     return uv
+
+
+def check_in_images(cameras, uv_free, set_ids) -> None:
+    """Refuse a free spot outside its camera's image (C×M×2, or a wand's C×M×2×2; ``set_ids``
+    the M sets'): it is no spot of that camera (another camera's, another resolution's)."""
+    for k, cam in enumerate(cameras):
+        u, v = uv_free[k, ..., 0], uv_free[k, ..., 1]
+        off = np.isfinite(u) & ((u < -0.5) | (u > cam.width - 0.5) | (v < -0.5)
+                                | (v > cam.height - 0.5))
+        if off.any():
+            i = int(np.flatnonzero(off.reshape(len(off), -1).any(axis=1))[0])
+            j = np.flatnonzero(off[i])[0] if off.ndim > 1 else ()
+            raise SurveyError(f"free set {set_ids[i]}, camera {cam.id}: spot ({u[i][j]:g}, "
+                              f"{v[i][j]:g}) is outside its {cam.width}×{cam.height} image "
+                              "(expected pixels within it)")
