@@ -8,6 +8,8 @@ The bundle (docs/formats.md#survey-bundle-a-folder) is written by
 :class:`~vlpcal.datasets.SurveyAppender`: append-only, resumable after any interruption. Every
 few points a quick pose fit per camera tells whether the survey is good enough yet, like the
 per-camera feedback of motion-capture wanding.
+
+cv2 is imported where a frame is encoded (:func:`as_jpeg`), so importing this module stays light.
 """
 
 from __future__ import annotations
@@ -19,9 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .datasets import read_survey_bundle
 from .deployment import Deployment
-from .detection import detect_spots
+from .detection import detect_several, detect_spots, jpeg_size
+from .live import READ_TIMEOUT
 from .survey import MIN_POINTS_POSE, SurveyError, fit_camera, survey_spots
+from .survey.coverage import camera_words, pair_words
 from .survey.spots import REST_FRAMES
 
 #: frame sets grabbed per point (all kept: the calibration averages their spots), and sets
@@ -132,8 +137,6 @@ class Burst:
         """Before the first point: camera id → (answered, what it said in a few words), from
         the first frame each sends within ``timeout`` (the live read timeout and a second) —
         its size checked against the deployment's camera (``cameras``: Camera objects)."""
-        from .detection import jpeg_size
-        from .live import READ_TIMEOUT
 
         timeout = READ_TIMEOUT + 1.0 if timeout is None else timeout
         if self._sets is None:
@@ -277,7 +280,6 @@ class CaptureSession:
     def _load_spots(self) -> None:
         """Spots of the points already in the bundle (a resumed session), as the calibration
         will see them."""
-        from .datasets import read_survey_bundle
 
         ids, _ = self.appender.accepted()
         if ids:
@@ -461,8 +463,6 @@ class FreeRecorder:
         return uv.reshape(len(self.dep.cameras), -1, 2)
 
     def report(self, final: bool = False) -> None:
-        from .survey.coverage import camera_words, pair_words
-
         uv = self.spots()
         if self.on_report is not None:
             self.on_report(uv)
@@ -475,7 +475,6 @@ class FreeRecorder:
     def _spots_in(self, frames: dict) -> dict:
         """camera id → [(u, v)]: the one clear spot in its frame, or a wand's spots (one or
         two; which is which is found when calibrating); none: not in the dict."""
-        from .detection import detect_several
 
         out = {}
         for cam in self.dep.cameras:

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .reading import ID_RULE, is_id, shown
+from .writing import OutputSet, spreadsheet_safe
 
 POINTS_COLUMNS = ("point_id", "x", "y", "z")
 OBSERVATION_COLUMNS = ("camera_id", "u", "v")
@@ -200,8 +201,6 @@ def _read_csv(path: Path, columns: tuple, most: int, noun: str, why: str):
 
 
 def _write_csv(path: Path, columns, rows) -> None:
-    from .writing import spreadsheet_safe
-
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(columns)
@@ -212,7 +211,6 @@ def _write_csv(path: Path, columns, rows) -> None:
 def _staged(root: Path, overwrite: bool):
     """A staging folder beside ``root`` to fill; put in place (replacing ``root`` if
     ``overwrite``) when the block succeeds, removed when it fails: :mod:`vlpcal.writing`."""
-    from .writing import OutputSet
 
     if root.exists() and not overwrite:
         raise DatasetError(f"{root}: already exists (choose another folder or overwrite)")
@@ -684,7 +682,6 @@ def _check_own_times(times, events) -> None:
 
 def write_truth_csv(path, ids, xyz, id_column: str = "frame_id") -> None:
     """Ground truth beside simulated frames: ``<id_column>,x,y,z`` in metres."""
-    from .writing import OutputSet
 
     with OutputSet(path) as (tmp,):
         _write_csv(tmp, (id_column, "x", "y", "z"),
@@ -796,8 +793,6 @@ class SurveyAppender:
         self._log("remove", point_id)
 
     def _write_points(self, rows) -> None:
-        from .writing import OutputSet
-
         with OutputSet(self.points) as (tmp,):
             _write_csv(tmp, POINTS_COLUMNS, [_point_row(i, p) for i, p in rows])
 

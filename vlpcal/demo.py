@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from .datasets import read_frames_folder, read_survey_bundle, write_truth_csv
 from .deployment import Deployment, save
@@ -182,8 +184,6 @@ def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
         stage.chmod(0o755)
         result = _run(stage, seed, say)
         if out.exists():  # the earlier demo's folder goes as a whole: only if it is all ours
-            import os
-
             foreign = sorted(set(os.listdir(out)) - set(os.listdir(stage)))
             if foreign:
                 raise DemoError(f"{given}: holds {foreign[0]}, which the demo does not write; "
@@ -194,8 +194,6 @@ def run_demo(out="vlpcal-demo", seed: int = 0, say=print) -> DemoResult:
 
 
 def _run(root: Path, seed: int, say) -> DemoResult:
-    import yaml
-
     t0 = time.perf_counter()
 
     def step(k: int, text: str) -> None:

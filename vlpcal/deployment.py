@@ -6,22 +6,39 @@ LEDs' blink codes, provenance) is optional and kept as it was read (``Deployment
 tool that does not know a block never drops it. Errors name the file, the key path
 (``cameras[2].fx``) and what was expected (:class:`DeploymentError`). Writes go through
 :mod:`vlpcal.writing` (staged, then renamed).
+
+shapely is imported where polygons are judged (zones, keep-outs, a fix near the walls): a
+deployment without them is loaded and used without that heavy import.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
+import yaml
 
+from . import __version__
 from .blink import BlinkCode, check_codes
 from .bodies import gives_full_pose
 from .detection import DEFAULT_DETECTOR, DEFAULTS, DETECTORS, DetectorSettings
 from .fusion import FUSIONS, PAIR_METHODS, RegionMap
 from .geometry import Camera, max_radius2
-from .reading import ID_RULE, is_id, room_slip, shown, slipped_units
+from .reading import (
+    ID_RULE,
+    ReadError,
+    is_id,
+    load_yaml,
+    read_text,
+    room_slip,
+    shown,
+    slipped_units,
+    yaml_dumper,
+)
+from .writing import write_text
 
 FORMAT, VERSION = "vlpcal-deployment", 1
 CAMERA_KEYS = ("id", "width", "height", "fx", "fy", "cx", "cy", "dist", "position", "rotation")
@@ -136,7 +153,6 @@ class Deployment:
 
     def zone(self, zone_id: str) -> Deployment:
         """The deployment of one zone: its cameras only (and the rest as it is)."""
-        from dataclasses import replace
 
         polygon, ids = self.zones[zone_id]
         keep = set(ids)
@@ -703,7 +719,6 @@ def load(path) -> Deployment:
     """Read and check a deployment file; :class:`DeploymentError` names what is wrong (a file
     larger than :data:`MAX_DEPLOYMENT_BYTES`, not UTF-8 YAML, with a key twice, nested too
     deep or full of aliases included: :mod:`.reading`)."""
-    from .reading import ReadError, load_yaml, read_text
 
     path, what = Path(path), "a deployment YAML file"
     try:
@@ -716,12 +731,9 @@ def load(path) -> Deployment:
 def dumps(deployment: Deployment, header: str = "") -> str:
     """The deployment file's text (cameras one per flow-style line for reading), checked: a
     text that would not load is never returned."""
-    import yaml
-
     doc = deployment.to_dict()
     from_dict(doc, f"{deployment.name} (not written)")
     cams = doc.pop("cameras")
-    from .reading import yaml_dumper
 
     dumper = yaml_dumper()
     text = yaml.dump(doc, Dumper=dumper, sort_keys=False, default_flow_style=None)
@@ -737,16 +749,12 @@ def dumps(deployment: Deployment, header: str = "") -> str:
 
 def save(deployment: Deployment, path, header: str = "") -> None:
     """Write the deployment file (staged and renamed: :mod:`vlpcal.writing`)."""
-    from .writing import write_text
 
     write_text(path, dumps(deployment, header))
 
 
 def provenance(command: str, **fields) -> dict:
     """The provenance block every writer of a deployment adds: command, version, time, more."""
-    from datetime import datetime, timezone
-
-    from . import __version__
 
     return {"command": command, "vlpcal": __version__,
             "written": datetime.now(timezone.utc).isoformat(timespec="seconds"), **fields}

@@ -11,6 +11,9 @@ aniposelib (``CameraGroup.load``) orders cameras by *sorting the section names a
 here zero-pad the index (``cam_00`` … ``cam_11``) so that the text order is the camera order;
 files read here are ordered by the number in the section name, so aniposelib's own unpadded
 files keep their order too.
+
+cv2 (FileStorage) and shapely (the cameras inside the room) are imported where used, being
+heavy: an anipose export needs neither.
 """
 
 from __future__ import annotations
@@ -21,8 +24,13 @@ from enum import Enum
 
 import numpy as np
 
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
 from .geometry import Camera, rodrigues
-from .reading import ID_RULE, is_id, shown
+from .reading import ID_RULE, MAX_DEPTH, is_id, nesting_depth, shown
 
 #: metres per unit
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -88,10 +96,6 @@ def to_anipose_toml(cameras: list[Camera], units: str = "m", metadata: dict | No
 
 
 def _toml_loads(text: str) -> dict:
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover - Python 3.10
-        import tomli as tomllib
     return tomllib.loads(text)
 
 
@@ -231,8 +235,6 @@ def from_opencv_yaml(text: str, source: str = "<yaml>") -> list[Camera]:
     """Cameras from a FileStorage YAML as :func:`to_opencv_yaml` writes it (its nesting
     checked first: OpenCV's parser recurses without a limit)."""
     import cv2
-
-    from .reading import MAX_DEPTH, nesting_depth
 
     if nesting_depth(text) > MAX_DEPTH:
         raise InterchangeError(f"{source}: nested deeper than {MAX_DEPTH} levels",

@@ -3,11 +3,20 @@ a V4L2 device, one per camera, grouped into frame sets by arrival time.
 
 Each source runs in its own thread and never raises into the caller: a source that stops
 (connection closed, timeout, device gone) is reported once as an event and the others go on.
+
+cv2 (devices, decoding) and urllib.request (MJPEG over HTTP) are imported where a source
+opens, being heavy: the timing tools here (:class:`ClockSync`, :class:`FrameIntervals`), which
+offline runs use, need neither.
 """
 
 from __future__ import annotations
 
+import base64
+import heapq
 import queue
+import re
+import socket
+import statistics
 import threading
 import time
 from collections import Counter
@@ -15,6 +24,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .reading import credentials, one_line
 
 #: how long a read may block before the source is declared stalled, s
 READ_TIMEOUT = 5.0
@@ -42,10 +53,7 @@ def mjpeg_frames(url: str, timeout: float = READ_TIMEOUT, stamps: bool = False) 
     apart, :func:`~vlpcal.reading.credentials`: no part of it reaches the URL parser or a
     message).
     """
-    import base64
     import urllib.request
-
-    from .reading import credentials
 
     bare, user, password = credentials(url)  # http://user:password@host/…: HTTP basic auth
     request = urllib.request.Request(bare)
@@ -205,7 +213,6 @@ def open_source(spec: str, stamps: bool = False) -> Callable[[], Iterator]:
     (``/dev/videoN`` or its number); anything else is refused (ValueError), before OpenCV's
     backends would try it as a file or a stream of their own. With ``stamps``, frames come
     as ``(frame, capture stamp or None)`` (:func:`mjpeg_frames`; a device has none)."""
-    import re
 
     if spec.startswith(("http://", "https://")):
         return lambda: mjpeg_frames(spec, stamps=stamps)
@@ -219,13 +226,11 @@ def open_source(spec: str, stamps: bool = False) -> Callable[[], Iterator]:
 def failure(e: Exception) -> str:
     """Why a source stopped, in a few words (not Python's repr of the exception), as one
     printable line whatever the server sent."""
-    from .reading import one_line
 
     return one_line(_why(e), 200)
 
 
 def _why(e: Exception) -> str:
-    import socket
     import urllib.error
 
     if isinstance(e, urllib.error.HTTPError):
@@ -435,7 +440,6 @@ class FrameIntervals:
         """s: the slowest camera's median interval, of the cameras with ``least`` intervals
         (``default`` before any has). (statistics' median: numpy's would import numpy.ma
         mid-stream, a pause a live run would feel.)"""
-        import statistics
 
         meds = [statistics.median(v) for v in self._gaps.values() if len(v) >= least]
         return max(meds) if meds else default
@@ -489,8 +493,6 @@ class TimedFrames:
         return self._intervals.period()
 
     def __iter__(self) -> Iterator[tuple]:
-        import heapq
-
         for cid, factory in self.sources.items():
             th = threading.Thread(target=self._reader, args=(cid, factory), daemon=True)
             self._threads[cid] = th

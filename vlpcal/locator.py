@@ -11,16 +11,21 @@ stack and fuses all fixes at once; :meth:`Locator.locate` is the one-fix conveni
 
 from __future__ import annotations
 
+import csv
+import json
+import os
+import sys
 from collections import Counter
 from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
 
-from .deployment import Deployment
+from .deployment import Deployment, load
 from .detection import REASONS, detect_frame, detect_spots
 from .fusion import OK, fuse
 from .triangulation import predicted_rms_error
+from .writing import OutputError, OutputSet, spreadsheet_safe
 
 
 class FixStatus(str, Enum):
@@ -170,8 +175,6 @@ class Locator:
 
     @classmethod
     def from_file(cls, path) -> Locator:
-        from .deployment import load
-
         return cls(load(path))
 
     def locate(self, frames: dict, frame_id=None) -> Fix:
@@ -264,8 +267,6 @@ class FixWriter:
     nothing)."""
 
     def __init__(self, path: str, fmt: str | None = None, extra_columns=(), live: bool = False):
-        import sys
-
         self.fmt = fmt or ("jsonl" if str(path).endswith((".jsonl", ".json")) else "csv")
         self.columns = ROW_COLUMNS + tuple(extra_columns)
         self.path = path
@@ -276,16 +277,12 @@ class FixWriter:
         elif live:
             self._f = open_live(path)
         else:
-            from .writing import OutputSet
-
             self._set = OutputSet(path)
             (tmp,) = self._set.stage()
             self._f = open(tmp, "w", newline="", encoding="utf-8")
         self._header = self.fmt != "csv"  # written with the first rows (or at close): an
         # input that fails before any fix leaves stdout clean
         if self.fmt == "csv":
-            import csv
-
             self._csv = csv.DictWriter(self._f, fieldnames=self.columns, extrasaction="ignore")
         if live and path != "-":  # a follower sees the header at once
             self._start()
@@ -297,10 +294,6 @@ class FixWriter:
             self._header = True
 
     def write(self, fixes, extra: dict | None = None) -> None:
-        import json
-
-        from .writing import spreadsheet_safe
-
         self._start()
         rows = fixes.rows() if isinstance(fixes, FixBatch) else (fix.row() for fix in fixes)
         for row in rows:
@@ -317,7 +310,6 @@ class FixWriter:
     def close(self) -> None:
         """Finish the file and move it into place (also after an interruption: what was
         located so far is kept)."""
-        from .writing import OutputError
 
         try:
             self._start()
@@ -344,8 +336,6 @@ class FixWriter:
             except OSError:
                 pass
             if not self._rows:  # … and a file of no rows goes
-                import os
-
                 try:
                     os.unlink(self.path)
                 except OSError:
@@ -355,7 +345,6 @@ class FixWriter:
 def open_live(path):
     """A new file for a live run's rows (text, line-buffered): refused (OutputError) if
     something is there already."""
-    from .writing import OutputError
 
     try:
         return open(path, "x", newline="", encoding="utf-8", buffering=1)

@@ -8,7 +8,8 @@ when the process dies. While the broker is away it reconnects with backoff and h
 in a bounded buffer; what the buffer cannot hold is counted as lost and said. A
 :class:`SpotSubscriber` reads the spots cameras publish on ``prefix/spots/<camera_id>``
 (``{"t": …, "u": …, "v": …}``, or a list of such) for the locator. paho-mqtt is the client;
-it is imported only when MQTT is used.
+it and ssl are imported only when a client connects: the commands that offer MQTT import this
+module at their start, and most runs never use it.
 """
 
 from __future__ import annotations
@@ -17,11 +18,15 @@ import json
 import math
 import os
 import queue
+import socket
+import stat
 import threading
 import time
 from collections import deque
 from dataclasses import dataclass
 from urllib.parse import urlsplit
+
+from .reading import MAX_BYTES, credentials, is_id, one_line, redacted
 
 #: the password, when the URL has none, comes from this environment variable (never echoed)
 PASSWORD_ENV = "VLPCAL_MQTT_PASSWORD"
@@ -64,7 +69,6 @@ class Target:
 def parse_url(url: str) -> Target:
     """Read an ``mqtt://[user[:password]@]host[:port]/prefix`` URL (``mqtts://`` for TLS); the
     password may instead be in :data:`PASSWORD_ENV`. A wrong URL is an :class:`MqttError`."""
-    from .reading import credentials, is_id, redacted
 
     # who (and a password, whatever its characters) is read apart: a prefix holds no @
     bare, user, secret = credentials(url)
@@ -99,9 +103,6 @@ def parse_url(url: str) -> Target:
 def check_ca_file(ca_file) -> None:
     """A CA file must be a regular file of a CA's size: a FIFO would hold the TLS setup
     forever, a device or a folder is no certificate (refused before anything opens it)."""
-    import stat
-
-    from .reading import MAX_BYTES, one_line
 
     try:
         st = os.stat(ca_file)
@@ -143,7 +144,6 @@ def _client(target: Target, client_id: str, ca_file=None):
 def _check_tls(target: Target, ca_file, timeout: float) -> None:
     """A TLS handshake with the broker before the client's: a certificate that does not pass
     ``ca_file`` (or the system's CAs), or a broker that does not speak TLS, said as such."""
-    import socket
     import ssl
 
     ctx = ssl.create_default_context(cafile=ca_file)
@@ -169,8 +169,6 @@ def _connect(client, target: Target, connected: threading.Event, refused: list,
     if target.tls:
         _check_tls(target, ca_file, timeout)
     else:  # a port nobody listens on says so at once (the client would retry until timeout)
-        import socket
-
         try:
             socket.create_connection((target.host, target.port), timeout=timeout).close()
         except OSError as e:

@@ -11,8 +11,13 @@ from __future__ import annotations
 
 import os
 import re
+import reprlib
 import stat
+import unicodedata
 from pathlib import Path
+from urllib.parse import unquote
+
+import yaml
 
 #: bytes: a deployment of a thousand cameras is well under 1 MB
 MAX_BYTES = 16 * 2 ** 20
@@ -86,8 +91,6 @@ def read_text(path, what: str = "a text file", max_bytes: int = MAX_BYTES) -> st
 
 
 def _loader():
-    import yaml
-
     class BoundedLoader(yaml.SafeLoader):
         """SafeLoader that refuses duplicate keys and counts depth and nodes while composing
         (the composer is where PyYAML recurses), an alias as the nodes of what it names."""
@@ -178,8 +181,6 @@ DOTLESS_FLOAT = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
 def yaml_dumper():
     """PyYAML's safe dumper that quotes what :func:`load_yaml` would read as a number (an id
     ``0E0`` written plain would come back as 0.0)."""
-    import yaml
-
     class Dumper(yaml.SafeDumper):
         pass
 
@@ -197,8 +198,6 @@ class _Refused(Exception):
 def load_yaml(path, what: str = "a YAML file", text: str | None = None):
     """The YAML document in ``path`` (or ``text``, named by ``path``), read within the budgets
     above; :class:`ReadError` names the file, the line and the problem."""
-    import yaml
-
     if text is None:
         text = read_text(path, what)
     try:
@@ -249,7 +248,6 @@ def nesting_depth(text: str) -> int:
 def shown(value) -> str:
     """A value as an error message quotes it: Python's repr, cut to a few items per level, a
     few levels and a short string (a document full of aliases must not make a huge message)."""
-    import reprlib
 
     r = reprlib.Repr()
     r.maxlevel, r.maxlist, r.maxtuple, r.maxdict, r.maxset = 3, 6, 6, 4, 6
@@ -271,8 +269,6 @@ def printable(text: str) -> str:
 
 
 def _escaped(ch: str) -> str:
-    import unicodedata
-
     kind = unicodedata.category(ch)
     if ch == "\n" or (kind[0] != "C" and kind not in ("Zl", "Zp")):
         return ch
@@ -290,7 +286,6 @@ def credentials(url: str) -> tuple[str, str | None, str | None]:
     (``/ ? # @ :`` included): it is what stands between the first ``:`` and the last ``@``, read
     apart so that no part of it ever reaches a URL parser or its messages; the rest of the
     URL holds no ``@`` (written ``%40``)."""
-    from urllib.parse import unquote
 
     scheme, sep, rest = url.partition("://")
     if not sep or "@" not in rest:

@@ -9,7 +9,8 @@ than two cameras saw it.
   then Gauss–Newton on the reprojection error.
 - :func:`triangulate_robust`: the same, dropping an observation whose reprojection error is far
   above the rest (a reflection picked up by one camera), and saying which.
-- :func:`triangulate_cv2`: ``cv2.triangulatePoints`` (DLT) for comparison.
+- :func:`triangulate_cv2`: ``cv2.triangulatePoints`` (DLT) for comparison (cv2 is imported
+  there: nothing else here needs that heavy import).
 """
 
 from __future__ import annotations

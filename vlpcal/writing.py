@@ -26,6 +26,8 @@ import stat
 import sys
 from pathlib import Path
 
+from .reading import printable, read_text
+
 #: marks vlpcal's staging names: ``.<target>.<pid>.<n>.vlpcal-tmp`` (and ``-old``, ``-commit``)
 MARK = ".vlpcal-"
 
@@ -121,8 +123,6 @@ def reclaim(folder) -> list[str]:
             continue
         if name.endswith(MARK + "commit"):
             try:
-                from .reading import read_text
-
                 moves = json.loads(read_text(path, "a journal", max_bytes=2 ** 20))
                 if not all(_ours(folder, m) for m in moves):
                     raise ValueError("a journal naming files outside its folder")
@@ -143,7 +143,6 @@ def reclaim(folder) -> list[str]:
         else:
             _remove(path)
             done.append(f"{folder}: removed {name} (left by a stopped run)")
-    from .reading import printable
 
     for line in done:  # names from a folder and a journal: printed safely
         print(printable(line), file=sys.stderr)  # noqa: T201 (below the CLI's echo)
@@ -214,7 +213,6 @@ class OutputSet:
                  for s, t, o in zip(self.staged, self.targets, olds)]
         journal = self._journal = self._name(self.targets[-1], "commit")
         if len(moves) > 1 or any(olds):
-
             def write_journal():
                 with open(journal, "w", encoding="utf-8") as f:
                     json.dump(moves, f)

@@ -9,10 +9,12 @@ tracker learns from it that the LED was not there, or dark), in real time."""
 from __future__ import annotations
 
 import json
+import threading
 import time
 
 import numpy as np
 
+from ..mqtt import MqttError, _client, _connect
 from .scene import Scene
 from .streams import MovingLed, Timing, capture_times
 
@@ -44,9 +46,6 @@ def play_spots(target, events, qos: int = 0, say=lambda msg: None) -> dict:
     """Publish ``events`` (:func:`spot_schedule`) on ``target`` (:class:`vlpcal.mqtt.Target`)
     as they fall due from now. Returns counts: sent (messages), spots (of them, with a spot),
     late (ms behind schedule, p99)."""
-    import threading
-
-    from ..mqtt import MqttError, _client, _connect
 
     client = _client(target, f"vlpcal-sim-{time.time_ns()}")
     connected, refused = threading.Event(), []

@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.special import erf
 
 from ..geometry import Camera, rodrigues, rotation_vector
 from .render import _pixel_integrals, encode_jpeg
@@ -134,8 +135,6 @@ def _spots(n, h, w, u, v, sigma, amp) -> np.ndarray:
     if ok.any():
         ix = _pixel_integrals(u[ok], w, sigma[ok])
         iy = _pixel_integrals(v[ok], h, sigma[ok])
-        from scipy.special import erf
-
         share = erf(0.5 / (math.sqrt(2.0) * sigma[ok])) ** 2
         img[ok] = (amp[ok] / share)[:, None, None] * iy[:, :, None] * ix[:, None, :]
     return img

@@ -7,7 +7,8 @@ and drift. Written as an asynchronous frames folder (docs/formats.md):
 
 and ``DIR.truth.csv`` beside it (``camera_id,frame_no,t,x,y,z,led``: where each LED was, and
 whether it was lit: ``lit``, 1 or 0, the last column). Several LEDs, each with an optional blink
-code (:class:`MovingLed`), render into the same frames."""
+code (:class:`MovingLed`), render into the same frames. shapely, a heavy import, is imported
+where a room's polygon is needed."""
 
 from __future__ import annotations
 
@@ -19,6 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..blink import BlinkCode
+from ..bodies import rotation
+from .render import encode_jpeg
 from .scene import CHUNK_PIXELS, ROBOT_RADIUS, STREAM_FRAMES, Scene, render_camera
 from .writers import trajectory
 
@@ -133,7 +136,6 @@ def body_leds(path, layout: dict, codes=BODY_CODES, bit_rate: float = BODY_BIT_R
     origin, on the floor: time → N×3) facing where it drives — or, ``heading`` (rad), facing
     one way throughout (a robot that drives to and fro, backing up) — each blinking its code
     from its own phase. Returns (the LEDs, the robot's yaw: time → rad)."""
-    from ..bodies import rotation
 
     def yaw(t):
         t = np.asarray(t, float)
@@ -180,7 +182,6 @@ def simulate_streams(scene: Scene, root, path, duration: float, timings: dict | 
     asynchronous frames folder ``root``; the LEDs ride robots whose bodies
     (``carrier_radius``) hide the floor under them. Returns camera id → (frame numbers, capture
     times, true positions ``N×3``, or ``N×K×3`` for a list)."""
-    from .render import encode_jpeg
 
     leds = list(path) if isinstance(path, (list, tuple)) else [MovingLed("L1", path)]
     root = Path(root)

@@ -1,15 +1,19 @@
 """Simulated data on disk in vlpcal's formats (docs/formats.md): survey bundles, ``locate``
-frame folders and deployment files (nominal, and the true cameras for evaluation)."""
+frame folders and deployment files (nominal, and the true cameras for evaluation). shapely, a
+heavy import, is imported where a room's or keep-out's polygon is needed."""
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import numpy as np
 
 from ..datasets import write_frames_folder, write_survey_bundle, write_truth_csv
 from ..deployment import Deployment, provenance, save
+from ..survey.linkage import SWEEP_SETS
 from ..survey.spots import REST_FRAMES
+from ..writing import OutputSet
 from .scene import ROBOT_RADIUS, STREAM_PATH, STREAM_TAPE, Scene, render_scene
 
 
@@ -117,7 +121,6 @@ def route_path(scene: Scene, route, n: int, seed: int = 0) -> np.ndarray:
     the stop's top and back, a sweep every :data:`~vlpcal.survey.linkage.SWEEP_SETS` sets,
     landing anywhere within the square the plan allows a stop found by eye; kept off the walls
     and keep-outs."""
-    from ..survey.linkage import SWEEP_SETS
 
     stops = np.asarray(route.stops, float).reshape(-1, 2)
     if not len(stops) or n < 1:
@@ -308,9 +311,6 @@ def _marks(marks, n: int):
 def write_led_truth(path, set_ids, positions) -> None:
     """Where each LED really was at each set: ``set_id,led,x,y,z`` (m), LEDs ``A``, ``B``… —
     one row per LED and set (``positions`` ``M×3`` for one LED or ``M×K×3``)."""
-    import csv
-
-    from ..writing import OutputSet
 
     pos = np.asarray(positions, float)
     pos = pos[:, None] if pos.ndim == 2 else pos

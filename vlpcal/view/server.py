@@ -17,6 +17,7 @@ import hmac
 import ipaddress
 import json
 import secrets
+import socket
 import threading
 import time
 from pathlib import Path
@@ -263,7 +264,6 @@ class ViewServer:
 def _network_address() -> str | None:
     """This machine's address on its network: the one its route out would use (a UDP socket
     aimed at a private address sends nothing); None without a network."""
-    import socket
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         try:

@@ -11,6 +11,7 @@ from collections import deque
 
 import numpy as np
 
+from ..capture import as_jpeg
 from ..detection import detect_frame
 from .hub import RATE_FRAMES, ViewHub
 
@@ -48,8 +49,6 @@ class FrameTap:
         uv, _ = detect_frame(frame, self.spots, self.dep.detector, self.dep.detector_settings,
                              shape=(cam.height, cam.width))
         if not isinstance(frame, bytes):
-            from ..capture import as_jpeg
-
             frame = as_jpeg(frame)
         self.hub.frame(camera_id, arrival + self._utc, uv, frame)
 
