@@ -10,10 +10,10 @@ calls the layers below.
 - :mod:`.demo`: the demo and the simulator (``demo``, ``simulate``);
 - :mod:`.show`: what a deployment holds (``show``).
 
-Heavy modules (cv2, scipy, matplotlib) are imported inside commands, so ``vlpcal --help``
-starts fast.
-
-Each command's module is imported when that command runs (:data:`.common.COMMANDS`).
+Imports inside the commands' functions are deliberate, for start time: each command's module is
+imported when that command runs (:data:`.common.COMMANDS`), and a command imports vlpcal's
+layers and heavy packages (cv2, scipy, matplotlib) in its body, so ``vlpcal --help`` and every
+command start without paying for the others' imports.
 """
 
 from .common import UserError, main
