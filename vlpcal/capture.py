@@ -10,6 +10,9 @@ few points a quick pose fit per camera tells whether the survey is good enough y
 per-camera feedback of motion-capture wanding.
 
 cv2 is imported where a frame is encoded (:func:`as_jpeg`), so importing this module stays light.
+
+The session's steps (the burst, what each camera saw, the quick fits, the walk, the free
+recorder) share the live grouper and the bundle's appender: one module of some 520 lines.
 """
 
 from __future__ import annotations

@@ -12,6 +12,10 @@ A missing JPEG means the camera did not see the LED there. Writers build the who
 beside the target and rename it into place, so a crash leaves no half-written folder. Readers
 check what they read and raise :class:`DatasetError` with a one-line message that names the file,
 the row or item, and what was expected.
+
+One module of some 860 lines on purpose: every reader, writer and appender here shares the same
+CSV, id, frame and limit checks, and the layouts stay consistent with each other (and with
+docs/formats.md) when one file holds them all.
 """
 
 from __future__ import annotations

@@ -5,7 +5,9 @@ them; every other top-level block (detector settings, fusion policy, region maps
 LEDs' blink codes, provenance) is optional and kept as it was read (``Deployment.extra``), so a
 tool that does not know a block never drops it. Errors name the file, the key path
 (``cameras[2].fx``) and what was expected (:class:`DeploymentError`). Writes go through
-:mod:`vlpcal.writing` (staged, then renamed).
+:mod:`vlpcal.writing` (staged, then renamed). Some 760 lines in one module on purpose: most are
+the checks of the optional blocks, a function each, sharing the key-path messages and the
+number checks, so that the format is known in one place.
 
 shapely is imported where polygons are judged (zones, keep-outs, a fix near the walls): a
 deployment without them is loaded and used without that heavy import.

@@ -3,6 +3,9 @@ a V4L2 device, one per camera, grouped into frame sets by arrival time.
 
 Each source runs in its own thread and never raises into the caller: a source that stops
 (connection closed, timeout, device gone) is reported once as an event and the others go on.
+Sources, their clocks and the grouping of their frames are one path from a camera to the locator
+or the tracker, kept in one module of some 530 lines so that its threading rule holds in one
+place.
 
 cv2 (devices, decoding) and urllib.request (MJPEG over HTTP) are imported where a source
 opens, being heavy: the timing tools here (:class:`ClockSync`, :class:`FrameIntervals`), which

@@ -10,6 +10,10 @@ in a bounded buffer; what the buffer cannot hold is counted as lost and said. A
 (``{"t": …, "u": …, "v": …}``, or a list of such) for the locator. paho-mqtt is the client;
 it and ssl are imported only when a client connects: the commands that offer MQTT import this
 module at their start, and most runs never use it.
+
+One module of some 690 lines on purpose: the publisher and the subscriber share the URL and
+its credentials, the connection and its failures said in one line, the TLS and CA-file checks,
+so that a broker is treated alike both ways.
 """
 
 from __future__ import annotations
