@@ -180,16 +180,17 @@ def _window_half(peak, p1, p2, p3, p4, lo):
 
 @cache
 def _plane(half: int):
-    """A (2h+1)² window's background plane, flattened: the flat indices of its border ring, the
-    operator that turns the ring's values into the least-squares plane's value at every pixel
-    (``(2h+1)²×K``), and the design ``[1, u, v]`` whose product with weights gives their sum
-    and moments."""
+    """A (2h+1)² window's background plane, flattened: the flat indices of its border ring,
+    the least-squares fit that turns the ring's values into the plane's ``[a, b_u, b_v]``
+    (``K×3``), the design ``[1, u, v]`` of every pixel (``(2h+1)²×3``: the plane's values are
+    ``design @ [a, b_u, b_v]``, and weights' ``@ design`` their sum and moments), and the two
+    composed (``(2h+1)²×K``, ring values → the plane's value at every pixel)."""
     size = 2 * half + 1
     gy, gx = np.mgrid[0:size, 0:size].astype(float)
     ring = (gy == 0) | (gx == 0) | (gy == size - 1) | (gx == size - 1)
     fit = np.linalg.pinv(np.c_[np.ones(ring.sum()), gx[ring], gy[ring]])
     design = np.c_[np.ones(gx.size), gx.ravel(), gy.ravel()]
-    return np.flatnonzero(ring), design @ fit, design
+    return np.flatnonzero(ring), fit.T, design, design @ fit
 
 
 def _plane_centroid(flat: np.ndarray, half: int, threshold: float):
@@ -201,13 +202,13 @@ def _plane_centroid(flat: np.ndarray, half: int, threshold: float):
     neighbouring reflection is removed before the centroid; weights are ``I − plane − T`` with
     T at ``threshold`` of the remaining peak, so pixels enter at zero (no jump as a pixel
     crosses the threshold)."""
-    ring, plane, design = _plane(half)
-    if flat.ndim == 1:  # one window (the live path): whole-array reductions cost the least
+    ring, fit, design, plane = _plane(half)
+    if flat.ndim == 1:  # one window (the live path): one product, whole-array reductions
         sig = flat - plane @ flat[ring]
         pk = sig.max()
         wgt = np.maximum(sig - threshold * pk, 0.0)
-    else:
-        sig = flat - flat[:, ring] @ plane.T
+    else:  # N windows: each plane's 3 coefficients, then its values (N·K·S² products fewer)
+        sig = flat - (flat[:, ring] @ fit) @ design.T
         pk = sig.max(axis=1)
         wgt = np.maximum(sig - threshold * pk[:, None], 0.0)
     return wgt @ design, pk, wgt
