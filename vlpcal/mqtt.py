@@ -123,7 +123,9 @@ def check_ca_file(ca_file) -> None:
                         f"PEM file of CA certificates, at most {MAX_BYTES})")
 
 
-def _client(target: Target, client_id: str, ca_file=None):
+def new_client(target: Target, client_id: str, ca_file=None):
+    """A paho client for ``target`` (its credentials, TLS with ``ca_file`` or the system's
+    CAs), not yet connected (:func:`connect`)."""
     import paho.mqtt.client as mqtt
 
     if ca_file is not None:
@@ -166,8 +168,8 @@ def _check_tls(target: Target, ca_file, timeout: float) -> None:
         raise MqttError(f"{target.shown()}: cannot connect ({e.strerror or e})") from None
 
 
-def _connect(client, target: Target, connected: threading.Event, refused: list,
-             timeout: float, ca_file=None) -> None:
+def connect(client, target: Target, connected: threading.Event, refused: list,
+            timeout: float, ca_file=None) -> None:
     """Start the client's loop and wait for the broker's first answer; a refusal (a wrong
     password) or no answer is an :class:`MqttError`."""
     if target.tls:
@@ -222,7 +224,7 @@ class Publisher:
         self._inflight: dict = {}
         self._acked: set = set()  # acknowledged before publish() returned its mid
         self._ilock = threading.Lock()  # never held around a paho call (its callbacks take it)
-        self.client = _client(target, client_id or f"vlpcal-{os.getpid()}-{time.time_ns()}",
+        self.client = new_client(target, client_id or f"vlpcal-{os.getpid()}-{time.time_ns()}",
                               ca_file)
         self.client.will_set(self.topic(self.status_topic), json.dumps({**self._status,
                                                                "state": "offline"}),
@@ -230,7 +232,7 @@ class Publisher:
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_publish = self._on_publish
-        _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
+        connect(self.client, target, self._connected, self._refused, timeout, ca_file)
         self.status()
 
     def topic(self, *parts: str) -> str:
@@ -422,7 +424,7 @@ class SpotSubscriber:
         self._connected = threading.Event()
         self._refused: list = []
         self._ever = False
-        self.client = _client(target, f"vlpcal-spots-{os.getpid()}-{time.time_ns()}", ca_file)
+        self.client = new_client(target, f"vlpcal-spots-{os.getpid()}-{time.time_ns()}", ca_file)
         self._qos = qos
         self._ca_file = ca_file
         self._since = time.monotonic()
@@ -431,7 +433,7 @@ class SpotSubscriber:
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_message = self._on_message
-        _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
+        connect(self.client, target, self._connected, self._refused, timeout, ca_file)
 
     def _on_connect(self, client, userdata, flags, reason_code, properties=None):
         # its cameras' topics only: a zone's locator hears its zone (a site's broker carries all)
@@ -537,10 +539,10 @@ class RowSubscriber:
         self._connected = threading.Event()
         self._refused: list = []
         self._ever = False
-        self.client = _client(target, f"vlpcal-follow-{os.getpid()}-{time.time_ns()}", ca_file)
+        self.client = new_client(target, f"vlpcal-follow-{os.getpid()}-{time.time_ns()}", ca_file)
         self.client.on_connect = self._on_connect
         self.client.on_message = self._on_message
-        _connect(self.client, target, self._connected, self._refused, timeout, ca_file)
+        connect(self.client, target, self._connected, self._refused, timeout, ca_file)
 
     def _on_connect(self, client, userdata, flags, reason_code, properties=None):
         _subscribe(self, client, reason_code, [(f"{self.target.prefix}/{kind}/+", 0)
@@ -610,11 +612,11 @@ def broker_topics(target: Target, ca_file=None, seconds: float = LOOK_SECONDS,
         if len(names) < most or "/spots/" in msg.topic.lower():
             names.add(msg.topic)
 
-    client = _client(target, f"vlpcal-look-{os.getpid()}-{time.time_ns()}", ca_file)
+    client = new_client(target, f"vlpcal-look-{os.getpid()}-{time.time_ns()}", ca_file)
     client.on_connect, client.on_subscribe = on_connect, on_subscribe
     client.on_message = on_message
     try:
-        _connect(client, target, connected, refused, seconds + CONNECT_TIMEOUT, ca_file)
+        connect(client, target, connected, refused, seconds + CONNECT_TIMEOUT, ca_file)
     except MqttError:
         return None
     try:

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from ..mqtt import MqttError, _client, _connect
+from ..mqtt import MqttError, connect, new_client
 from .scene import Scene
 from .streams import MovingLed, Timing, capture_times
 
@@ -47,7 +47,7 @@ def play_spots(target, events, qos: int = 0, say=lambda msg: None) -> dict:
     as they fall due from now. Returns counts: sent (messages), spots (of them, with a spot),
     late (ms behind schedule, p99)."""
 
-    client = _client(target, f"vlpcal-sim-{time.time_ns()}")
+    client = new_client(target, f"vlpcal-sim-{time.time_ns()}")
     connected, refused = threading.Event(), []
 
     def on_connect(c, u, f, reason_code, p=None):
@@ -58,7 +58,7 @@ def play_spots(target, events, qos: int = 0, say=lambda msg: None) -> dict:
 
     client.on_connect = on_connect
     client.on_disconnect = lambda *a, **k: connected.clear()
-    _connect(client, target, connected, refused, 10.0)
+    connect(client, target, connected, refused, 10.0)
     start_mono, start_utc = time.monotonic() + 0.2, time.time() + 0.2
     late, sent, spots = [], 0, 0
     try:
