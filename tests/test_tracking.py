@@ -77,14 +77,18 @@ def grouped_errors(dep, events, path, tolerance=0.05):
 
 def test_tracker_beats_grouping_by_arrival_on_the_same_spots(rng):
     """At 1.5 m/s, 30 fps, random phases, 2 ms jitter, 5 % dropped: the tracker's fixes are
-    millimetres from the LED where frames grouped by arrival are centimetres, with one track."""
+    millimetres from the LED where frames grouped by arrival are centimetres, with one track.
+    Fed frame by frame (as live), the first second's rows have no position until the cameras'
+    times are checked against each other (``times_unchecked``); then nearly all are ``ok``."""
     dep = square_rig()
     path = circle(1.5)
     events = streams(dep, path, 6.0, rng)
     rows = run(dep, events)
     e = errors(rows, path)
     assert len({r.led for r in rows}) == 1
-    assert np.mean([r.status == "ok" for r in rows]) > 0.95
+    unchecked = [r.t for r in rows if r.status == "times_unchecked"]
+    assert unchecked and max(unchecked) < 1.2, unchecked[-3:]
+    assert np.mean([r.status == "ok" for r in rows if r.t > max(unchecked)]) > 0.95
     grouped = grouped_errors(dep, events, path)
     assert e.mean() < 0.003, e.mean()
     assert grouped.mean() > 5 * e.mean(), (grouped.mean(), e.mean())

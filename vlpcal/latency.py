@@ -53,16 +53,34 @@ class LatencyEstimate:
         #: sets them: a live stream's windows, with frames late or dropped under load, are
         #: not trusted to move a camera's times)
         self.follow = True
+        #: per camera: its times checked against another's by a search of the spots (or a
+        #: whole recording's windows trusted): until then a row counts its latency as unknown
+        #: to the prior's spread, whatever the windows say (their word is linear only near
+        #: the right times)
+        self.vetted = np.zeros(cameras, bool)
+        #: s², per camera: how far its latency wanders from window to window beyond what the
+        #: windows' noise explains (a clock that runs fast, frames late under load): what a
+        #: row adds for it, as the one latency estimated cannot follow it
+        self.wander = np.zeros(cameras)
+        #: over windows, s the window's information on each camera's latency (its diagonal):
+        #: Σ s sᵀ and Σ s × (chi² − its expectation) — a camera k whose latency wanders by
+        #: τ_k² adds τ_k² s_k to a window's chi², so the τ² are these sums' least squares
+        self._scatter = np.zeros((cameras, cameras))
+        self._excess = np.zeros(cameras)
+        self._chi2 = np.zeros(2)  # Σ (chi² − expectation), Σ degrees of freedom
 
-    def restart(self, applied, information=None) -> None:
+    def restart(self, applied, information=None, wander=None) -> None:
         """Start again from latencies ``applied`` (s; a search of the spots found them): what
         windows said before, with their times off, is forgotten. With ``information`` (a
         run before measured them so): they are held — no window moves them — at the
-        uncertainty it gives."""
+        uncertainty it gives (and ``wander``, s², the run's :attr:`wander`)."""
+        self.wander = np.zeros(len(self.value)) if wander is None else np.array(wander, float)
+        self._scatter[:], self._excess[:], self._chi2[:] = 0.0, 0.0, 0.0
         self._start = np.asarray(applied, float).copy()
         self.value, self.applied = self._start.copy(), self._start.copy()
         self.windows = 0
         self.held = information is not None
+        self.vetted |= self.held
         self.information = np.zeros_like(self.information) if information is None \
             else np.array(information, float)
         self.pull = self.information @ self._start
@@ -76,9 +94,31 @@ class LatencyEstimate:
         if self.held:
             return
         cams = np.asarray(cams)
+        self._scattered(cams, information, pull, placed)
         self.information[np.ix_(cams, cams)] += information
         self.pull[cams] += information @ placed + pull
         self.windows += 1
+
+    def _scattered(self, cams, information, pull, placed) -> None:
+        """One window's disagreement with the latencies so far, beyond what its noise and
+        theirs explain (chi² less its expectation), summed per camera by the information the
+        window has on each: a latency that holds still leaves it near nought."""
+        vals, vecs = np.linalg.eigh(information)
+        keep = vals > 1e-9 * max(vals.max(initial=0.0), 1e-300)
+        if not keep.any():
+            return
+        vals, vecs = vals[keep], vecs[:, keep]
+        want = placed + vecs @ (vecs.T @ pull / vals)  # the latencies this window points to
+        off = vecs.T @ (want - self.value[cams])
+        chi2 = float(vals @ off ** 2)
+        known = float(np.trace(information @ self.covariance[np.ix_(cams, cams)]))
+        if known > 0.5 * keep.sum():  # (the latencies so far less sure than this window:
+            return  # its disagreement is theirs)
+        expected = keep.sum() + known
+        s = np.diag(information)
+        self._scatter[np.ix_(cams, cams)] += np.outer(s, s)
+        self._excess[cams] += s * (chi2 - expected)
+        self._chi2 += (chi2 - expected, keep.sum())
 
     def solve(self) -> None:
         """The latencies the windows so far give, relative to their cameras' middle one."""
@@ -94,6 +134,13 @@ class LatencyEstimate:
             middle = np.sort(change[measured])[(int(measured.sum()) - 1) // 2]
             value = self._start + np.where(measured, change - middle, 0.0)
         self.value, self.covariance = value, cov
+        excess, dof = self._chi2
+        self.wander = np.zeros(n)
+        if excess > 3.0 * np.sqrt(2.0 * max(dof, 1.0)):  # (beyond the chi²'s own spread)
+            seen = self._scatter.diagonal() > 0
+            fit = np.linalg.lstsq(self._scatter[np.ix_(seen, seen)], self._excess[seen],
+                                  rcond=None)[0]
+            self.wander[seen] = np.maximum(fit, 0.0)
         # from clocks taken to agree, a correction within its own noise costs more than it
         # gains; from latencies found before, the estimate is the best word
         sure = np.abs(value - self._start) > APPLIED_SIGMAS * np.sqrt(
@@ -110,7 +157,9 @@ class LatencyEstimate:
         window of theirs can be wrong by (a shift common to them moves its time only)."""
         cams = np.asarray(cams)
         left = (self.value - self.applied)[cams]  # a latency not applied: all of it
-        return self._relative(self.covariance[np.ix_(cams, cams)]) + np.diag(left ** 2)
+        cov = self.covariance[np.ix_(cams, cams)] + np.diag(
+            np.where(self.vetted[cams], 0.0, self.prior ** 2) + self.wander[cams])
+        return self._relative(cov) + np.diag(left ** 2)
 
     @staticmethod
     def _relative(cov) -> np.ndarray:

@@ -121,6 +121,12 @@ SEARCH_EVERY, LINEAR_PERIODS = 30, 1.0
 SEARCH_FRAMES = 2000
 #: searches of a run that may apply latencies: skews that keep changing are no latency
 SEARCH_RESTARTS = 2
+#: live, a camera's times are first searched (vetted) once it and another hold this many
+#: one-spot frames (what a search's verdict takes), then every ``VET_EVERY`` frames until a
+#: search has told them
+VET_FRAMES, VET_EVERY = 20, 10
+#: … doubled after each search that told nothing, up to this many frames
+VET_EVERY_MOST = 300
 
 #: a row whose predicted error passes this share of the room's size is ``degenerate``
 DEGENERATE_SHARE = 0.1
@@ -308,6 +314,9 @@ class Tracker:
         #: a window's fit wanted a latency past its linear reach: search the times (at most
         #: every :data:`SEARCH_EVERY` frames)
         self._suspect, self._frames_since_search = False, 0
+        #: frames between vetting searches: doubled after each that told nothing (an LED at
+        #: rest tells no skew: not searched for it every few frames all day)
+        self._vet_every = VET_EVERY
         self._restarts = 0  #: searches that applied latencies (:data:`SEARCH_RESTARTS` at most)
         self.tracks: list[_Track] = []
         self.held: list[_Track] = []  #: ended tracks whose ids wait (:data:`HOLD_SECONDS`)
@@ -439,6 +448,11 @@ class Tracker:
         if self._suspect and self._frames_since_search >= SEARCH_EVERY:
             self._frames_since_search, self._suspect = 0, False
             self._search_times()
+        elif self._frames_since_search >= self._vet_every and self._unvetted():
+            vetted = self.latency.vetted.sum()
+            self._frames_since_search = 0
+            if not self._search_times() and self.latency.vetted.sum() == vetted:
+                self._vet_every = min(2 * self._vet_every, VET_EVERY_MOST)
         if not self._lag:  # rows at once: this frame's too
             out += self._due(t)
         return out
@@ -470,20 +484,33 @@ class Tracker:
         (:func:`~vlpcal.latency.pair_skew`): when a pair's skew is not what the latencies
         applied give it (by half a frame period or more), the latencies found are applied and
         the tracks started again (their rays were placed at the wrong times). Whether so."""
-        if self.spots != 1 or self._restarts >= SEARCH_RESTARTS:
-            return False  # (times whose skews keep changing are no latency: judged as they are)
+        if self.spots != 1:
+            return False
         skews = self._skews()
         applied = self.latency.applied
-        if not any(abs(s - (applied[b] - applied[a])) >= max(0.5 * self.period, within)
-                   for a, b, (s, within) in skews):
+        off = [abs(s - (applied[b] - applied[a])) >= max(0.5 * self.period, within)
+               for a, b, (s, within) in skews]
+        if not any(off):  # the times as corrected agree: those cameras are vetted
+            self.latency.vetted[[c for a, b, _ in skews for c in (a, b)]] = True
             return False
+        if self._restarts >= SEARCH_RESTARTS:
+            return False  # (times whose skews keep changing are no latency: judged as they are)
         self.latency.restart(camera_latencies(len(self.cameras),
                                               [(a, b, s) for a, b, (s, _) in skews]))
+        self.latency.vetted[[c for a, b, _ in skews for c in (a, b)]] = True
         self._restarts += 1
         self.tracks, self.held, self._pending = [], [], []
         self._one_spot.clear()  # (and the frames judged anew: those before had times off)
         self.fit = FitWatch(self.fit.deployment, self.fit.what, least=self.fit.least)
         return True
+
+    def _unvetted(self) -> bool:
+        """Whether a camera's times wait for a search (live: :attr:`LatencyEstimate.vetted`)
+        and it and another have the one-spot frames for one (:data:`VET_FRAMES`)."""
+        if self.spots != 1 or self.latency.vetted.all():
+            return False
+        ready = [k for k, q in self._one_spot.items() if len(q) >= VET_FRAMES]
+        return len(ready) >= 2 and not self.latency.vetted[ready].all()
 
     def in_order(self, frames) -> list:
         """``(time, camera id, …)`` frames in the order of their capture times as the cameras'
@@ -496,6 +523,13 @@ class Tracker:
         for the cameras whose times are corrected."""
         return {c.id: float(v) for c, v in zip(self.cameras, self.latency.applied) if v}
 
+    def wandering(self) -> dict:
+        """Camera id → how far (s, 1 sigma) its latency wanders from window to window beyond
+        the windows' noise (:attr:`LatencyEstimate.wander`), for cameras where it passes a
+        tenth of a frame period."""
+        spread = np.sqrt(self.latency.wander)
+        return {c.id: float(v) for c, v in zip(self.cameras, spread) if v > 0.1 * self.period}
+
     def search_times(self, frames) -> list[TimesDrift]:
         """Before a recording is tracked: its cameras' latencies searched on all its one-spot
         frames (``(time, camera id, spots K×2 px)``; :func:`~vlpcal.latency.pair_skew`) and
@@ -505,6 +539,7 @@ class Tracker:
         if self.spots != 1:  # (several LEDs: a frame with one spot may be either one's)
             return []
         self.latency.follow = True  # a whole recording: its windows move the corrections
+        self.latency.vetted[:] = True  # (and its search sees all its spots)
         logs: dict = {}
         for t, cid, uvs in frames:
             k = self._camera(cid)
@@ -537,8 +572,32 @@ class Tracker:
         end = max(float(t[-1]) for t, _ in logs.values() if len(t))
         # stretches of SKEW_FRAMES periods, a short recording's a third of it (not under a
         # third of SKEW_FRAMES: a stretch must hold enough spots to search)
-        span = max(SKEW_FRAMES / 3 * self.period, min(SKEW_FRAMES * self.period,
-                                                      (end - start) / 3))
+        least = SKEW_FRAMES / 3 * self.period
+        span = max(least, min(SKEW_FRAMES * self.period, (end - start) / 3))
+        out: dict = {}
+        for (a, b), seen in self._stretch_skews(logs, start, end, span).items():
+            first = min(seen, key=lambda x: x[1])
+            last = max(seen, key=lambda x: x[1])
+            if last[1] - first[1] > max(self.period, first[2] + last[2]):
+                out[a, b] = seen
+        # a steady drift (a clock a fraction of a percent fast) seen on the shortest
+        # stretches: a slope clear of the skews' own scatter about it, worth a frame period
+        for (a, b), seen in self._stretch_skews(logs, start, end, least).items():
+            if (a, b) in out or len(seen) < 4:
+                continue
+            t, skew = np.array([x[0] for x in seen]), np.array([x[1] for x in seen])
+            slope, centre = np.polyfit(t, skew, 1)
+            scatter = np.sqrt(np.sum((skew - slope * t - centre) ** 2) / (len(t) - 2))
+            se = scatter / np.sqrt(np.sum((t - t.mean()) ** 2))
+            if abs(slope) * (t.max() - t.min()) > self.period and abs(slope) > 4.0 * se:
+                out[a, b] = seen
+        return [TimesDrift(self.cameras[a].id, self.cameras[b].id,
+                           tuple((t, s) for t, s, _ in sorted(seen)))
+                for (a, b), seen in out.items()]
+
+    def _stretch_skews(self, logs, start: float, end: float, span: float) -> dict:
+        """(a, b) → [(middle time, skew, how surely)] of the recording's stretches ``span``
+        long that tell the pair's skew."""
         edges = np.arange(start, end + span, span)
         found: dict = {}
         for lo, hi in zip(edges[:-1], edges[1:]):
@@ -546,14 +605,7 @@ class Tracker:
                     for k, (t, d) in logs.items()}
             for a, b, (skew, within) in self._skews(part):
                 found.setdefault((a, b), []).append((0.5 * (lo + hi), skew, within))
-        out = []
-        for (a, b), seen in found.items():
-            first = min(seen, key=lambda x: x[1])
-            last = max(seen, key=lambda x: x[1])
-            if last[1] - first[1] > max(self.period, first[2] + last[2]):
-                out.append(TimesDrift(self.cameras[a].id, self.cameras[b].id,
-                                      tuple((t, s) for t, s, _ in sorted(seen))))
-        return out
+        return found
 
     def _skews(self, logs=None) -> list:
         """(a, b, (how much later b's stated times run than a's, how surely)) for pairs of
@@ -1390,8 +1442,11 @@ class Tracker:
         sigma = float(np.sqrt(max(variance, 0.0)))
         status = "ok" if fit_ok else "one_camera"
         if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name: none
-            status = "degenerate"  # given (as the locator's degenerate fixes), so no robot
-            fit = np.full(9, np.nan)  # steers by it
+            # given (as the locator's degenerate fixes), so no robot steers by it; live, the
+            # first second's, before a search has checked the cameras' times, say so
+            status = "times_unchecked" if fit_ok and timing > variance - timing \
+                and not self.latency.vetted[cams].all() else "degenerate"
+            fit = np.full(9, np.nan)
         return TrackUpdate(t, tr.led, fit[:3].copy(), fit[3:6].copy(), sigma,
                            "+".join(self.cameras[k].id for k in cams), status)
 

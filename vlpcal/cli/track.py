@@ -75,7 +75,9 @@ def track(deployment_path, frames_dir, cameras, spots_url, duration, lag, spots,
     frame that saw an LED: t,led,x,y,z,vx,vy,vz,sigma_m,cameras,status (m, m/s; t in s on the
     frames' clock, or UTC seconds live; status ok where two cameras or more placed it,
     one_camera where one camera saw it and its motion carried it, degenerate — no position —
-    where that guess is as uncertain as a tenth of the room). With the deployment's leds:
+    where that guess is as uncertain as a tenth of the room, times_unchecked — no position —
+    live before the cameras' capture times were checked against each other, the first
+    second or so of a moving LED). With the deployment's leds:
     block, each LED is named by its blink code; without, tracks are T1, T2…
 
     Example: vlpcal track -d deployment.yaml --frames streams/ --out tracks.csv
@@ -275,14 +277,16 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     drifts = tracker.search_times(spotted)  # the cameras' times, searched on the recording
+    drifted = f"{folder.root / 'times.csv'}: {drifts[0].message()}" if drifts else ""
+    check.also = lambda watch: drifted or _wandering_said(watch)  # (said with the fit
+    # watch's verdict, which names a wrong deployment first: a clock's drift looks alike)
     for t, cid, uv in tracker.in_order(spotted):
         rows.extend(_published(publisher, tracker.update_spots(cid, t, uv)))
         check(tracker)  # (a deployment that does not fit is said first: its skews wander too)
-    if drifts:  # times that place no frame right
-        said = f"{folder.root / 'times.csv'}: {drifts[0].message()}"
+    if drifts and not check.said:  # times that place no frame right
         if not check.keep_going:
-            raise UserError(f"{said} (nothing was written)")
-        echo(f"warning: {said} (going on: --keep-going)", err=True)
+            raise UserError(f"{drifted} (nothing was written)")
+        echo(f"warning: {drifted} (going on: --keep-going)", err=True)
     rows += _published(publisher, tracker.finish())
     if tracker.latencies() and publisher is None:  # rows from the first frame at the
         tracker, rows = _retracked(tracker, spotted, check)  # times the run found
@@ -314,7 +318,8 @@ def _retracked(first, spotted, check) -> tuple:
     from ..tracking import Tracker
 
     tracker = Tracker(first.deployment, period=first.period, spots=first.spots, lag=first.lag)
-    tracker.latency.restart(first.latency.applied, first.latency.information)
+    tracker.latency.restart(first.latency.applied, first.latency.information,
+                            first.latency.wander)
     rows = []
     for t, cid, uv in tracker.in_order(spotted):
         rows += tracker.update_spots(cid, t, uv)
@@ -332,6 +337,21 @@ def _said_latencies(tracker) -> None:
              f"{'late' if late > 0 else 'early'} against the others' (seen in the LED's "
              f"motion): its frames were placed {abs(late):.3f} s "
              f"{'earlier' if late > 0 else 'later'} than their times say", err=True)
+    wander = _wandering_said(tracker)
+    if wander:
+        echo(f"warning: {wander}; their rows' sigma_m hold it", err=True)
+
+
+def _wandering_said(tracker) -> str:
+    """The cameras whose latency wanders along the run, said ("" if none): a possible cause
+    of a misfit, and a warning after a run."""
+    spread = sorted(tracker.wandering().items())
+    if not spread:
+        return ""
+    return (f"camera{'s' * (len(spread) > 1)} {', '.join(c for c, _ in spread)}: capture "
+            f"times wander by {', '.join(f'±{s:.3f}' for _, s in spread)} s (1 sigma) "
+            "against the others' along the LED's motion (a clock running fast or slow? "
+            "frames stamped late under load?)")
 
 
 def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False,
