@@ -868,6 +868,12 @@ def test_a_planted_journal_cannot_move_or_delete_anything_outside_vlpcals_names(
       "--out", "{tmp}/f.csv"], "inf is not in the range"),
     (["locate", "-d", DEPLOYMENT, "--camera", "C1=ftp://127.0.0.1/x", "--out", "{tmp}/f.csv"],
      "expected an http(s):// MJPEG URL or a video device"),
+    # a URL that cannot be one is the user's to mend (exit 2), not a camera that did not
+    # answer (exit 1); a password cut at its "#" is not quoted back
+    (["track", "-d", DEPLOYMENT, "--camera", "C1=http://[::1/x", "--out", "{tmp}/t.csv"],
+     "expected an http(s):// MJPEG URL: host, port"),
+    (["locate", "-d", DEPLOYMENT, "--camera", "C1=http://robot:s3cr#t@cam/x", "--out",
+      "{tmp}/f.csv"], "%23"),
     (["plan", "--site", SITE, "--out", "{tmp}/p.yaml", "--max-cameras", "100000"],
      "100000 is not in the range"),
 ])
@@ -876,6 +882,7 @@ def test_options_that_are_not_numbers_or_sources_are_one_line(tmp_path, args, fr
     code, out, err, rss = _vlpcal(*args, timeout=60)
     lines = [line for line in out.splitlines() + err if line.strip()]
     assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+    assert "s3cr" not in lines[0]
     assert rss is not None and rss < 500
 
 

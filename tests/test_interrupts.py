@@ -301,3 +301,22 @@ def test_a_live_run_stopped_keeps_its_whole_rows_so_far(tmp_path, sim, command, 
     rows = list(csv.reader(text.splitlines()))
     assert len(rows) > 20 and len({len(r) for r in rows}) == 1, rows[:3]
     assert sorted(p.name for p in out.parent.iterdir()) == ["rows.csv"]
+
+
+def test_a_command_under_nohup_goes_on_when_the_terminal_closes(tmp_path, sim):
+    """``nohup vlpcal plan …`` ignores SIGHUP (a closed terminal); the command's own stop on
+    SIGHUP overrode that, so closing the terminal stopped the run nohup was asked to keep."""
+    argv, work, before = _setup(tmp_path, sim, "plan")
+    err_path = tmp_path / "stderr.txt"
+    with open(err_path, "w") as err:
+        proc = subprocess.Popen([sys.executable, "-c", PRELUDE, *map(str, argv)],
+                                stdout=subprocess.DEVNULL, stderr=err, cwd=tmp_path,
+                                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                                preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+    deadline = time.monotonic() + 60
+    while "@checked" not in err_path.read_text():
+        assert proc.poll() is None and time.monotonic() < deadline, err_path.read_text()
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGHUP)
+    assert proc.wait(timeout=300) == 0, err_path.read_text()
+    assert _snapshot(work) != before  # the plan was written

@@ -218,6 +218,16 @@ def open_source(spec: str, stamps: bool = False) -> Callable[[], Iterator]:
     as ``(frame, capture stamp or None)`` (:func:`mjpeg_frames`; a device has none)."""
 
     if spec.startswith(("http://", "https://")):
+        from urllib.parse import urlsplit
+
+        try:  # (a URL that cannot be one — a bracket left open, a port of letters — is the
+            parts = urlsplit(spec)  # user's to mend, said before any camera is asked)
+            hostless = not parts.hostname or parts.port == 0
+        except ValueError:
+            raise ValueError("expected an http(s):// MJPEG URL: host, port (a number) and "
+                             "path; a password with # / ? @ written %23 %2F %3F %40") from None
+        if hostless:
+            raise ValueError("expected an http(s):// MJPEG URL with a host (and a port not 0)")
         return lambda: mjpeg_frames(spec, stamps=stamps)
     if re.fullmatch(r"[0-9]{1,3}|/dev/video[0-9]{1,3}|/dev/v4l/by-[a-z]+/[^/]+", spec):
         if stamps:

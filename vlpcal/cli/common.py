@@ -57,6 +57,9 @@ class FitCheck:
     def __init__(self, keep_going: bool, kept: str):
         self.keep_going, self.kept, self.said = keep_going, kept, False
         self.say = lambda msg: echo(msg, err=True)
+        #: what else the run found that may be the cause, said with a misfit (" Or: …"): a
+        #: text, or a function of the watch giving one (or "")
+        self.also = ""
 
     def __call__(self, watch) -> None:
         if self.said:
@@ -64,10 +67,12 @@ class FitCheck:
         misfit = watch.misfit()
         if misfit is None:
             return
+        also = self.also(watch) if callable(self.also) else self.also
+        said = misfit.message() + (f" Or: {also}" if also else "")
         if not self.keep_going:
-            raise Misfit(f"{misfit.message()} ({self.kept})")
+            raise Misfit(f"{said} ({self.kept})")
         self.said = True
-        self.say(f"warning: {misfit.message()} (going on: --keep-going)")
+        self.say(f"warning: {said} (going on: --keep-going)")
 
 
 #: whether a stop (Ctrl-C, SIGTERM, SIGHUP) has come: a library running Python from C
@@ -96,8 +101,9 @@ def _stop_on_signals() -> None:
         STOP["asked"] = True
         raise KeyboardInterrupt
 
-    for name in ("SIGTERM", "SIGHUP"):
-        if hasattr(signal, name):
+    for name in ("SIGTERM", "SIGHUP"):  # (not one ignored: nohup's SIGHUP stays so)
+        if hasattr(signal, name) and signal.getsignal(getattr(signal, name)) \
+                is not signal.SIG_IGN:
             signal.signal(getattr(signal, name), interrupt)
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # (not when ignored)
         signal.signal(signal.SIGINT, interrupt)
