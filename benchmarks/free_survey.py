@@ -1,4 +1,4 @@
-"""The free survey (issue 15): cameras calibrated from a freely moving LED and a few measured
+"""The free survey: cameras calibrated from a freely moving LED and a few measured
 reference points, against the datum floor those points allow and the full tape survey.
 
 Per profile: a simulated install; the reference points ``survey plan --free`` asks for
@@ -120,7 +120,7 @@ WAND = 0.5
 
 
 def wand_run(scene, tmp: Path, seed: int) -> dict:
-    """No tape at all (issue 26): the frame marks ``survey plan --free --wand`` asks for (O,
+    """No tape at all: the frame marks ``survey plan --free --wand`` asks for (O,
     X, F1-F3: the LED stood on each, the floor uneven under it), a 0.5 m wand waved
     for FREE_SETS sets, default flags. The install described in the marks' frame (as
     ``simulate --wand`` does); test frames rendered there. The datum floor here: the true

@@ -131,7 +131,7 @@ def test_refusals_say_which_camera_and_why(rng):
     with pytest.raises(SurveyError, match="camera C2: saw none of the"):
         calibrate(cams, floor, blind, ids)
     # a tape's precision written in millimetres (3 for 3 mm) passed as metres gave a
-    # calibration worse than the nominal cameras, exit 0 (issue 31's hostile probe)
+    # calibration worse than the nominal cameras, exit 0 (a hostile input)
     with pytest.raises(SurveyError, match=r"±3.0 m, .* a tenth of it: .*millimetres\?"):
         calibrate(cams, floor, observe(cams, floor, rng), ids, point_sigma=3.0)
 
@@ -293,7 +293,7 @@ def test_the_schur_step_is_the_sparse_solve_step(rng, wand):
 
 
 def test_a_tape_point_30_cm_off_is_named_with_what_leaving_it_out_gives(rng):
-    """Issue 31, a tape survey's point read 0.30 m off in x: named with its held-out error
+    """A tape survey's point read 0.30 m off in x: named with its held-out error
     against the other points' and their held-out mean with it and without it; the survey
     without the misreading names none."""
     from vlpcal.survey import calibrate_survey

@@ -1,4 +1,4 @@
-"""Calibration from a freely moving LED and a few reference points (issue 15)."""
+"""Calibration from a freely moving LED and a few reference points."""
 
 import subprocess
 import sys
@@ -79,7 +79,7 @@ def test_cameras_10_cm_and_5_degrees_off_are_found(free_case):
         assert np.linalg.norm(np.subtract(c.position, t.position)) < 0.01
     assert cal.used_sets > 1000 and sum(cal.rejected.values()) <= 5
     assert np.nanmax(cal.leave_one_out) < 0.01 and 0.0003 < cal.datum_floor < 0.003
-    assert cal.suspects == []  # no reference named where none is wrong (issue 31)
+    assert cal.suspects == []  # no reference named where none is wrong
 
 
 def test_a_reflection_in_5_percent_of_one_cameras_frames_is_rejected(free_case):
@@ -485,7 +485,7 @@ def test_references_left_out_far_beyond_their_noise_call_the_survey_weak(
 
 
 def test_a_reference_30_cm_off_is_named_with_what_leaving_it_out_gives(free_case):
-    """Issue 31: one reference's x misread by 0.30 m calibrated silently (the left-out
+    """One reference's x misread by 0.30 m calibrated silently (the left-out
     figures showed only a "max" among means). It is named, with its left-out residual, the
     others', and what the survey gives without it; the same survey without the misreading
     names none."""
@@ -509,7 +509,7 @@ def test_a_reference_30_cm_off_is_named_with_what_leaving_it_out_gives(free_case
 
 
 def test_test_points_are_judged_as_locate_judges_them():
-    """Issue 31: the report listed a test point 75 cm off that `locate` with the same file
+    """The report listed a test point 75 cm off that `locate` with the same file
     refuses as outside_room (a floor reflection taken for the LED). The report's test points
     are located by the calibrated file's own locator: that point is not fixed, its status
     said, and every point's status is the one `locate` gives."""

@@ -1,4 +1,4 @@
-"""The lens model chosen by the data (issues 12, 28): by the held-out 3D error of survey points,
+"""The lens model chosen by the data: by the held-out 3D error of survey points,
 the same at any scale, warned (not refused) where the survey pins it only weakly, never worse
 than the nominal lens when that lens is right, and on real data (MyPTV, OpenPTV's cavity) at
 least as good as plain OpenCV on the same split."""

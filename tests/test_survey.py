@@ -40,7 +40,7 @@ def test_survey_plan_walks_a_serpentine_without_crossing_the_room():
 
 
 def test_capture_exits_1_when_every_camera_sends_too_slowly(tmp_path):
-    """Issue 31: cameras that send, but too slowly to make a frame, stopped `survey capture`
+    """Cameras that send, but too slowly to make a frame, stopped `survey capture`
     with exit 2 (a user's mistake) where the README documents 1, as a live `locate` without
     frames exits: each camera named with why, nothing written."""
     import subprocess

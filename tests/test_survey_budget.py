@@ -1,4 +1,4 @@
-"""How many survey points a rig needs (issue 12): the predicted cost of a tape survey agrees with
+"""How many survey points a rig needs: the predicted cost of a tape survey agrees with
 real bundle adjustments, the planner sizes the grid by it at any scale, and says so."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Issue 26: survey plans that link every camera, checked before anyone measures — the free
+"""Survey plans that link every camera, checked before anyone measures — the free
 LED's route through every thin overlap, references and frame marks spread over the room, the
 cameras that cannot be linked named with what would link them, tape positions to what a tape
 marks and the survey's time said. Deployments are written directly (planning them is slow)."""
@@ -17,7 +17,7 @@ from vlpcal.deployment import Deployment, save
 from vlpcal.geometry import NADIR, paper_camera, rodrigues, rotation_vector
 from vlpcal.survey import SurveyError, free_route, plan_references
 from vlpcal.survey.frame_error import marks_frame_error
-from vlpcal.survey.free import MIN_SHARED, _linkage
+from vlpcal.survey.free_checks import MIN_SHARED, check_linked
 from vlpcal.survey.linkage import (
     PLACING_SHARE,
     SWEEP_SETS,
@@ -110,9 +110,9 @@ def test_the_issue_office_is_linked_through_its_thin_column_overlaps():
     assert {("C1", "C2"), ("C2", "C3"), ("C10", "C11"), ("C11", "C12")} <= across
     assert (route.sets[np.triu(route.linkage.linked, 1)] >= MIN_SHARED).all()
     rng = np.random.default_rng(3)
-    _linkage(ids, walk(dep, route, rng))  # the calibration's rule: no refusal
+    check_linked(ids, walk(dep, route, rng))  # the calibration's rule: no refusal
     with pytest.raises(SurveyError, match="not linked"):
-        _linkage(ids, walk(dep, route, rng, tops=np.full(len(route.stops), route.high)))
+        check_linked(ids, walk(dep, route, rng, tops=np.full(len(route.stops), route.high)))
 
 
 @pytest.mark.parametrize("room", sorted(ROOMS))

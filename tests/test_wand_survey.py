@@ -1,4 +1,4 @@
-"""A survey with no tape measure (issue 26): frame marks, a wand, a start from the data."""
+"""A survey with no tape measure: frame marks, a wand, a start from the data."""
 
 from __future__ import annotations
 
@@ -396,7 +396,7 @@ def test_a_wand_whose_led_names_are_swapped_for_a_camera_is_refused():
 
 def test_the_x_mark_lands_on_plus_x_when_the_start_faces_the_other_way():
     """The marks' zeros fit a half turn about z as well as the frame itself: the X mark names
-    the +x side (``X,,0,0``, DESIGN.md), so a start drawn facing the other way (the plan's
+    the +x side (``X,,0,0``, docs/formats.md), so a start drawn facing the other way (the plan's
     axes reversed) is turned round, not left with X at negative x."""
     from vlpcal.survey.network import align_to_references
 

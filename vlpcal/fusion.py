@@ -69,7 +69,7 @@ class RegionMap:
     @classmethod
     def from_dict(cls, items) -> RegionMap:
         """From ``[{"polygon": [[x, y], …], "cameras": [id, …]}, …]`` (metres)."""
-        from shapely.geometry import Polygon
+        from shapely.geometry import Polygon  # (a region map only: locate starts without it)
 
         return cls([(Polygon(r["polygon"]), tuple(str(c) for c in r["cameras"])) for r in items])
 
@@ -79,7 +79,7 @@ class RegionMap:
 
     def lookup(self, xy) -> np.ndarray:
         """Index of the region containing each floor point ``N×2`` (−1: none, or NaN input)."""
-        import shapely
+        import shapely  # (a region map only: locate starts without it)
 
         xy = np.atleast_2d(np.asarray(xy, dtype=float))
         out = np.full(len(xy), -1)
@@ -191,7 +191,7 @@ def fuse(cameras: list[Camera], uv, method: str = "mean", region_map: RegionMap 
                         subsets.append(members)
                     take = (region == r) & seen[list(members)].all(axis=0)
                     choice[take] = subsets.index(members)
-            for k in sorted(set(choice[choice >= 0].tolist())):  # (np.unique: numpy.ma, 9 ms)
+            for k in sorted(set(choice[choice >= 0].tolist())):  # (np.unique loads numpy.ma)
                 pts = choice == k
                 members = list(subsets[k])
                 if k < len(pairs):

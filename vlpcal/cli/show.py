@@ -5,7 +5,10 @@ from __future__ import annotations
 import math
 
 import click
+import numpy as np
+from shapely.geometry import Polygon
 
+from ..reading import shown
 from .common import _load_deployment, echo, main
 
 
@@ -22,8 +25,6 @@ def show(deployment_path, deployment_option):
 
     Example: vlpcal show layouts/paper-linear.planned.yaml
     """
-    import numpy as np
-
     if (deployment_path is None) == (deployment_option is None):
         raise click.UsageError("give one deployment: vlpcal show D (or -d D)")
     dep = _load_deployment(deployment_path or deployment_option)
@@ -65,8 +66,6 @@ def show(deployment_path, deployment_option):
     try:
         _provenance(dep, prov)
     except (TypeError, ValueError, AttributeError, KeyError, OverflowError):
-        from ..reading import shown
-
         _say(f"  (the rest of provenance: is not as vlpcal writes it: {shown(prov)})")
 
 
@@ -127,8 +126,5 @@ def _extent(room):
     """The room's length and width: the sides of the smallest rectangle around it at any
     angle (a room carried into a frame that marks define is turned, and its box would not
     be its size)."""
-    import numpy as np
-    from shapely.geometry import Polygon
-
     box = np.asarray(Polygon(room).minimum_rotated_rectangle.exterior.coords)[:3]
     return np.sort(np.linalg.norm(np.diff(box, axis=0), axis=1))[::-1]

@@ -4,9 +4,12 @@ and the runtime path never draws."""
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
+
+from ..survey import LENS_MODELS
 
 
 def _pyplot():
@@ -90,7 +93,7 @@ def survey_plan_figure(path, dep, plan, route=None) -> list:
     low (a thin overlap) in another colour — and cameras the route cannot link ringed, with
     where another camera would link them. Labels are placed so that none overlaps another
     (:func:`_place_labels`); returns their boxes (display coordinates), for a check."""
-    from matplotlib.transforms import Bbox
+    from matplotlib.transforms import Bbox  # (matplotlib: when drawing)
 
     plt = _pyplot()
     heights = sorted(set(plan.xyz[:, 2].round(6)))
@@ -335,8 +338,6 @@ def _lens_panel(ax, rows) -> None:
     """Per camera, the held-out error that chose its lens model, for each model fitted: the 3D
     error of held-out survey points (cm) where the choice was made by it, else the camera's
     held-out reprojection error (px); the chosen model filled, the others hollow."""
-    from ..survey import LENS_MODELS
-
     in_3d = any(c.get("held_out_3d_m") is not None
                 for r in rows for c in r.get("lens_candidates", {}).values())
     key, scale = ("held_out_3d_m", 100.0) if in_3d else ("held_out_px", 1.0)
@@ -371,7 +372,7 @@ def plan_maps(path, site, cand) -> None:
     height) and the predicted RMS error (one scale that includes the requirement, its cut
     shown), the points that fail the requirement outlined in red, the cameras with their ids
     and the direction of each image's long side; axes in metres."""
-    from matplotlib import patheffects
+    from matplotlib import patheffects  # (matplotlib: when drawing)
     from matplotlib.colors import BoundaryNorm
 
     plt = _pyplot()
@@ -585,8 +586,6 @@ def run_figure(path, dep, t, ids, X, sigma, status, yaw=None, title: str = "",
     id's ``sigma`` over ``t`` (log scale over a decade), so where the fixes were loose
     shows. One row per fix or track update: ``t`` N, ``ids`` N, ``X`` N×3 m, ``sigma`` N m,
     ``status`` N."""
-    from collections import Counter
-
     plt = _pyplot()
     fig, (plan, sig) = plt.subplots(1, 2, figsize=(13, 5.2), constrained_layout=True,
                                     gridspec_kw={"width_ratios": [1.1, 1.0]})
@@ -633,7 +632,7 @@ def run_figure(path, dep, t, ids, X, sigma, status, yaw=None, title: str = "",
         plan.legend(fontsize=7, markerscale=4, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     lo, hi = sig.get_ylim()
     if hi > 10 * max(lo, 1e-12):  # over a decade: a log scale, millimetres as numbers
-        from matplotlib.ticker import FuncFormatter
+        from matplotlib.ticker import FuncFormatter  # (matplotlib: when drawing)
 
         sig.set_yscale("log")
         sig.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))

@@ -16,7 +16,6 @@ import numpy as np
 
 from ..survey import LENS_MODELS, FreeSurveyResult, SurveyResult, plan_references
 from ..survey.calibration import format_length
-from ..survey.free import WAND_PRECISION
 from ..survey.plan import (
     MAX_PLANNED_POINTS,
     TYPICAL_SHARE,
@@ -24,6 +23,7 @@ from ..survey.plan import (
     duration_words,
 )
 from ..survey.suspects import suspect_words
+from ..survey.wand import WAND_PRECISION
 
 #: how the words name a parameter a user can change, by default (a Python caller's names);
 #: ``plan_references`` is what plans a free survey's references

@@ -10,9 +10,14 @@
   OpenCV;
 - :mod:`.held_out`: honest accuracy, k-fold by survey point;
 - :mod:`.regions`: the paper's approach (c), the best pair per floor region;
-- :mod:`.plan`: where to put the LED; :mod:`.spots`: the survey's spots as the locator sees
-  them; :mod:`.pipeline`: the whole of ``vlpcal survey calibrate``; :mod:`.results`: what
-  it returns, typed.
+- :mod:`.free`: a free survey (the LED moved freely, a few references measured) — its
+  refusals :mod:`.free_checks`, starts :mod:`.free_start`, joint fit :mod:`.free_fit`, lens
+  models :mod:`.free_lens`; a wand's :mod:`.wand`; the frame the references or marks fix
+  :mod:`.datum`, :mod:`.marks_frame`, :mod:`.network`, :mod:`.frame_error`;
+- :mod:`.plan`: where to put the LED (:mod:`.linkage`: whether a free LED can link every
+  camera; :mod:`.budget`: what a tape survey costs the fixes); :mod:`.spots`: the survey's
+  spots as the locator sees them; :mod:`.pipeline`: the whole of ``vlpcal survey
+  calibrate``; :mod:`.results`: what it returns, typed.
 """
 
 from .calibration import (

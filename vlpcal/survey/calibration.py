@@ -16,12 +16,15 @@ import numpy as np
 
 from ..geometry import Camera
 from ..reading import slipped_units
+from ..triangulation import triangulate
 from .camera_fit import CameraFit, fit_camera
 from .errors import SurveyError
 from .least_squares import SchurSolver, levenberg_marquardt
 from .lens import (
     LENS_MODELS,
+    LENS_WORDS,
     SINGULAR,
+    describe_lens,
     from_vector,
     lens_params,
     min_points,
@@ -187,7 +190,7 @@ def refine_jointly(cameras: list[Camera], X, obs, intrinsics: bool = False,
         return np.concatenate(out)
 
     def jac(p):
-        from scipy.sparse import csr_matrix
+        from scipy.sparse import csr_matrix  # (scipy: loaded by a fit only)
 
         pts, cams = unpack(p)
         data = []
@@ -436,7 +439,6 @@ def calibrate(nominal: list[Camera], X, uv, ids, intrinsics: bool = False,
     suspects = [i for i, pid in enumerate(ids)
                 if rejected.get(pid, 0) >= 2 or (rejected.get(pid, 0) >= 1 and seen_by[i] == 1)]
     # how far off the record is: where the calibrated cameras see the LED, against it
-    from ..triangulation import triangulate
 
     where = triangulate(cams, uv[:, suspects]).X if suspects else np.zeros((0, 3))
     bad = [(ids[i], float(np.linalg.norm(w - X[i]))) for i, w in zip(suspects, where)]
@@ -453,8 +455,6 @@ def lens_sentence(choice: LensChoice, camera: Camera, nominal: Camera) -> str:
     behind it: the 3D error of held-out points where the choice was made by it, else the
     reprojection (px, and what that is at the camera's points); and what the survey pins only
     weakly, with what that costs the fixes."""
-    from .lens import LENS_WORDS, describe_lens
-
     cand = choice.candidates
     in_3d = any(c.get("held_out_3d_m") is not None for c in cand.values())
 

@@ -4,7 +4,7 @@ wrong spots found against the fit's own spread and dropped."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -65,9 +65,7 @@ def _outlier_limit(cam: Camera, sigma: float) -> float:
 
 def _pnp_start(nominal: Camera, X, uv) -> Camera:
     """OpenCV's SQPnP on the nominal lens, unless it lands worse than the nominal pose."""
-    from dataclasses import replace
-
-    import cv2
+    import cv2  # (OpenCV: loaded by a fit only)
 
     xy = nominal.normalise(uv)
     good = np.isfinite(xy).all(axis=1)

@@ -11,8 +11,10 @@ moments (what the free calibration needs to tie two cameras together).
 from __future__ import annotations
 
 import numpy as np
+from shapely import contains_xy
+from shapely.geometry import Polygon
 
-from .free import MIN_SHARED
+from .free_checks import MIN_SHARED
 
 #: image quarters by (column, row): 0 = left/top, 1 = right/bottom
 QUARTERS = {(0, 0): "top-left", (1, 0): "top-right", (0, 1): "bottom-left",
@@ -43,8 +45,6 @@ IN_ROOM_SHARE = 0.25
 def quarters_in_room(camera, room, height: float = 0.0) -> np.ndarray:
     """``2×2`` [row, column]: the share of each image quarter that sees the room's floor
     polygon ``room`` at ``height`` (an 8 × 8 grid of pixels per quarter)."""
-    from shapely import contains_xy
-    from shapely.geometry import Polygon
 
     poly = Polygon(room)
     share = np.zeros((2, 2))

@@ -1,4 +1,4 @@
-"""How precisely frame marks fix the frame, predicted from the cameras alone (issue 26).
+"""How precisely frame marks fix the frame, predicted from the cameras alone.
 
 A wand survey's frame is where the LED stood on its marks (``O``: all three coordinates, ``X``:
 its y and z, each floor mark: its z). Each mark is triangulated from the views that see it,

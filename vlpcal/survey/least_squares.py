@@ -19,7 +19,7 @@ def levenberg_marquardt(resid, jac, p0, f_scale: float, iterations: int = 60, so
     Stops when a step gains less than ``tolerance`` of the cost or less than ``negligible``
     times ``f_scale``² (a gain below the noise's own scale, Δχ² ≪ 1, moves nothing that
     matters). Returns (p, cost)."""
-    from scipy.sparse import diags
+    from scipy.sparse import diags  # (scipy: loaded by a fit only)
     from scipy.sparse.linalg import spsolve
 
     def cost_of(r):
@@ -78,7 +78,7 @@ class SchurSolver:
     caller falls back to a general sparse solve)."""
 
     def __init__(self, n_cam: int, n_pts: int, pairs=None):
-        from scipy.sparse import coo_matrix
+        from scipy.sparse import coo_matrix  # (scipy: loaded by a fit only)
         from scipy.sparse.csgraph import connected_components
 
         self.n_cam = n_cam
@@ -112,7 +112,7 @@ class SchurSolver:
 
     def __call__(self, A, g, damping):
         """``step`` solving ``(A + diag(damping)) step = -g`` (``A``: CSC), or None."""
-        from scipy.sparse import coo_matrix
+        from scipy.sparse import coo_matrix  # (scipy: loaded by a fit only)
 
         nc = self.n_cam
         A = A.tocsr()

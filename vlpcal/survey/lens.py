@@ -189,7 +189,7 @@ def project_with_jacobian(cam: Camera, X, model: str):
     not project (behind the camera) are NaN in ``uv`` and zero in both Jacobians. Analytic so
     that a bundle adjustment over hundreds of points and cameras costs one projection per step
     instead of one per parameter."""
-    import cv2
+    import cv2  # (OpenCV: loaded by a fit only)
 
     X = np.asarray(X, float)
     uv, _, _ = cam.project(X)

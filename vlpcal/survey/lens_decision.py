@@ -1,4 +1,4 @@
-"""Every camera's lens model, decided by what it does to the fixes (issue 28).
+"""Every camera's lens model, decided by what it does to the fixes.
 
 Each nested model (:data:`~.lens.LENS_MODELS`) is fitted to each camera on all but one fold of
 the survey points; the left-out fold is triangulated with every camera's fit and compared with
@@ -21,7 +21,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..deployment import DeploymentError, check_intrinsics
 from ..geometry import Camera
+from ..triangulation import triangulate
 from .camera_fit import fit_camera
 from .errors import SurveyError
 from .lens import LENS_MODELS, SINGULAR, lens_params, min_points
@@ -88,7 +90,7 @@ def opencv_camera(nominal: Camera, X, uv, principal=None) -> Camera | None:
 
 def _opencv_fit(nominal: Camera, X, uv, principal=None) -> tuple[Camera | None, float]:
     """:func:`opencv_camera` and OpenCV's own reprojection RMS (px; inf where it refused)."""
-    import cv2
+    import cv2  # (OpenCV: loaded by a fit only)
 
     X = np.asarray(X, float)
     uv = np.asarray(uv, float)
@@ -135,8 +137,6 @@ def holdable(cam: Camera) -> bool:
     """Whether a deployment file can hold ``cam``'s lens (a principal point within one image
     of the image, distortion terms a lens can have): a narrow view's fit can wander past
     them, trading the principal point against the camera's tilt."""
-    from ..deployment import DeploymentError, check_intrinsics
-
     try:
         check_intrinsics(cam.to_dict(), cam.id)
     except DeploymentError:
@@ -203,8 +203,6 @@ class _HeldOut:
     """Per-point held-out 3D errors of any assignment of fold cameras (C × folds)."""
 
     def __init__(self, X, uv, fold):
-        from ..triangulation import triangulate
-
         self._tri = triangulate
         self.X, self.uv, self.fold = X, uv, fold
         self.counted = np.isfinite(uv).all(axis=2).sum(axis=0) >= 2

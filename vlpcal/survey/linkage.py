@@ -1,8 +1,8 @@
-"""Whether a free survey can link every camera, judged from the geometry before anyone measures
-(issue 26).
+"""Whether a free survey can link every camera, judged from the geometry before anyone
+measures.
 
 A free calibration ties two cameras together only when they saw the free LED at
-:data:`~.free.MIN_SHARED` moments or more; cameras no chain of such pairs joins are refused,
+:data:`MIN_SHARED` moments or more; cameras no chain of such pairs joins are refused,
 after the measuring. So the plan asks first, for every camera pair: where in the space the LED
 can reach (the room minus its keep-out areas, from the sweep's foot to its top, and not behind
 an obstacle) do both cameras see it, and would a stop there give the pair enough sightings?
@@ -12,7 +12,7 @@ place found by eye (within :data:`PLACING_SHARE` of a camera's floor footprint, 
 views meet in a strip narrower than that gets a share of the sweep only): the pair's expected
 sightings there are the sweep's moments times the share of the sweep, over the places the LED
 may land, that both cameras see. A pair is *linked* when its best stop, with the sweep kept as
-low as the overlap reaches there, gives :data:`~.free.MIN_SHARED`; *thin* when only such a low
+low as the overlap reaches there, gives :data:`MIN_SHARED`; *thin* when only such a low
 sweep does. Every size here is relative to the scene: the grid and the placing to the cameras'
 footprint, the heights to the sweep.
 """
@@ -23,9 +23,13 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+import shapely
+from shapely import MultiPoint, contains_xy, union_all
+from shapely.geometry import Point, Polygon
 
+from ..geometry import Camera
 from .errors import SurveyError
-from .free import MIN_SHARED
+from .free_checks import MIN_SHARED
 
 #: moments one sweep records: from the foot to the top and back in about four seconds at the
 #: capture's ten moments a second
@@ -52,8 +56,8 @@ REACH_SHARE = 0.9
 
 def obstacles_of(deployment) -> list:
     """The deployment's obstacles that hide what is behind them: keep-out items given as
-    ``{polygon: …, height: H}`` (DESIGN.md), as ``(polygon, H)``; a plain polygon is a floor
-    area to leave out and hides nothing."""
+    ``{polygon: …, height: H}`` (docs/formats.md, the site file), as ``(polygon, H)``; a plain
+    polygon is a floor area to leave out and hides nothing."""
     out = []
     for item in deployment.keep_out:
         if isinstance(item, dict) and "height" in item:
@@ -225,8 +229,6 @@ def reach(deployment, low: float = 0.0, top: float | None = None, margin_px: flo
     """Sample the space a free LED can reach under ``deployment``'s cameras: from ``low`` to
     ``top`` (default 40 % of the ceiling's height) and on, at the same spacing, up to
     :data:`REACH_SHARE` of the lowest camera's height (what a taller sweep could do)."""
-    from shapely import contains_xy, union_all
-    from shapely.geometry import Polygon
 
     cams = list(deployment.cameras)
     if not cams:
@@ -293,8 +295,6 @@ def _box(a: np.ndarray, w: int) -> np.ndarray:
 def _hidden(centre, pts: np.ndarray, obstacles) -> np.ndarray:
     """``N``: the segment from a camera's ``centre`` to each point passes through an obstacle
     (a polygon ``H`` m tall, standing on the floor)."""
-    import shapely
-    from shapely.geometry import Polygon
 
     pts = np.asarray(pts, float)
     out = np.zeros(len(pts), bool)
@@ -371,7 +371,7 @@ class Linkage:
 
     @property
     def linked(self) -> np.ndarray:
-        """``C×C``: the pair's best stop gives it :data:`~.free.MIN_SHARED` moments or more."""
+        """``C×C``: the pair's best stop gives it :data:`MIN_SHARED` moments or more."""
         return self.sets >= MIN_SHARED
 
     @property
@@ -460,8 +460,6 @@ def _view_centre(r: Reach, seen: np.ndarray) -> np.ndarray:
 
 def _view_hull(r: Reach, seen: np.ndarray):
     """Where a camera sees the LED at the sweep's foot, as a convex floor polygon."""
-    from shapely import MultiPoint
-
     iy, ix = np.nonzero(seen[0])
     return MultiPoint(np.c_[r.xs[ix], r.ys[iy]]).convex_hull
 
@@ -471,10 +469,6 @@ def _remedy(r: Reach, group, main) -> Remedy:
     lowest sweep top, above the verdict's, at which a pair of one of each is linked; a camera
     like theirs between the nearest views that both a camera of the group and one of the
     others would share enough with."""
-    from shapely.geometry import Point
-
-    from ..geometry import Camera
-
     T, cams = r.top_index, r.cameras
     need = MIN_SHARED / SWEEP_SETS
     tops = [int(np.argmax(np.maximum.accumulate(r.score(g, h).best) >= need))

@@ -1,10 +1,10 @@
-"""The plan's frame carried into the frame that frame marks define (issue 26).
+"""The plan's frame carried into the frame that frame marks define.
 
-A marks-only survey sets its own origin and axes (``O,0,0,0``, ``X,,0,0``, DESIGN.md); the
-deployment's room, keep-outs and nominal cameras are in the plan's frame, which the marks may
-put anywhere. Everything judged against the room (free positions inside it, the datum floor
-over its floor, the region map) is judged with the room moved along with the cameras: the
-nominal room is taken as roughly placed, like the nominal cameras.
+A marks-only survey sets its own origin and axes (``O,0,0,0``, ``X,,0,0``: docs/formats.md,
+survey bundle); the deployment's room, keep-outs and nominal cameras are in the plan's frame,
+which the marks may put anywhere. Everything judged against the room (free positions inside
+it, the datum floor over its floor, the region map) is judged with the room moved along with
+the cameras: the nominal room is taken as roughly placed, like the nominal cameras.
 """
 
 from __future__ import annotations

@@ -18,10 +18,13 @@ Shapes: ``uv`` C×M×S×2 (camera, set, spot slot, pixel; NaN: not seen), S = 1 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from itertools import product
 
 import numpy as np
 
 from ..geometry import Camera, rodrigues, rotation_vector
+from ..triangulation import reprojection_errors, triangulate
+from .datum import unfixed_motions
 
 #: RANSAC inlier bound on the epipolar distance, as a share of the image diagonal: generous,
 #: since the deployment's lens may be off by a few pixels at the edges
@@ -54,7 +57,7 @@ def _pair_pose(ni, nj, S: int, labelled: bool, threshold: float):
     """The relative pose (R, t: x_j = R x_i + t, |t| = 1) of two cameras from their
     normalised spots ``ni``, ``nj`` (M×S×2), and the slot matching per set it implies
     (M×S: slot of j for each slot of i, −1 unknown); None when too little is shared."""
-    import cv2
+    import cv2  # (OpenCV: loaded by a fit only)
 
     combos = [(a, b) for a in range(S) for b in range(S) if not labelled or a == b]
     sets, pa, pb, A, B = [], [], [], [], []
@@ -232,9 +235,7 @@ def align_to_references(cameras: list[Camera], uv, X, scale_fixed: bool = False
     the gauge the bundle adjustment would otherwise have to turn the whole network through.
     ``scale_fixed``: the cameras' scale is already right (a wand's). Unchanged when the
     references seen by two cameras do not fix the transform."""
-    from scipy.optimize import least_squares
-
-    from ..triangulation import triangulate
+    from scipy.optimize import least_squares  # (scipy: by a fit only)
 
     X = np.asarray(X, float)
     two = np.isfinite(np.asarray(uv, float)).all(axis=2).sum(axis=0) >= 2
@@ -243,7 +244,6 @@ def align_to_references(cameras: list[Camera], uv, X, scale_fixed: bool = False
     P = triangulate(cameras, np.asarray(uv, float)[:, two]).X
     T = X[two]
     known = np.isfinite(T) & np.isfinite(P).all(axis=1)[:, None]
-    from .datum import unfixed_motions
 
     spread = float(np.median([c.position[2] for c in cameras])) or 1.0
     # judged on the positions as measured where they were (a mark's zeros exactly)
@@ -264,7 +264,7 @@ def align_to_references(cameras: list[Camera], uv, X, scale_fixed: bool = False
     R = rodrigues(q[:3])
     s = 1.0 if scale_fixed else float(np.exp(q[6]))
     # an axis mark (``X,,0,0``) lies along +x: a half turn about z through the origin fits the
-    # marks' zeros as well, and is taken when it puts the axis marks there (DESIGN.md)
+    # marks' zeros as well, and is taken when it puts the axis marks on +x, as they are defined
     axis = ~np.isfinite(T[:, 0]) & (T[:, 1] == 0.0) & np.isfinite(P).all(axis=1)
     turn = np.diag([-1.0, -1.0, 1.0])
     if axis.any() and np.mean(moved(q)[axis, 0]) < 0:
@@ -291,10 +291,6 @@ def label_wand(cameras: list[Camera], spots, wand: float, tolerance: float) -> n
     counted at the cap) and by how far its ends are from ``wand`` m apart; the best kept when
     the next is worse by a cap. ``spots`` C×M×2×2. Returns ``order`` C×M×2 (the slot of each
     end, −1: none or undecided), as :class:`Network` holds it."""
-    from itertools import product
-
-    from ..triangulation import reprojection_errors, triangulate
-
     spots = np.asarray(spots, float)
     C, M = spots.shape[:2]
     has = np.isfinite(spots[..., 0])  # C×M×2

@@ -22,6 +22,7 @@ from .results import (
     TapeCamera,
     finite_or_none,
 )
+from .suspects import far_beyond, suspects_of
 
 #: the calibrated file's residual limit, in held-out residuals of its worst camera
 RESIDUAL_LIMIT = 5.0
@@ -118,8 +119,6 @@ def _suspect_points(nominal, X, uv, ids, dep, cal, folds, errors, label, limit) 
     cheap-wide installs, seeds 0–4, 1–5 such points a survey stood 6–180 × beyond the others,
     none rejected by two cameras). With the others' held-out mean with them and with the
     k-fold check run again without them."""
-    from .suspects import far_beyond, suspects_of
-
     errors = np.asarray(errors, float)
     rejected = {}
     for fit in cal.fits:

@@ -5,10 +5,25 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from shapely import contains_xy, union_all
+from shapely.geometry import Polygon, box
 
 from .budget import calibration_ratio
 from .errors import SurveyError
+from .frame_error import frame_errors, mark_covariances, roles_information, zone_weight
+from .free_checks import MIN_SHARED
 from .lens import MIN_POINTS_POSE
+from .linkage import (
+    PLACING_SHARE,
+    SWEEP_SECONDS,
+    SWEEP_SETS,
+    WALK_SPEED,
+    _box,
+    _components,
+    footprint,
+    link_cameras,
+    reach,
+)
 
 #: points a survey plan gives each camera by default: twice what its pose needs, so that a
 #: k-fold check can judge a lens fit (more points let it fit more of the lens)
@@ -142,8 +157,6 @@ MAX_GRID_POINTS = 50_000
 def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_px, tape,
                spot_noise, predict: bool = True) -> SurveyPlan:
     """:func:`plan_survey` at a stated grid spacing, with its predicted calibration."""
-    from shapely import contains_xy
-
     heights = sorted(set(float(h) for h in heights))
     if len(heights) < 2:
         raise SurveyError("a survey needs points at two or more heights (a floor-only survey "
@@ -222,8 +235,6 @@ def _plan_grid(deployment, step, heights, min_per_camera, min_per_pair, margin_p
 
 def _floor(deployment):
     """The room's floor less its keep-out areas (a shapely geometry)."""
-    from shapely.geometry import Polygon
-
     room = Polygon(deployment.room)
     for poly in deployment.keep_out:
         room = room.difference(Polygon(poly))
@@ -233,8 +244,6 @@ def _floor(deployment):
 def _views_box(cams, height: float, room):
     """Where on the floor (at ``height``) the cameras look: the union of each camera's view's
     bounding box — a grid beyond it would be points no camera sees."""
-    from shapely import union_all
-    from shapely.geometry import Polygon, box
 
     boxes = []
     for c in cams:
@@ -267,8 +276,6 @@ FIX_PLACES = 1500
 def _fix_places(room, heights, step) -> np.ndarray:
     """Where fixes are judged: a grid offset from the survey's, at its heights and halfway
     between them, thinned evenly to :data:`FIX_PLACES`."""
-    from shapely import contains_xy
-
     x0, y0, x1, y1 = room.bounds
     s = step / 1.7
     gx, gy = np.meshgrid(np.arange(x0 + s / 3, x1, s), np.arange(y0 + s / 3, y1, s))
@@ -303,7 +310,7 @@ def _walking_order(pts: np.ndarray, quantum: float) -> np.ndarray:
 
 def plan_references(deployment, count: int | None = None, heights=None,
                     margin_px: float = 5.0, tape: float = TAPE_M) -> SurveyPlan:
-    """Where a free survey's reference points go (issue 15): where two or more cameras see
+    """Where a free survey's reference points go: where two or more cameras see
     them, spread over the room (farthest-point order) at three heights (:data:`REFERENCE_HEIGHTS`
     of the ceiling: cameras that all look down cannot tell a longer focal length from a
     deeper LED by the free LED alone; references spread in depth tell them), and where cameras
@@ -312,12 +319,10 @@ def plan_references(deployment, count: int | None = None, heights=None,
     or more, else four per overlapping pair, at most 12 — or as given. Ids ``R01``… in walking
     order; positions to the marks of a tape measuring to ``tape`` (:func:`to_marks`).
 
-    Issue 26: with more overlapping pairs than the count (twelve cameras), the pairs taken in
-    turn, two each, used up the count in the first few overlaps (an office's twelve in its
-    lower half, their hull 26 % of it); now each overlap gets its share only where the count
-    has one for each, and the farthest-point order spreads the rest."""
-    from shapely import contains_xy
-
+    With more overlapping pairs than the count (twelve cameras), each overlap gets its share
+    only where the count has one for each, and the farthest-point order spreads the rest:
+    pairs taken in turn, two each, would use up the count in the first few overlaps and leave
+    the rest of the room without a reference."""
     cams = deployment.cameras
     room = _floor(deployment)
     if room.is_empty:
@@ -370,7 +375,7 @@ def plan_references(deployment, count: int | None = None, heights=None,
 
 @dataclass
 class FrameMarks(SurveyPlan):
-    """A wand survey's frame marks (issue 26): ``O`` (the origin), ``X`` (along the frame's +x
+    """A wand survey's frame marks: ``O`` (the origin), ``X`` (along the frame's +x
     from it) and floor marks ``F1``… at ``xyz`` in the nominal frame (where to put them; seen
     by ``seen``), and ``recorded``: what the survey's ``points.csv`` holds for them (N×3, NaN:
     a coordinate nobody measures — ``O,0,0,0``, ``X,,0,0``, ``F1,,,0``). ``axis``: the nominal
@@ -398,10 +403,6 @@ def plan_marks(deployment, floor_marks: int = FLOOR_MARKS, tape: float = TAPE_M)
     from it — with half the marks' zone ahead of it along one room axis (the nominal x,
     unless the zone is twice as long along y); then ``X`` ahead of it and ``floor_marks``
     marks ``F1``… where they fix the frame best for the fixes (:func:`_frame_marks`)."""
-    from shapely import contains_xy
-
-    from .linkage import PLACING_SHARE, _box, footprint
-
     cams = deployment.cameras
     room = _floor(deployment)
     if room.is_empty:
@@ -485,8 +486,6 @@ def _frame_marks(cams, xy, views, o: int, row, axis: int, floor_marks: int,
     by more cameras or at a wider angle is placed better; the best trade is measured, not
     guessed. Marks stay ``apart`` m from each other (a mark's spot bias is the same wherever
     it stands, so two marks at one place are one)."""
-    from .frame_error import frame_errors, mark_covariances, roles_information, zone_weight
-
     P = np.c_[xy, np.zeros(len(xy))]
     cov = mark_covariances(cams, P, views)
     # the model in the room's own measure: from O, in camera heights (a site far from the
@@ -555,9 +554,7 @@ class FreeRoute:
     @property
     def groups(self) -> list:
         """Camera ids of each group the route links (pairs sharing
-        :data:`~.free.MIN_SHARED` moments), the largest first."""
-        from .free import MIN_SHARED
-        from .linkage import _components
+        :data:`MIN_SHARED` moments), the largest first."""
 
         ids = self.linkage.camera_ids
         return [[ids[k] for k in g] for g in _components(self.sets >= MIN_SHARED)]
@@ -565,8 +562,6 @@ class FreeRoute:
     @property
     def minutes(self) -> float:
         """About how long the walk takes: a sweep at each stop, and the walk between them."""
-        from .linkage import SWEEP_SECONDS, WALK_SPEED
-
         walk = float(np.linalg.norm(np.diff(self.stops, axis=0), axis=1).sum())
         return (len(self.stops) * SWEEP_SECONDS + walk / WALK_SPEED) / 60
 
@@ -586,17 +581,15 @@ def free_sweep(deployment, wand: float | None = None) -> tuple[float, float]:
 
 
 def free_route(deployment, heights=None, margin_px: float = 5.0, obstacles=None) -> FreeRoute:
-    """A short walk for a free survey (issues 15, 26) that links every camera the geometry
+    """A short walk for a free survey that links every camera the geometry
     lets a free LED link and passes through every quarter of every camera's image: a stop in
     the shared view of each pair a stop can link (:mod:`.linkage`), thin overlaps included —
     there the sweep stays as low as the overlap reaches, else it would cross it in a moment —
     where one stop gives the pair the most, the pair with the least shared air first, until
-    every such pair is expected to share :data:`~.free.MIN_SHARED` moments over the stops; then
+    every such pair is expected to share :data:`MIN_SHARED` moments over the stops; then
     one under the middle of each image quarter no stop falls in (at ``margin_px``), visited in
     nearest-neighbour order from the stop nearest a corner of the room. At each stop the LED is
     swept up and down: depth is what separates a camera's height from its focal length."""
-    from .free import MIN_SHARED
-    from .linkage import SWEEP_SETS, link_cameras, reach
 
     cams = deployment.cameras
     if heights is None:

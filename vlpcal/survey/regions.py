@@ -5,6 +5,7 @@ specific regions ... based on prior knowledge and experimental data")."""
 from __future__ import annotations
 
 import numpy as np
+from shapely.geometry import Polygon, box
 
 from ..fusion import RegionMap, pair_estimates
 from ..geometry import Camera
@@ -32,8 +33,6 @@ def learn_region_map(cameras: list[Camera], uv, X, room, cell: float | None = No
     measured, ``uv`` C×N×2) that fall in it. Cells with fewer than ``min_points`` usable points
     are left out (the fusion falls back to the nearest pair there).
     """
-    from shapely.geometry import Polygon, box
-
     X = np.asarray(X, float)
     if cell is None:
         cell = region_cell(cameras, room)

@@ -1,6 +1,6 @@
 """Survey points that disagree with the rest: a reference (or a tape point) whose left-out
 residual — how far from its record the cameras fitted without it put it — stands far beyond
-the others' (issue 31).
+the others'.
 
 One rule for a free survey's references and a tape survey's points: judged against the other
 points' own left-out residuals (their median: robust to the suspect itself and to a second
@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .calibration import format_length
 
 #: a point is named when its left-out residual exceeds this many times the others' median.
 #: Good surveys stay far below it: on 15 simulated free surveys (paper-2024, cheap-wide and
@@ -92,8 +94,6 @@ def suspect_words(s: Suspect, held_out: bool = False) -> str:
     it out gives. A free survey's reference is left out in turn (its record against where the
     rest put it); a tape survey's point is ``held_out`` (located by cameras calibrated on the
     other folds)."""
-    from .calibration import format_length
-
     f = format_length
     if held_out:
         said = (f"point {s.point_id}: held out, the cameras calibrated without it put it "
