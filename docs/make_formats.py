@@ -227,8 +227,10 @@ Example: `surveys/paper-2024/survey/`.
   clock (live: UTC seconds); m, m/s; `led` the LED's id from its blink code (the deployment's
   `leds:`), else a track id (`T1`, …; also while a code is being read); `cameras` the cameras
   whose rays the fit's window held (`C1+C3`); `status` `ok` (two cameras or more), `one_camera`
-  (one camera's rays, the track's motion placing the LED along them) or `degenerate` (a
-  predicted error past a tenth of the room's size: x, y, z, vx, vy, vz empty).
+  (one camera's rays, the track's motion placing the LED along them), `degenerate` (a
+  predicted error past a tenth of the room's size: x, y, z, vx, vy, vz empty) or
+  `times_unchecked` (live, before the cameras' capture times were checked against each
+  other — the first second or so of a moving LED: empty as `degenerate`).
 - Bodies (`bodies:` in the deployment): per body `id` and `leds` (LED id, each one of
   `leds:`, on at most one body → `[x, y, z]`, m in the body's frame: x forward, y left, z up).
   The tracks file then has four more columns, `yaw,pitch,roll,sigma_yaw` (rad; Z-Y-X, body to

@@ -25,6 +25,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from urllib.parse import urlsplit
 
 import numpy as np
 
@@ -218,8 +219,6 @@ def open_source(spec: str, stamps: bool = False) -> Callable[[], Iterator]:
     as ``(frame, capture stamp or None)`` (:func:`mjpeg_frames`; a device has none)."""
 
     if spec.startswith(("http://", "https://")):
-        from urllib.parse import urlsplit
-
         try:  # (a URL that cannot be one — a bracket left open, a port of letters — is the
             parts = urlsplit(spec)  # user's to mend, said before any camera is asked)
             hostless = not parts.hostname or parts.port == 0
