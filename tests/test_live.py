@@ -105,6 +105,12 @@ def test_locate_live_mjpeg_streams(rig, tmp_path):
     nearest = np.min(np.linalg.norm(X[:, None, :] - POINTS[None], axis=2), axis=1)
     assert np.median(nearest) < 0.01
     assert {"t_s", "camera_status"} <= set(rows[0])
+    # t_s in UTC seconds, as the README says (it counted from the command's start)
+    import time
+
+    t_s = np.array([float(r["t_s"]) for r in rows])
+    assert (t_s > time.time() - 300).all() and (t_s <= time.time()).all(), t_s[:3]
+    assert (np.diff(t_s) >= 0).all()
 
 
 def test_a_camera_that_dies_mid_stream_is_reported_and_the_fixes_are_kept(rig, tmp_path):

@@ -126,7 +126,7 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
         writer = _PlottingWriter(writer, plot, dep, led_of(dep), live, say)
     if publisher:
         writer = PublishingWriter(writer, publisher, site_led if zone else led_of(dep),
-                                  utc="t_s" if spots_url else None)
+                                  utc="t_s" if live else None)
     if zone is not None:  # written and published: the fixes inside the zone's polygon
         writer = ZoneWriter(writer, _load_deployment(deployment_path).zones, zone)
     # from here on every way out either closes the writer (the fixes so far are kept) or
@@ -389,12 +389,13 @@ def _locate_live(loc, cameras, writer, tolerance, duration, max_sets, statuses, 
     sources = _camera_sources(cameras, loc.deployment)
     t_end = time.monotonic() + duration if duration else None
     grouper = LiveGrouper(sources, tolerance, on_event=say, deadline=t_end)
+    utc = time.time() - time.monotonic()  # a set's time, UTC s: when its first frame came
     n = 0
     try:
         for fs in grouper:
             fixes = loc.locate_batch([fs.frames], [f"{fs.index:06d}"])
             statuses.add(fixes)
-            writer.write(fixes, {"t_s": round(fs.t, 3)})
+            writer.write(fixes, {"t_s": round(grouper.t0 + fs.t + utc, 3)})
             n += 1
             if (max_sets and n >= max_sets) or (t_end and time.monotonic() > t_end):
                 break
