@@ -1,4 +1,4 @@
-"""Whether the frames fit the deployment: a wrong set-up caught at once (issue 29).
+"""Whether the frames fit the deployment: a wrong set-up caught at once.
 
 A deployment of another install with the same camera ids, cameras swapped, a deployment of
 another scale or a calibration gone stale give fixes that each look plausible — small

@@ -1,4 +1,4 @@
-"""Each camera's latency, learned from the rays of a moving LED (issue 31).
+"""Each camera's latency, learned from the rays of a moving LED.
 
 A camera whose capture times run late (a slower link absorbed into its clock estimate, a
 mis-stated ``times.csv``) sees the LED where it was earlier than its times say: with the LED

@@ -1,5 +1,5 @@
 """The robot integrator's command: an LED's track from cameras that are not synchronised
-(``vlpcal track``, issue 16)."""
+(``vlpcal track``)."""
 
 from __future__ import annotations
 
@@ -20,9 +20,6 @@ from .common import (
 )
 from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary, subscriber_notes
 from .view import DEFAULT_BIND
-
-#: camera frames read and detected at once, at most — and at most this many bytes of them
-BLOCK, BLOCK_BYTES = 2048, 64 << 20
 
 
 @main.command()
@@ -200,6 +197,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
     from ..datasets import DatasetError, read_async_frames
     from ..live import FrameIntervals
     from ..tracking import Tracker
+    from ..tracking.recording import recording_spots, tracked_again
 
     if duration is not None:
         raise click.BadParameter("is for live cameras (--camera)", param_hint="--duration")
@@ -230,49 +228,12 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
 
     held = [Path(frames_dir) / "times.csv", *(Path(frames_dir) / c for c in folder.camera_ids)]
     out = _output_file(out, inputs=(deployment_path, frames_dir, *held), what="the tracks")
-    from ..detection import detect_several
-
     tracker = Tracker(dep, period=1.0 / fps, spots=spots, lag=lag)
-    cams = {c.id: c for c in dep.cameras}
     rows = []
-    missing = 0
-    from collections import Counter
-
-    unreadable: Counter = Counter()
-    spotted: list = []  # (time, camera, spots) of every frame, tracked once all are found
-
-    def track_block(block):
-        """Each camera's frames of the block detected as one batch (a tenth of the cost of
-        one by one), kept in time order."""
-        found_at: dict = {}
-        for cid in {c for _, c, _, _ in block}:
-            mine = [(no, f) for _, c, no, f in block if c == cid]
-            found, why = detect_several([f for _, f in mine], tracker.spots, dep.detector,
-                                        dep.detector_settings,
-                                        shape=(cams[cid].height, cams[cid].width),
-                                        reasons=True)
-            for (no, f), uv, w in zip(mine, found, why):
-                found_at[(cid, no)] = uv
-                if w is not None and f is not None:
-                    unreadable[w] += 1
-        for t, cid, no, _ in block:
-            spotted.append((t, cid, found_at[(cid, no)]))
-
     with click.progressbar(length=len(folder.events), label="tracking", hidden=quiet,
                            file=sys.stderr) as bar:
-        block, held_bytes = [], 0  # frames held at once: bounded in count and in bytes
-        for t, cid, no in folder.events:
-            frame = folder.frame(cid, no)
-            missing += frame is None
-            block.append((t, cid, no, frame))
-            held_bytes += len(frame or b"")
-            if len(block) >= BLOCK or held_bytes >= BLOCK_BYTES:
-                track_block(block)
-                bar.update(len(block))
-                block, held_bytes = [], 0
-        if block:
-            track_block(block)
-            bar.update(len(block))
+        found = recording_spots(folder, tracker, progress=bar.update)
+    spotted, missing, unreadable = found.spotted, found.missing, found.unreadable
     if missing == len(folder.events):
         raise UserError(f"{frames_dir}: none of the {missing} frames times.csv lists is there "
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
@@ -289,7 +250,7 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
         echo(f"warning: {drifted} (going on: --keep-going)", err=True)
     rows += _published(publisher, tracker.finish())
     if tracker.latencies() and publisher is None:  # rows from the first frame at the
-        tracker, rows = _retracked(tracker, spotted, check)  # times the run found
+        tracker, rows = tracked_again(tracker, spotted, check)  # times the run found
     _said_latencies(tracker)
     _Layouts(tracker)(end=True)
     wrong = {m.body for m in tracker.layout_misfits()}
@@ -310,21 +271,6 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
              + (f"; {missing} listed frames missing" if missing else "")
              + (f"; {bad} (not used)" if bad else ""), err=True)
     return rows
-
-
-def _retracked(first, spotted, check) -> tuple:
-    """The frames' spots tracked again with the cameras' latencies the first pass found
-    (its rows before it found them had those cameras' times off): (the tracker, its rows)."""
-    from ..tracking import Tracker
-
-    tracker = Tracker(first.deployment, period=first.period, spots=first.spots, lag=first.lag)
-    tracker.latency.restart(first.latency.applied, first.latency.information,
-                            first.latency.wander)
-    rows = []
-    for t, cid, uv in tracker.in_order(spotted):
-        rows += tracker.update_spots(cid, t, uv)
-        check(tracker)
-    return tracker, rows + tracker.finish()
 
 
 def _said_latencies(tracker) -> None:
