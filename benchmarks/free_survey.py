@@ -21,6 +21,7 @@ Prints tables; writes benchmarks/out/free_survey.json.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 import time
@@ -33,14 +34,17 @@ from _common import table, write_json
 
 from vlpcal import deployment
 from vlpcal.datasets import read_survey_bundle
+from vlpcal.demo import DEMO_SITE, hung
 from vlpcal.deployment import Deployment
 from vlpcal.geometry import rodrigues, rotation_vector
 from vlpcal.locator import Locator
+from vlpcal.planning import plan_site, site_from_dict
 from vlpcal.sim.profiles import PROFILES, get_profile
-from vlpcal.sim.scene import make_scene, render_scene
+from vlpcal.sim.scene import in_frame, make_scene, render_scene
 from vlpcal.sim.writers import (
     deployment_of,
     grid_points,
+    reference_placings,
     simulate_free_survey,
     simulate_survey,
     write_deployments,
@@ -51,7 +55,9 @@ from vlpcal.survey import (
     free_spots,
     plan_references,
     survey_spots,
+    wand_spots,
 )
+from vlpcal.survey.free_plan import plan_marks
 
 FREE_SETS = 1800
 ROBOT_HEIGHT = 0.15
@@ -125,15 +131,7 @@ def wand_run(scene, tmp: Path, seed: int) -> dict:
     for FREE_SETS sets, default flags. The install described in the marks' frame (as
     ``simulate --wand`` does); test frames rendered there. The datum floor here: the true
     cameras in the frame the LED's placings on the marks define."""
-    import math
-
-    from scipy.optimize import least_squares
-
-    from vlpcal.geometry import rodrigues
-    from vlpcal.sim.scene import in_frame
-    from vlpcal.sim.writers import reference_placings
-    from vlpcal.survey import wand_spots
-    from vlpcal.survey.plan import plan_marks
+    from scipy.optimize import least_squares  # (scipy: only this case needs it)
 
     marks = plan_marks(deployment_of(scene, "nominal"))
     o, x = marks.xyz[0], marks.xyz[1]
@@ -249,9 +247,6 @@ def timing_six(seed: int, tmp: Path) -> dict:
     """Seconds to calibrate 1800 free sets × 6 cameras (the demo's install: its planned
     cameras, hung with its errors), median of three runs: from the spots, and the JPEG
     detection of its frames (those of sets some camera saw) before it."""
-    from vlpcal.demo import DEMO_SITE, hung
-    from vlpcal.planning import plan_site, site_from_dict
-
     site = site_from_dict(DEMO_SITE, "demo")
     scene = hung(site, plan_site(site).candidates[0].cameras, seed)
     dep = deployment_of(scene, "nominal")

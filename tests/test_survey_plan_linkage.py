@@ -18,6 +18,7 @@ from vlpcal.geometry import NADIR, paper_camera, rodrigues, rotation_vector
 from vlpcal.survey import SurveyError, free_route, plan_references
 from vlpcal.survey.frame_error import marks_frame_error
 from vlpcal.survey.free_checks import MIN_SHARED, check_linked
+from vlpcal.survey.free_plan import MARK_MARGIN, plan_marks
 from vlpcal.survey.linkage import (
     PLACING_SHARE,
     SWEEP_SETS,
@@ -27,7 +28,6 @@ from vlpcal.survey.linkage import (
     footprint,
     link_cameras,
 )
-from vlpcal.survey.plan import MARK_MARGIN, plan_marks
 
 PILLAR = [[2.8, 1.8], [3.2, 1.8], [3.2, 2.2], [2.8, 2.2]]
 

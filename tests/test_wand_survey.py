@@ -60,7 +60,7 @@ def _test_error(cams, true, scene, rng, shift=(0, 0, 0)):
 def _marks_of(scene):
     """Where ``survey plan --free --wand`` puts O, X, F1–F3 (world frame)."""
     from vlpcal.sim.writers import deployment_of
-    from vlpcal.survey.plan import plan_marks
+    from vlpcal.survey.free_plan import plan_marks
 
     return plan_marks(deployment_of(scene, "nominal")).xyz
 
@@ -343,7 +343,7 @@ def test_marks_anywhere_in_the_room_calibrate_and_carry_the_room_into_their_fram
     from vlpcal.sim.scene import in_frame
     from vlpcal.sim.writers import deployment_of, simulate_free_survey
     from vlpcal.survey import calibrate_free_survey, survey_spots, wand_spots
-    from vlpcal.survey.plan import plan_marks
+    from vlpcal.survey.free_plan import plan_marks
 
     scene = make_scene(get_profile("paper-2024"), 0)
     marks = plan_marks(deployment_of(scene, "nominal"))

@@ -181,27 +181,10 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     if missing:
         echo(f"note: no --camera for {', '.join(missing)}: their frames stay missing",
              err=True)
-    # every camera is asked for a frame before the walk starts (and before any file exists)
-    grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: None)
-    frames = Burst(grouper, burst)
-    answers = frames.check(dep.cameras)
-    if not any(ok for ok, _ in answers.values()):
-        grouper.stop()
-        said = "; ".join(f"{cid}: {what}" for cid, (_, what) in answers.items())
-        raise NoCameraAnswered(f"no camera answered ({said}): check their power, network and "
-                               "the --camera URLs before the walk; nothing was written")
-    for cid, (ok, what) in answers.items():
-        echo(f"camera {cid}: {what}" + ("" if ok else "; going on without it"),
-             err=True)
+    grouper, frames = _cameras_answering(dep, sources, burst)
     hub = server = None
     if view_bind is not None:
-        from ..view.tap import FrameTap  # (the web framework: only for a live page)
-        from .view import open_view
-
-        hub, server = open_view(dep, view_bind, source=f"vlpcal survey capture → {survey_path}",
-                                path=deployment_path)
-        hub.tracking = False  # a survey: no tracks to come
-        grouper.tap = FrameTap(hub, dep, spots=2 if wand is not None else 1)
+        hub, server = _live_page(dep, grouper, view_bind, deployment_path, survey_path, wand)
     bundle = Path(survey_path)
     created = not bundle.exists()
     try:
@@ -260,6 +243,37 @@ def survey_capture(deployment_path, points_path, survey_path, cameras, yes, dela
     if not left:
         say(f"next: vlpcal survey calibrate -d {deployment_path} --survey {survey_path} "
             + (f"--wand {wand:g} " if wand is not None else "") + "--out calibrated.yaml")
+
+
+def _cameras_answering(dep, sources, burst):
+    """Every camera asked for a frame before the walk starts (and before any file exists):
+    each said with its answer on stderr; none answering is :class:`NoCameraAnswered`.
+    Returns the live grouper and its bursts."""
+    grouper = LiveGrouper(sources, tolerance=0.05, on_event=lambda m: None)
+    frames = Burst(grouper, burst)
+    answers = frames.check(dep.cameras)
+    if not any(ok for ok, _ in answers.values()):
+        grouper.stop()
+        said = "; ".join(f"{cid}: {what}" for cid, (_, what) in answers.items())
+        raise NoCameraAnswered(f"no camera answered ({said}): check their power, network and "
+                               "the --camera URLs before the walk; nothing was written")
+    for cid, (ok, what) in answers.items():
+        echo(f"camera {cid}: {what}" + ("" if ok else "; going on without it"),
+             err=True)
+    return grouper, frames
+
+
+def _live_page(dep, grouper, view_bind, deployment_path, survey_path, wand):
+    """``--view``: the capture on the live page (each camera's frames and spots, a wand's
+    two). Returns its hub and server."""
+    from ..view.tap import FrameTap  # (the web framework: only for a live page)
+    from .view import open_view
+
+    hub, server = open_view(dep, view_bind, source=f"vlpcal survey capture → {survey_path}",
+                            path=deployment_path)
+    hub.tracking = False  # a survey: no tracks to come
+    grouper.tap = FrameTap(hub, dep, spots=2 if wand is not None else 1)
+    return hub, server
 
 
 def _view_stop(hub):

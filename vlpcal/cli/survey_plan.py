@@ -13,7 +13,7 @@ from ..datasets import POINTS_COLUMNS, write_truth_csv
 from ..reports import survey_plan_figure
 from ..reports.survey_text import free_plan_lines, plan_lines
 from ..survey import SurveyError, free_route, plan_references, plan_survey
-from ..survey.plan import PROPOSED_WAND, free_sweep, plan_marks, wand_alternative
+from ..survey.free_plan import PROPOSED_WAND, free_sweep, plan_marks, wand_alternative
 from ..writing import OutputSet
 from .common import Finite, UserError, _floats, _load_deployment, _output_file
 from .survey import (

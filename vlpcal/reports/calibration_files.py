@@ -14,7 +14,7 @@ from ..deployment import dumps
 from ..locator import Locator
 from ..survey import FreeSurveyResult, SurveyResult, error_stats
 from ..writing import OutputSet
-from .figures import calibration_figure, free_calibration_figure
+from .calibration_figures import calibration_figure, free_calibration_figure
 
 
 def test_point_errors(dep, X, uv, ids) -> dict:

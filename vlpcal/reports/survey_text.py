@@ -315,10 +315,7 @@ def free_calibration_lines(result: FreeSurveyResult, nominal, points_file,
     wand's held-out length, the predicted error, and every warning (``points_file``: the
     references' file, to correct a suspect in)."""
     cal = result.calibration
-    wand, free_height = cal.wand, result.free_height
-    n_ref = len(result.reference_ids)
-    marks = cal.in_marks_frame  # frame marks among the references
-    marks_only = cal.marks_only
+    free_height, marks_only = result.free_height, cal.marks_only
     refs = "marks" if marks_only else "references"
     lines = [Line(
         f"free survey: {result.free_sets} sets (moments a camera saw the LED), "
@@ -340,6 +337,22 @@ def free_calibration_lines(result: FreeSurveyResult, nominal, points_file,
                    f"{r.turned_deg:8.2f}  {r.lens_model}") for r in result.cameras]
     lines.append(Line("\nwhere the free LED went, in each camera's image:"))
     lines += [Line(f"  {r.coverage}") for r in result.cameras]
+    lines += _reference_lines(result, points_file, names)
+    lines += _free_warning_lines(result, nominal, names)
+    return lines
+
+
+def _reference_lines(result: FreeSurveyResult, points_file,
+                     names: Mapping[str, str]) -> list[Line]:
+    """What fixes a free survey's frame: the references left out in turn, the suspects among
+    them, the datum floor, the marks' frame, the wand's held-out length, the predicted
+    error."""
+    cal = result.calibration
+    wand = cal.wand
+    n_ref = len(result.reference_ids)
+    marks, marks_only = cal.in_marks_frame, cal.marks_only  # frame marks among them; all
+    refs = "marks" if marks_only else "references"
+    lines = []
     loo = cal.leave_one_out[np.isfinite(cal.leave_one_out)]
     if len(loo):
         tape = cal.point_sigma * 1000 * math.sqrt(3)
@@ -384,6 +397,17 @@ def free_calibration_lines(result: FreeSurveyResult, nominal, points_file,
                           f"{format_length(cal.predicted_error)} off on average over the "
                           "floor (the survey's adjustment, linearised; exact cameras: "
                           f"{format_length(cal.exact_error)})"))
+    return lines
+
+
+def _free_warning_lines(result: FreeSurveyResult, nominal,
+                        names: Mapping[str, str]) -> list[Line]:
+    """A free survey's warnings: cameras it fixes weakly, cameras far from the ``nominal``
+    deployment, a doubtful scale."""
+    cal = result.calibration
+    wand = cal.wand
+    n_ref = len(result.reference_ids)
+    lines = []
     if cal.references_disagree:
         loo_mm = float(np.nanmean(cal.leave_one_out)) * 1000
         allowed = cal.left_out_allowed * 1000

@@ -14,7 +14,8 @@
   refusals :mod:`.free_checks`, starts :mod:`.free_start`, joint fit :mod:`.free_fit`, lens
   models :mod:`.free_lens`; a wand's :mod:`.wand`; the frame the references or marks fix
   :mod:`.datum`, :mod:`.marks_frame`, :mod:`.network`, :mod:`.frame_error`;
-- :mod:`.plan`: where to put the LED (:mod:`.linkage`: whether a free LED can link every
+- :mod:`.plan`: where to put the LED for a tape survey, :mod:`.free_plan` for a free or wand
+  survey (:mod:`.linkage`: whether a free LED can link every
   camera; :mod:`.budget`: what a tape survey costs the fixes); :mod:`.spots`: the survey's
   spots as the locator sees them; :mod:`.pipeline`: the whole of ``vlpcal survey
   calibrate``; :mod:`.results`: what it returns, typed.
@@ -30,17 +31,11 @@ from .calibration import (
     refine_jointly,
 )
 from .camera_fit import CameraFit, fit_camera
+from .free_plan import FreeRoute, free_route, plan_references
 from .held_out import FUSION_CHOICES, HELD_OUT, HeldOutCase, error_stats, held_out
 from .lens import LENS_MODELS, MIN_POINTS_POSE, LensModel, lens_params, lens_support
 from .pipeline import calibrate_free_survey, calibrate_survey
-from .plan import (
-    MIN_POINTS_PLANNED,
-    FreeRoute,
-    SurveyPlan,
-    free_route,
-    plan_references,
-    plan_survey,
-)
+from .plan import MIN_POINTS_PLANNED, SurveyPlan, plan_survey
 from .regions import learn_region_map, region_cell
 from .results import (
     FreeCamera,
