@@ -457,7 +457,7 @@ def test_a_live_tracks_file_on_a_full_disk_is_one_line_and_keeps_whole_rows(tmp_
     import errno
 
     from vlpcal.cli import UserError
-    from vlpcal.cli.track import _LiveTracks
+    from vlpcal.cli.track_live import _LiveTracks
     from vlpcal.tracking import TrackUpdate
 
     class Filling:  # a file whose disk holds `room` more bytes
