@@ -50,10 +50,24 @@ class FusionMethod(StrEnum):
 FUSIONS = tuple(FusionMethod)
 PAIR_METHODS = ("paper", "lsq")
 
-#: statuses of a fused point
-OK, NO_SPOT, ONE_CAMERA, DEGENERATE = "ok", "no_spot", "one_camera", "degenerate"
-#: the robust fusion found no subset of two or more cameras that agree (a reflection, a lamp)
-INCONSISTENT = "inconsistent"
+
+class FixStatus(StrEnum):
+    """What fusion made of a point; the value is the spelling of ``fixes.csv``'s ``status``
+    (docs/conventions.md, fix statuses) — :attr:`Fused.status` holds these strings."""
+
+    OK = "ok"  #: fixed
+    NO_SPOT = "no_spot"  #: no camera saw the LED
+    ONE_CAMERA = "one_camera"  #: one camera alone fixes nothing
+    DEGENERATE = "degenerate"  #: the rays barely meet (the cameras' line, in top view)
+    #: the robust fusion found no subset of two or more cameras that agree (a reflection, a
+    #: lamp)
+    INCONSISTENT = "inconsistent"
+
+
+#: the statuses by name, as callers import them
+OK, NO_SPOT, ONE_CAMERA, DEGENERATE = (FixStatus.OK, FixStatus.NO_SPOT, FixStatus.ONE_CAMERA,
+                                       FixStatus.DEGENERATE)
+INCONSISTENT = FixStatus.INCONSISTENT
 
 
 @dataclass
@@ -96,7 +110,7 @@ class Fused:
     """One fix per point: ``X`` (N×3, NaN without a fix), status, cameras used, residuals."""
 
     X: np.ndarray
-    status: np.ndarray  # N strings
+    status: np.ndarray  # N strings: :class:`FixStatus` values
     used: np.ndarray  # C×N bool
     residual: np.ndarray  # C×N px (undistorted), NaN where the camera was not used
 

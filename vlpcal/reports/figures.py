@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..survey.free_plan import FrameMarks
+
 
 def _pyplot():
     """matplotlib's pyplot on the file-only backend (no display needed)."""
@@ -100,7 +102,7 @@ def survey_plan_figure(path, dep, plan, route=None) -> list:
     fig, axes = plt.subplots(1, len(heights), figsize=(max(5.5 * len(heights), 8.0),
                                                       5.5 * aspect + 1.8),
                              squeeze=False, constrained_layout=True)
-    marks = hasattr(plan, "recorded") and plan.recorded is not None
+    marks = isinstance(plan, FrameMarks) and plan.recorded is not None
     unlinked, remedies = [], []
     if route is not None and route.linkage is not None and len(route.groups) > 1:
         unlinked = [c for g in route.groups[1:] for c in g]

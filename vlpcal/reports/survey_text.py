@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..fusion import FixStatus
 from ..survey import LENS_MODELS, FreeSurveyResult, SurveyResult, plan_references
 from ..survey.calibration import format_length
 from ..survey.plan import (
@@ -448,10 +449,11 @@ def _free_warning_lines(result: FreeSurveyResult, nominal,
 
 # -- test points -----------------------------------------------------------------------------
 
-#: a test point's status, in words
-_UNFIXED = {"no_spot": "seen by no camera", "one_camera": "seen by one camera only",
-            "inconsistent": "whose spots no camera pair agreed on",
-            "degenerate": "whose rays barely meet",
+#: a test point's status, in words (fusion's, and the locator's outside_room)
+_UNFIXED = {FixStatus.NO_SPOT: "seen by no camera",
+            FixStatus.ONE_CAMERA: "seen by one camera only",
+            FixStatus.INCONSISTENT: "whose spots no camera pair agreed on",
+            FixStatus.DEGENERATE: "whose rays barely meet",
             "outside_room": "that locate would refuse as outside_room (the fix beyond the "
                             "room by more than its predicted error)"}
 
