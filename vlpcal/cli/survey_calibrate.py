@@ -122,7 +122,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
     _check_survey_positions(survey_path, dep, bundle.xyz, bundle.point_ids)
     sources = {"deployment": str(deployment_path), "survey": str(survey_path)}
     if bundle.free_ids:
-        result, free_notes = _calibrate_free(dep, bundle, uv, lens, point_sigma, free_height,
+        result, free_notes = _calibrate_from_free(dep, bundle, uv, lens, point_sigma, free_height,
                                              wand, quiet, survey_path, sources)
         notes = notes + free_notes
         say_lines(free_calibration_lines(result, dep, bundle.root / "points.csv", FLAGS))
@@ -132,7 +132,7 @@ def survey_calibrate(deployment_path, survey_path, out, lens, intrinsics, folds,
             if value is not None:
                 raise UserError(f"{survey_path}: {name} is for a free survey (a free/ folder); "
                                 "this bundle has none")
-        result = _calibrate_tape(dep, bundle, uv, lens, folds, point_sigma, quiet,
+        result = _calibrate_from_tape(dep, bundle, uv, lens, folds, point_sigma, quiet,
                                  survey_path, sources)
         say_lines(calibration_lines(result, FLAGS))
         header = f"Calibrated by vlpcal survey calibrate from {survey_path}."
@@ -153,7 +153,7 @@ def _lens_asked(lens: str, intrinsics: bool) -> str:
     return LensModel.FULL
 
 
-def _calibrate_tape(dep, bundle, uv, lens, folds, point_sigma, quiet, survey_path,
+def _calibrate_from_tape(dep, bundle, uv, lens, folds, point_sigma, quiet, survey_path,
                     sources) -> SurveyResult:
     """A tape survey calibrated (:func:`~vlpcal.survey.calibrate_survey`), with a progress
     bar: each camera's lens models, the joint fit, then each fold."""
@@ -168,7 +168,7 @@ def _calibrate_tape(dep, bundle, uv, lens, folds, point_sigma, quiet, survey_pat
         raise UserError(f"{survey_path}: {e}") from None
 
 
-def _calibrate_free(dep, bundle, uv, lens, point_sigma, free_height, wand, quiet, survey_path,
+def _calibrate_from_free(dep, bundle, uv, lens, point_sigma, free_height, wand, quiet, survey_path,
                     sources) -> tuple[FreeSurveyResult, list]:
     """A free survey calibrated (:func:`~vlpcal.survey.calibrate_free_survey`), or a wand's,
     with a progress bar; and the notes on its free spots."""
