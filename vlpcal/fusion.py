@@ -48,7 +48,18 @@ class FusionMethod(StrEnum):
 
 #: every fusion method, in the order the file format lists them
 FUSIONS = tuple(FusionMethod)
-PAIR_METHODS = ("paper", "lsq")
+
+
+class PairMethod(StrEnum):
+    """How a camera pair's estimate is solved; the value is the deployment file's
+    ``fusion.pair_method`` spelling."""
+
+    PAPER = "paper"  #: the paper's pair method (section 2.2): top-view lines and the depth
+    LSQ = "lsq"  #: two-view least squares
+
+
+#: every pair method, in the order the file format lists them
+PAIR_METHODS = tuple(PairMethod)
 
 
 class FixStatus(StrEnum):
@@ -118,7 +129,8 @@ class Fused:
 def pair_estimates(cameras: list[Camera], uv, pair_method: str = "paper"):
     """Every camera pair's estimate: ``(pairs, X P×N×3)``, NaN where the pair has none."""
     if pair_method not in PAIR_METHODS:
-        raise ValueError(f"unknown pair method {pair_method!r}; expected one of {PAIR_METHODS}")
+        raise ValueError(f"unknown pair method {pair_method!r}; expected one of "
+                         f"{', '.join(PAIR_METHODS)}")
     uv = np.asarray(uv, dtype=float)
     seen = np.isfinite(uv).all(axis=2)
     pairs = list(combinations(range(len(cameras)), 2))
