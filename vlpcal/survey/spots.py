@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..detection import detect_several, detect_spots
 from .errors import SurveyError
 
 #: frames taken while the LED rests on a survey point (a second at 10 frames/s): their spots
@@ -65,8 +66,6 @@ class WandSpots:
 def wand_spots(deployment, bundle) -> WandSpots:
     """The wand survey's two spots per camera and set, from its frames (the two most LED-like
     blobs) or its observations (an ``led`` column, if any, names each spot's LED)."""
-    from ..detection import detect_several  # (OpenCV: when frames are read)
-
     cams = deployment.cameras
     ids = bundle.free_ids
     uv = np.full((len(cams), len(ids), 2, 2), np.nan)
@@ -150,8 +149,6 @@ def _spots(deployment, ids, frames_of, observations, notes, what) -> np.ndarray:
     """Each camera's spot per id ``C×N×2``: from ``frames_of(id, camera id)`` (a list of frames:
     one, or a burst of the LED resting there, averaged by :func:`burst_spot`) or, without it,
     ``observations``."""
-    from ..detection import detect_spots  # (OpenCV: when frames are read)
-
     uv = np.full((len(deployment.cameras), len(ids), 2), np.nan)
     for k, cam in enumerate(deployment.cameras):
         if frames_of is None:
