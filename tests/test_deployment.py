@@ -195,3 +195,22 @@ def test_outside_judges_surely_inside_points_without_the_polygon_library_alike(r
     # the one-point test in plain Python and the vectorised one agree point for point
     alone = np.array([dep._point_surely_inside(*x) for x in X.tolist()])
     assert (alone == dep._surely_inside(X)).all() and 0.3 < alone.mean() < 0.9
+
+
+def test_a_camera_under_the_floor_or_looking_up_is_said_not_refused(tmp_path):
+    """A camera under the floor (a sign lost) or whose optical axis looks up (a rotation
+    given camera-to-world, or none at all) was taken without a word, its fixes then failing
+    as 'outside the room'; a plain calibration tool takes such a file too: each is a
+    warning naming the camera, the deployment still loads."""
+    assert deployment.from_dict(GOOD).doubts() == []
+    doc = copy.deepcopy(GOOD)
+    doc["cameras"][0]["rotation"] = [0.0, 0.0, 0.0]  # the camera frame's z up: looking up
+    doc["cameras"][1]["position"][2] *= -1
+    path = tmp_path / "odd.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    res = CliRunner().invoke(main, ["show", str(path)])
+    assert res.exit_code == 0, res.output
+    said = [line for line in res.output.splitlines() if line.startswith("warning:")]
+    assert len(said) == 2, res.output
+    assert f"camera {doc['cameras'][0]['id']} looks up, 90° above level" in said[0]
+    assert f"camera {doc['cameras'][1]['id']} hangs" in said[1] and "under the floor" in said[1]

@@ -108,6 +108,23 @@ class Deployment:
         ys = [p[1] for p in self.room]
         return max(max(xs) - min(xs), max(ys) - min(ys), float(self.ceiling_height))
 
+    def doubts(self) -> list[str]:
+        """What the file holds that is possible but hardly meant, one line each — said, not
+        refused (a plain calibration tool would take it): a camera under the floor, or whose
+        optical axis looks up, away from the floor, so it sees no LED there (a rotation given
+        camera-to-world, say: docs/conventions.md, "Pose")."""
+        out = []
+        for c in self.cameras:
+            if c.center[2] < 0:
+                out.append(f"camera {c.id} hangs {-c.center[2]:.3g} m under the floor "
+                           f"(position z = {c.center[2]:g}): is the sign right?")
+            axis = c.axis
+            if axis[2] >= 0:
+                up = math.degrees(math.atan2(axis[2], math.hypot(axis[0], axis[1])))
+                out.append(f"camera {c.id} looks up, {up:.0f}° above level: it sees nothing on "
+                           "the floor (is its rotation world-to-camera, as OpenCV's rvec?)")
+        return out
+
     @property
     def max_residual(self) -> float:
         """px: the robust fusion's limit on an observation's reprojection error; unless the

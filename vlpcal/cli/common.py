@@ -199,13 +199,24 @@ def main():
     """
 
 
+#: deployment files whose doubts were said (a command may load one twice): said once
+_DOUBTED: set = set()
+
+
 def _load_deployment(path):
+    """The deployment at ``path``; a wrong file is one line (exit 2), a doubtful one a warning
+    per doubt (:meth:`~vlpcal.deployment.Deployment.doubts`; -q hides none)."""
     from ..deployment import DeploymentError, load
 
     try:
-        return load(path)
+        dep = load(path)
     except DeploymentError as e:
         raise UserError(str(e)) from None
+    if str(path) not in _DOUBTED:
+        _DOUBTED.add(str(path))
+        for doubt in dep.doubts():
+            echo(f"warning: {path}: {doubt}", err=True)
+    return dep
 
 
 def _same_file(a, b) -> bool:
