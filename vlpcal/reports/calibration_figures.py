@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..survey import LENS_MODELS
-from .figures import _place_labels, _pyplot, save_figure
+from .figures import _place_labels, _pyplot, error_cdf, save_figure
 
 #: a calibration report's error maps: one panel per LED height, at most this many (more
 #: heights are binned)
@@ -35,10 +35,8 @@ def calibration_figure(path, stats, per_point, X, cameras, lens_rows=(), rows=()
     _movement_panel(moved, cameras, rows, X)
     cdf = fig.add_subplot(grid[0, 1])
     for label, err in per_point.items():
-        e = np.sort(err[np.isfinite(err)] * 100)
-        if len(e):
-            cdf.plot(e, np.arange(1, len(e) + 1) / len(e), label=label,
-                     ls="--" if label.startswith("nominal") else "-")
+        e = err[np.isfinite(err)]
+        error_cdf(cdf, label, e, len(e), dashed=label.startswith("nominal"))
     cdf.set_xscale("log")
     cdf.set_xlabel("held-out 3D error (cm)")
     cdf.set_ylabel("share of held-out points")

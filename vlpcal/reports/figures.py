@@ -41,6 +41,14 @@ LABEL_OFFSETS = [(4, 4), (4, -4), (-4, 4), (-4, -4), (6, 0), (-6, 0), (0, 7), (0
                  (18, 18), (18, -18), (-18, 18), (-18, -18)]
 
 
+def error_cdf(ax, label: str, errors_m, total: int, dashed: bool = False) -> None:
+    """One pipeline's 3D errors (m) as a CDF in cm: the share of ``total`` points within each
+    error (points with no fix never reach 1); nothing where there is no error to draw."""
+    e = np.sort(np.asarray(errors_m, float) * 100)
+    if len(e):
+        ax.plot(e, np.arange(1, len(e) + 1) / total, label=label, ls="--" if dashed else "-")
+
+
 def _place_labels(ax, labels, avoid=()) -> list:
     """Put each label ``(xy, text, style)`` beside its point at the first of
     :data:`LABEL_OFFSETS` where it overlaps no label placed before it nor a box of ``avoid``

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import _pyplot, save_figure
+from .figures import _pyplot, error_cdf, save_figure
 
 
 def demo_figure(path, site, truth, fixes_of: dict, cameras, shown: tuple) -> None:
@@ -32,10 +32,8 @@ def demo_figure(path, site, truth, fixes_of: dict, cameras, shown: tuple) -> Non
     top.set_title(f"{site.name}: the robot's LED at h = {truth[0, 2]:g} m, seen from above",
                   fontsize=9)
     for label, fixes in fixes_of.items():
-        e = np.sort(np.linalg.norm(fixes.X - truth, axis=1)[np.isfinite(fixes.X[:, 0])] * 100)
-        if len(e):
-            cdf.plot(e, np.arange(1, len(e) + 1) / len(truth), label=label,
-                     ls="--" if label.startswith("paper") else "-")
+        e = np.linalg.norm(fixes.X - truth, axis=1)[np.isfinite(fixes.X[:, 0])]
+        error_cdf(cdf, label, e, len(truth), dashed=label.startswith("paper"))
     cdf.set_xscale("log")
     cdf.set_xlabel("3D error (cm)")
     cdf.set_ylabel("share of frames (CDF)")
