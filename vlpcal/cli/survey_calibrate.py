@@ -240,7 +240,7 @@ def _read_test_points(dep, test_path, survey_path, survey):
                             frame_marks=bool(np.isnan(survey.xyz).any()))
     whole = survey.xyz[np.isfinite(survey.xyz).all(axis=1)]
     if len(whole):
-        from scipy.spatial import cKDTree  # (scipy: a quarter of a second to load)
+        from scipy.spatial import cKDTree  # (scipy: slow to load, for test points only)
 
         same = sorted(set(tb.point_ids) & set(survey.point_ids))
         gap = cKDTree(whole).query(tb.xyz)[0]  # each test point's nearest reference
