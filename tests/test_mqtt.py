@@ -465,12 +465,13 @@ def test_track_spots_shrugs_off_hostile_messages(broker, tmp_path):
     assert len(rows) > 30
 
 
+@pytest.mark.parametrize("cut", [False, True], ids=["by hand", "vlpcal zones"])
 def test_two_zone_locators_give_the_site_locators_fixes_and_keep_the_leds_id(broker,
-                                                                               tmp_path):
-    """A line of five cameras split into two zones (C2 and C3 on the border, in both): one
-    locator per zone and one for the whole site, all on one broker; an LED driving along the
-    line crosses the border. Each zone's fixes are the site locator's fixes inside its polygon,
-    and every published fix is the same LED."""
+                                                                               tmp_path, cut):
+    """A line of five cameras split into two zones (C2 and C3 on the border, in both; or as
+    `vlpcal zones` cuts it): one locator per zone and one for the whole site, all on one
+    broker; an LED driving along the line crosses the border. Each zone's fixes are the site
+    locator's fixes inside its polygon, and every published fix is the same LED."""
     import csv
     import subprocess
     import sys
@@ -487,6 +488,12 @@ def test_two_zone_locators_give_the_site_locators_fixes_and_keep_the_leds_id(bro
               "cameras": ["C1", "C2", "C3"]},
              {"id": "east", "polygon": [[3.0, 0], [7.2, 0], [7.2, 1.8], [3.0, 1.8]],
               "cameras": ["C2", "C3", "C4", "C5"]}]
+    if cut:
+        from vlpcal.planning.zones import cut_zones
+
+        zones = cut_zones(Deployment("line", 2.3, room, cams, [], {}), 2).block()
+        zones[0]["id"], zones[1]["id"] = "west", "east"
+        assert zones[0]["polygon"][1][0] < 7.2 and zones[1]["polygon"][0][0] > 0
     save(Deployment("line", 2.3, room, cams, [], {"zones": zones}), tmp_path / "d.yaml")
     run = [sys.executable, "-m", "vlpcal", "locate", "-d", str(tmp_path / "d.yaml"), "--spots",
            broker.url("site"), "--duration", "7", "--publish", broker.url("out"), "-q"]

@@ -122,7 +122,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 #: is asked for: one command's start does not pay for every other's imports
 COMMANDS = {"demo": "demo", "simulate": "demo", "plan": "plan", "check": "plan",
             "survey": "survey", "locate": "locate", "track": "track", "export": "interchange",
-            "import": "interchange", "show": "show", "view": "view"}
+            "import": "interchange", "show": "show", "view": "view", "zones": "plan"}
 
 
 class OneLineErrors(click.Group):

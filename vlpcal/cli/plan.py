@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import click
 
-from ..deployment import dumps
+from ..deployment import MAX_ZONES, dumps
 from ..planning import Candidate, SiteError, load_site, plan_site, planned_deployment
 from ..planning.check import check_layout
 from ..planning.report import (
@@ -16,6 +16,7 @@ from ..planning.report import (
     no_plan_message,
     plan_lines,
     verdict_line,
+    zones_lines,
 )
 from ..reports import plan_maps
 from ..survey import SurveyError
@@ -147,3 +148,42 @@ def check(site_path, deployment_path, maps):
     echo(verdict_line(checked, site))
     if not checked.meets:
         raise SystemExit(1)
+
+
+@main.command()
+@click.option("--deployment", "-d", "deployment_path", required=True,
+              type=click.Path(dir_okay=False), help="Deployment YAML (docs/formats.md).")
+@click.option("--processes", "-n", required=True, type=click.IntRange(1, MAX_ZONES),
+              help="Locator processes to share the site among: one zone each.")
+@click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),
+              help="The deployment with its zones: block (the input is never written over).")
+def zones(deployment_path, processes, out):
+    """Cut a site into zones for several locator processes, of balanced camera load.
+
+    Each zone is a rectangle of the floor; its cameras are those whose view of the floor
+    reaches it, so a camera near a border is in both zones and each zone's locator places
+    every fix in its floor as the whole site's would. The cuts — strips along the room's
+    longer side, or a grid of them — are chosen so that the most loaded zone has as few
+    cameras as can be. Writes the deployment with the zones: block (an existing one is
+    replaced) and prints each process's command.
+
+    Example: vlpcal zones -d site.yaml --processes 4 --out site-zoned.yaml
+    """
+    from dataclasses import replace
+
+    from ..deployment import save
+    from ..planning.zones import ZoningError, cut_zones
+
+    dep = _load_deployment(deployment_path)
+    out = _output_file(out, inputs=(deployment_path,), what="the zoned deployment")
+    if not str(out).lower().endswith((".yaml", ".yml")):
+        raise UserError(f"{out}: the zoned deployment is a YAML file (.yaml)")
+    try:
+        zoning = cut_zones(dep, processes)
+    except ZoningError as e:
+        raise UserError(str(e)) from None
+    for line in zones_lines(zoning, replaced="zones" in dep.extra):
+        echo(line)
+    save(replace(dep, extra={**dep.extra, "zones": zoning.block()}), out)
+    echo(f"wrote {out}; each process: vlpcal locate -d {out} --zone ZONE --spots mqtt://… "
+         "(or track)")

@@ -1,6 +1,6 @@
 """The terminal reports of planning, as lines of text the command prints: a plan's ranked
 candidates and what the optimiser did, how to hang a tilted layout, why no layout meets, and a
-layout's check against a site. (The maps are :func:`vlpcal.reports.plan_maps`.)"""
+layout's check against a site, a site's zones. (The maps are :func:`vlpcal.reports.plan_maps`.)"""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from .families import mount_step
 from .plan import Plan
 from .poses import pose_of, tilts
 from .site import Site, unit_doubt
+from .zones import Zoning
 
 
 def plan_lines(site: Site, plan: Plan) -> list[str]:
@@ -197,3 +198,20 @@ def verdict_line(check: LayoutCheck, site: Site) -> str:
     if why:
         return f"verdict: does not meet the site ({'; '.join(why)})"
     return "verdict: meets the site"
+
+
+def zones_lines(zoning: Zoning, replaced: bool = False) -> list[str]:
+    """A site's zones: one line each (its rectangle, its cameras), then the balance."""
+    strips, pieces = zoning.grid
+    cut = f"{strips} strip{'s' * (strips > 1)}" + (f" × {pieces}" if pieces > 1 else "")
+    lines = [f"{len(zoning.zones)} zones ({cut}) over {zoning.cameras} cameras"
+             + (" (the deployment's zones: replaced)" if replaced else "") + ":"]
+    for z in zoning.zones:
+        (x0, y0), _, (x1, y1), _ = z.polygon
+        lines.append(f"  {z.id}: x {min(x0, x1):.2f}–{max(x0, x1):.2f} m, y {min(y0, y1):.2f}–"
+                     f"{max(y0, y1):.2f} m, {len(z.cameras)} cameras ({_some(list(z.cameras))})")
+    loads = zoning.loads
+    lines.append(f"load: {loads.min()}–{loads.max()} cameras a zone (the most loaded "
+                 f"{zoning.imbalance:.0%} over the mean); {zoning.shared} cameras on a border, "
+                 "in two zones or more")
+    return lines
