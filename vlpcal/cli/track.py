@@ -22,15 +22,15 @@ from .common import (
 from .mqtt import mqtt_options, open_publisher, parse_mqtt, publisher_summary
 from .track_live import _track_live, _track_spots
 from .track_rows import (
-    _UNREADABLE,
-    _lag_said,
-    _Layouts,
-    _no_rows,
-    _published,
-    _said_latencies,
-    _summary,
-    _wandering_said,
-    _write_tracks,
+    UNREADABLE,
+    Layouts,
+    lag_said,
+    no_rows,
+    published_rows,
+    run_summary,
+    say_latencies,
+    wandering_said,
+    write_tracks,
 )
 from .view import DEFAULT_BIND
 
@@ -197,20 +197,20 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                         "(expected <camera_id>/<frame_no>.jpg); nothing was written")
     drifts = tracker.search_times(spotted)  # the cameras' times, searched on the recording
     drifted = f"{folder.root / 'times.csv'}: {drifts[0].message()}" if drifts else ""
-    check.also = lambda watch: drifted or _wandering_said(watch)  # (said with the fit
+    check.also = lambda watch: drifted or wandering_said(watch)  # (said with the fit
     # watch's verdict, which names a wrong deployment first: a clock's drift looks alike)
     for t, cid, uv in tracker.in_order(spotted):
-        rows.extend(_published(publisher, tracker.update_spots(cid, t, uv)))
+        rows.extend(published_rows(publisher, tracker.update_spots(cid, t, uv)))
         check(tracker)  # (a deployment that does not fit is said first: its skews wander too)
     if drifts and not check.said:  # times that place no frame right
         if not check.keep_going:
             raise UserError(f"{drifted} (nothing was written)")
         echo(f"warning: {drifted} (going on: --keep-going)", err=True)
-    rows += _published(publisher, tracker.finish())
+    rows += published_rows(publisher, tracker.finish())
     if tracker.latencies() and publisher is None:  # rows from the first frame at the
         tracker, rows = tracked_again(tracker, spotted, check)  # times the run found
-    _said_latencies(tracker)
-    _Layouts(tracker)(end=True)
+    say_latencies(tracker)
+    Layouts(tracker)(end=True)
     wrong = {m.body for m in tracker.layout_misfits()}
     if wrong:  # its rows before the verdict were skewed by the layout too: none written
         kept = [r for r in rows if not (r.pose is not None and r.led in wrong)]
@@ -219,13 +219,13 @@ def _track(dep, deployment_path, frames_dir, duration, lag, spots, out, fps, qui
                  "given before its layout was judged are left out of the file", err=True)
         rows = kept
     if not rows:
-        raise _no_rows(tracker, frames_dir, unreadable)
-    _write_tracks(out, rows, pose_columns=bool(tracker.bodies),
+        raise no_rows(tracker, frames_dir, unreadable)
+    write_tracks(out, rows, pose_columns=bool(tracker.bodies),
                   figure=(plot, dep, f"{dep.name}: vlpcal track → {out}") if plot else None)
     if not quiet:
-        bad = "; ".join(f"{n} frames {_UNREADABLE.get(w, w)}" for w, n in unreadable.items())
-        echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {_summary(rows)} → {out}"
-             + _lag_said(tracker)
+        bad = "; ".join(f"{n} frames {UNREADABLE.get(w, w)}" for w, n in unreadable.items())
+        echo(f"{len(folder.events)} camera frames ({fps:g} fps) → {run_summary(rows)} → {out}"
+             + lag_said(tracker)
              + (f"; {missing} listed frames missing" if missing else "")
              + (f"; {bad} (not used)" if bad else ""), err=True)
     return rows

@@ -14,15 +14,15 @@ from ..writing import OutputError
 from .common import UserError, _camera_sources, _output_file, echo
 from .mqtt import subscriber_notes
 from .track_rows import (
-    _UNREADABLE,
-    _columns,
-    _lag_said,
-    _Layouts,
-    _no_rows,
-    _published,
-    _said_latencies,
-    _summary,
-    _utc_row,
+    UNREADABLE,
+    Layouts,
+    lag_said,
+    no_rows,
+    published_rows,
+    run_summary,
+    say_latencies,
+    track_columns,
+    utc_row,
 )
 
 
@@ -47,7 +47,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
     t_end = time.monotonic() + duration if duration else None
     frames = TimedFrames(sources, deadline=t_end, on_event=say)
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
-    layouts = _Layouts(tracker)
+    layouts = Layouts(tracker)
     utc = time.time() - time.monotonic()  # the host's monotonic clock → UTC seconds
     # row by row, flushed: a reader follows
     live = _LiveTracks(out, utc, bool(dep.bodies)) if out is not None else _NoTracks()
@@ -82,7 +82,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
                 hub.frame(cid, t + utc, uv, frame if isinstance(frame, bytes) else None)
                 if n % 30 == 0:
                     _camera_facts(hub, frames)
-            made = _published(publisher, made, utc)
+            made = published_rows(publisher, made, utc)
             put(made)
             rows += made
             n += 1
@@ -94,7 +94,7 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
         say("stopped (Ctrl-C or a signal): writing what was tracked")
     finally:
         frames.stop()
-        made = _published(publisher, tracker.finish(), utc)
+        made = published_rows(publisher, tracker.finish(), utc)
         put(made)
         rows += made
         live.close()
@@ -117,14 +117,14 @@ def _track_live(dep, deployment_path, cameras, duration, lag, spots, out, fps, q
                if frames.stamped[cid] else ", no X-Timestamp (arrival times used)")
             + (f"; {st.dropped[cid]} dropped" if st.dropped[cid] else "")
             + (f"; stopped: {st.ended[cid]}" if cid in st.ended else ""))
-    bad = "; ".join(f"{k} frames {_UNREADABLE.get(w, w)}" for w, k in unreadable.items())
-    say(f"{n} camera frames → {_summary(rows)}" + (f" → {out}" if out is not None else "")
-        + _lag_said(tracker) + (f"; {bad} (not used)" if bad else ""))
-    _said_latencies(tracker)
+    bad = "; ".join(f"{k} frames {UNREADABLE.get(w, w)}" for w, k in unreadable.items())
+    say(f"{n} camera frames → {run_summary(rows)}" + (f" → {out}" if out is not None else "")
+        + lag_said(tracker) + (f"; {bad} (not used)" if bad else ""))
+    say_latencies(tracker)
     layouts(end=True)
     if not rows and out is not None:
         live.remove()
-        raise _no_rows(tracker, "the cameras", unreadable)
+        raise no_rows(tracker, "the cameras", unreadable)
     return rows
 
 
@@ -169,7 +169,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         raise UserError(f"--spots {e}") from None
     say(f"listening for spots on {target.shown()}/spots/+")
     tracker = Tracker(dep, period=1.0 / (fps or 30.0), spots=spots, lag=lag)
-    layouts = _Layouts(tracker)
+    layouts = Layouts(tracker)
     t_end = time.monotonic() + duration if duration else None
     rows: list = []
     n, future, crowded = 0, 0, 0
@@ -186,7 +186,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
                 future += 1
                 continue
             crowded += len(uv) > tracker.spots
-            made = _published(publisher, tracker.update_spots(cid, t, uv))
+            made = published_rows(publisher, tracker.update_spots(cid, t, uv))
             live.write(made)
             if hub is not None:
                 hub.frame(cid, t, uv)
@@ -202,7 +202,7 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
         say("stopped (Ctrl-C or a signal): writing what was tracked")
     finally:
         sub.close()
-        made = _published(publisher, tracker.finish())
+        made = published_rows(publisher, tracker.finish())
         live.write(made)
         if hub is not None:
             hub.track_rows(made)
@@ -222,12 +222,12 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     said += subscriber_notes(sub, "tracker", "tracked")
     if sub.disconnects:
         said.append(f"the broker went away {sub.disconnects} time(s)")
-    say("; ".join(said) + f" → {_summary(rows)} → {out}" + _lag_said(tracker))
-    _said_latencies(tracker)
+    say("; ".join(said) + f" → {run_summary(rows)} → {out}" + lag_said(tracker))
+    say_latencies(tracker)
     layouts(end=True)
     if not rows:
         live.remove()
-        raise _no_rows(tracker, f"{target.shown()}/spots/+", what="spot message")
+        raise no_rows(tracker, f"{target.shown()}/spots/+", what="spot message")
     return rows
 
 
@@ -255,14 +255,14 @@ class _LiveTracks:
         self.w = csv.writer(self.f)
         self.failed, self._whole = False, 0
         try:
-            self._put([_columns(pose_columns)])
+            self._put([track_columns(pose_columns)])
         except UserError:  # not even the header: no file of ours is left
             self.close()
             self.remove()
             raise
 
     def write(self, rows) -> None:
-        self._put(_utc_row(r, self.utc, self.pose_columns) for r in rows)
+        self._put(utc_row(r, self.utc, self.pose_columns) for r in rows)
 
     def _put(self, lines) -> None:
         """CSV lines, flushed; a disk that fails (full, gone) is one line naming the file, the

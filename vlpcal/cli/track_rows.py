@@ -10,7 +10,7 @@ from ..writing import OutputSet
 from .common import UserError, echo
 
 
-class _Layouts:
+class Layouts:
     """Says, once each, the pairs of a body's LEDs that lie apart otherwise than its layout
     (:meth:`~vlpcal.tracking.Tracker.layout_misfits`; a warning: -q hides none): every
     ``every`` calls during a live run, so a service says it within seconds, and at the end."""
@@ -29,16 +29,16 @@ class _Layouts:
 
 
 #: why a frame could not be measured, said of frames
-_UNREADABLE = {"wrong_size": "of another size than their camera's", "corrupt_frame": "not whole "
+UNREADABLE = {"wrong_size": "of another size than their camera's", "corrupt_frame": "not whole "
                "JPEGs"}
 
 
-def _no_rows(tracker, source, unreadable=None, what: str = "frame") -> UserError:
+def no_rows(tracker, source, unreadable=None, what: str = "frame") -> UserError:
     """Why a run gave no row at all (``unreadable``: frames not measured, by reason;
     ``what`` a frame is: a camera frame, or a spot message)."""
     fit = tracker.fit
     if unreadable and not tracker.frames_with_spot:
-        why = "; ".join(f"{n} frames {_UNREADABLE.get(w, w)}" for w, n in unreadable.items()) \
+        why = "; ".join(f"{n} frames {UNREADABLE.get(w, w)}" for w, n in unreadable.items()) \
             + " (is it the deployment of these cameras?)"
     elif not tracker.frames_with_spot:
         why = (f"no {what} had a spot (is the LED on and in view, and the exposure right?)"
@@ -52,7 +52,7 @@ def _no_rows(tracker, source, unreadable=None, what: str = "frame") -> UserError
     return UserError(f"{source}: no rows: {why}")
 
 
-def _published(publisher, rows, utc: float = 0.0):
+def published_rows(publisher, rows, utc: float = 0.0):
     """``rows`` (track updates) published as they are made, when --publish asks; returned."""
     if publisher:
         from ..mqtt import track_message
@@ -63,7 +63,7 @@ def _published(publisher, rows, utc: float = 0.0):
     return rows
 
 
-def _said_latencies(tracker) -> None:
+def say_latencies(tracker) -> None:
     """Cameras whose capture times the run found to run late or early, said (a warning: a
     camera's clock or link to see to)."""
     for cid, late in sorted(tracker.latencies().items()):
@@ -73,12 +73,12 @@ def _said_latencies(tracker) -> None:
              f"{'late' if late > 0 else 'early'} against the others' (seen in the LED's "
              f"motion): its frames were placed {abs(late):.3f} s "
              f"{'earlier' if late > 0 else 'later'} than their times say", err=True)
-    wander = _wandering_said(tracker)
+    wander = wandering_said(tracker)
     if wander:
         echo(f"warning: {wander}; their rows' sigma_m hold it", err=True)
 
 
-def _wandering_said(tracker) -> str:
+def wandering_said(tracker) -> str:
     """The cameras whose latency wanders along the run, said ("" if none): a possible cause
     of a misfit, and a warning after a run."""
     spread = sorted(tracker.wandering().items())
@@ -90,7 +90,7 @@ def _wandering_said(tracker) -> str:
             "frames stamped late under load?)")
 
 
-def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False,
+def write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False,
                   figure=None) -> None:
     """The tracks file, staged and renamed (``utc``: added to each row's time;
     ``pose_columns``: the bodies' columns too; ``figure``: (png, deployment, title), drawn
@@ -104,17 +104,17 @@ def _write_tracks(out, rows, utc: float = 0.0, pose_columns: bool = False,
             track_figure(staged[0], figure[1], rows, figure[2])
         with open(tmp, "w", newline="") as f:
             w = csv.writer(f)
-            w.writerow(_columns(pose_columns))
-            w.writerows(_utc_row(r, utc, pose_columns) for r in rows)
+            w.writerow(track_columns(pose_columns))
+            w.writerows(utc_row(r, utc, pose_columns) for r in rows)
 
 
-def _columns(pose_columns: bool) -> tuple:
+def track_columns(pose_columns: bool) -> tuple:
     from ..tracking import BODY_COLUMNS, TRACK_COLUMNS
 
     return TRACK_COLUMNS + (BODY_COLUMNS if pose_columns else ())
 
 
-def _utc_row(update, utc: float, pose_columns: bool = False) -> list:
+def utc_row(update, utc: float, pose_columns: bool = False) -> list:
     """A track update's CSV row, its time moved by ``utc`` s (live: the host's monotonic clock
     to UTC)."""
     row = update.row(pose_columns)
@@ -123,7 +123,7 @@ def _utc_row(update, utc: float, pose_columns: bool = False) -> list:
     return row
 
 
-def _lag_said(tracker) -> str:
+def lag_said(tracker) -> str:
     """What the summary says of a --lag past half the fit's window (the most a row can wait)."""
     if tracker.lag is None or tracker.lag <= tracker.half:
         return ""
@@ -131,7 +131,7 @@ def _lag_said(tracker) -> str:
             f"{tracker.half:.3g} s after their frames")
 
 
-def _summary(rows) -> str:
+def run_summary(rows) -> str:
     ok = sum(r.status == "ok" for r in rows)
     leds = sorted({r.led for r in rows if r.pose is None},  # T2 before T10
                   key=lambda led: [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", led)])
