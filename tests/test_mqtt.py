@@ -459,7 +459,9 @@ def test_track_spots_shrugs_off_hostile_messages(broker, tmp_path):
     _, err = trk.communicate(timeout=60)
     assert trk.returncode == 0, err
     assert "Traceback" not in err
-    assert "2 not spots (skipped)" in err and "1 captured in the future" in err, err
+    # counted, and the first one's topic and what was wrong with it said
+    assert '2 not spots (skipped; the first: lab/spots/C1: expected JSON {"t": capture ' \
+        'time, UTC s, "u": px, "v": px}' in err and "1 captured in the future" in err, err
     assert "1 held more spots than --leds 1" in err, err
     rows = open(tmp_path / "t.csv").read().splitlines()
     assert len(rows) > 30

@@ -417,6 +417,9 @@ class SpotSubscriber:
         self.disconnects = 0  #: times the broker went away (not counting our own disconnect)
         self._closing = False
         self.bad = 0
+        #: why the first message counted in ``bad`` was not a spot message (its topic and
+        #: what was wrong), so a summary can say it
+        self.first_bad: str | None = None
         self.unknown = 0
         self.received = 0
         self._queue: queue.Queue = queue.Queue(maxsize=100_000)
@@ -444,7 +447,12 @@ class SpotSubscriber:
         try:
             self._take(msg)
         except Exception:  # whatever a message holds, the client's thread goes on listening
-            self.bad += 1
+            self._bad(msg, "not readable")
+
+    def _bad(self, msg, why: str) -> None:
+        self.bad += 1
+        if self.first_bad is None:
+            self.first_bad = f"{msg.topic}: {why}"
 
     def _take(self, msg):
         cid = msg.topic.rsplit("/", 1)[-1]
@@ -457,9 +465,12 @@ class SpotSubscriber:
         self._heard.add(cid)
         spots = _spots_of(msg.payload)
         w, h = self.sizes.get(cid, (math.inf, math.inf))
-        if spots is None or not all(-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5
-                                    for u, v in spots[1]):
-            self.bad += 1
+        if spots is None:
+            self._bad(msg, 'expected JSON {"t": capture time, UTC s, "u": px, "v": px}, a '
+                      'list of such, or {"t"} alone')
+            return
+        if not all(-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5 for u, v in spots[1]):
+            self._bad(msg, f"a spot off the camera's {w:g} × {h:g} px image")
             return
         t, uv = spots
         self.received += 1

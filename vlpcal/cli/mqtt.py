@@ -86,7 +86,7 @@ def subscriber_notes(sub, who: str, done: str) -> list[str]:
     run's summary (``who``: the locator or tracker that fell behind; ``done``: located or
     tracked)."""
     return [part for part, n in (
-        (f"{sub.bad} not spots (skipped)", sub.bad),
+        (f"{sub.bad} not spots (skipped; the first: {sub.first_bad})", sub.bad),
         (f"{sub.unknown} of cameras not in the deployment", sub.unknown),
         (f"{sub.stale} retained from before (skipped)", sub.stale),
         (f"{sub.dropped} dropped (the {who} fell behind)", sub.dropped),
