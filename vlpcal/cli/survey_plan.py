@@ -74,6 +74,26 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
     """
     dep = _load_deployment(deployment_path)
     free = free or free_height is not None or wand is not None
+    hs = _plan_heights(dep, heights, free, free_height, wand, references, step)
+    _check_wand_fits(wand, dep, to_wave=True)
+    plan, route = _plan_of(dep, deployment_path, hs, heights, free, free_height, wand,
+                           references, step, min_per_camera, tape, spot_noise)
+    out = _output_file(_plan_file(out), inputs=(deployment_path,), beside=(".png",))
+    _write_plan(out, dep, plan, route, wand)
+    if route is not None:
+        say_lines(free_plan_lines(plan, route, out, wand, CAPTURE_SETS, CAPTURE_SECONDS,
+                                  names=FLAGS))
+        return
+    alternative = wand_alternative(dep, plan)
+    say_lines(plan_lines(plan, hs, out, step is not None, min_per_camera,
+                         None if alternative is None else alternative.minutes,
+                         f"vlpcal survey plan -d {deployment_path} --wand {PROPOSED_WAND:g} "
+                         "--out marks.csv", names=FLAGS))
+
+
+def _plan_heights(dep, heights, free, free_height, wand, references, step) -> list:
+    """The options checked against each other and the cameras; the LED heights to plan
+    (``--heights``, or 0, 0.35 and 0.7 m)."""
     if references is not None and not free:
         raise click.BadParameter("is for a free survey (--free)", param_hint="--references")
     if wand is not None and (references is not None or free_height is not None):
@@ -103,7 +123,13 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         raise click.BadParameter(f"expected a height from 0 to below {top:g} m (nine tenths of "
                                  f"the lowest camera's), got {free_height:g}",
                                  param_hint="--free-height")
-    _check_wand_fits(wand, dep, to_wave=True)
+    return hs
+
+
+def _plan_of(dep, deployment_path, hs, heights, free, free_height, wand, references, step,
+             min_per_camera, tape, spot_noise):
+    """The plan the options ask for — a wand's frame marks, a free survey's references, or a
+    tape survey's grid — and a free or wand survey's route (None for a tape survey)."""
     sweep = hs if heights else None
     if wand is not None and not heights:  # the wand's LEDs: from the floor to 40 % + half of it
         sweep = free_sweep(dep, wand)
@@ -119,6 +145,11 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
             plan = plan_survey(dep, step, hs, min_per_camera, tape=tape, spot_noise=spot_noise)
     except SurveyError as e:
         raise UserError(f"{deployment_path}: {e}") from None
+    return plan, route
+
+
+def _plan_file(out) -> Path:
+    """``--out`` checked: a .csv whose folder can be made, not a survey's own record."""
     out = Path(out)
     if out.suffix.lower() != ".csv":  # its map is written beside it as .png
         raise UserError(f"{out}: the survey plan is a CSV file (.csv); its map (.png) goes "
@@ -135,7 +166,12 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         raise UserError(f"{out}: is a survey's record (it has {', '.join(beside)} beside it); "
                         "the plan would replace its measurements: write the plan to another "
                         "file")
-    out = _output_file(out, inputs=(deployment_path,), beside=(".png",))
+    return out
+
+
+def _write_plan(out, dep, plan, route, wand) -> None:
+    """The plan's points.csv (a wand's marks with their unmeasured cells empty) and its map,
+    both or neither."""
     with OutputSet(out.with_suffix(".png"), out) as (png, csv_file):  # both, or neither
         if wand is not None:  # the marks' unmeasured coordinates are empty cells
             with open(csv_file, "w", newline="", encoding="utf-8") as f:
@@ -146,12 +182,3 @@ def survey_plan(deployment_path, out, step, heights, free, free_height, wand, re
         else:
             write_truth_csv(csv_file, plan.ids, plan.xyz, id_column=POINTS_COLUMNS[0])
         survey_plan_figure(png, dep, plan, route)
-    if route is not None:
-        say_lines(free_plan_lines(plan, route, out, wand, CAPTURE_SETS, CAPTURE_SECONDS,
-                                  names=FLAGS))
-        return
-    alternative = wand_alternative(dep, plan)
-    say_lines(plan_lines(plan, hs, out, step is not None, min_per_camera,
-                         None if alternative is None else alternative.minutes,
-                         f"vlpcal survey plan -d {deployment_path} --wand {PROPOSED_WAND:g} "
-                         "--out marks.csv", names=FLAGS))
