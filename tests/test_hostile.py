@@ -872,8 +872,8 @@ def test_a_planted_journal_cannot_move_or_delete_anything_outside_vlpcals_names(
     # answer (exit 1); a password cut at its "#" is not quoted back
     (["track", "-d", DEPLOYMENT, "--camera", "C1=http://[::1/x", "--out", "{tmp}/t.csv"],
      "expected an http(s):// MJPEG URL: host, port"),
-    (["locate", "-d", DEPLOYMENT, "--camera", "C1=http://robot:s3cr#t@cam/x", "--out",
-      "{tmp}/f.csv"], "%23"),
+    (["locate", "-d", DEPLOYMENT, "--camera", "C1=http://robot:s3cr#t@[::1/x", "--out",
+      "{tmp}/f.csv"], "expected an http(s):// MJPEG URL: host, port"),
     (["plan", "--site", SITE, "--out", "{tmp}/p.yaml", "--max-cameras", "100000"],
      "100000 is not in the range"),
 ])

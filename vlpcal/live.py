@@ -220,11 +220,12 @@ def open_source(spec: str, stamps: bool = False) -> Callable[[], Iterator]:
 
     if spec.startswith(("http://", "https://")):
         try:  # (a URL that cannot be one — a bracket left open, a port of letters — is the
-            parts = urlsplit(spec)  # user's to mend, said before any camera is asked)
+            # user's to mend, said before any camera is asked; its password read apart)
+            parts = urlsplit(credentials(spec)[0])
             hostless = not parts.hostname or parts.port == 0
         except ValueError:
             raise ValueError("expected an http(s):// MJPEG URL: host, port (a number) and "
-                             "path; a password with # / ? @ written %23 %2F %3F %40") from None
+                             "path") from None
         if hostless:
             raise ValueError("expected an http(s):// MJPEG URL with a host (and a port not 0)")
         return lambda: mjpeg_frames(spec, stamps=stamps)
