@@ -20,12 +20,12 @@ two-view least squares (``"lsq"``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import StrEnum
 from itertools import combinations
 
 import numpy as np
 
 from .geometry import Camera
+from .spelling import Spelling
 from .triangulation import (
     reprojection_errors,
     triangulate,
@@ -34,7 +34,7 @@ from .triangulation import (
 )
 
 
-class FusionMethod(StrEnum):
+class FusionMethod(Spelling):
     """How several cameras' estimates become one fix; the value is the deployment file's
     ``fusion.method`` spelling (a member equals its string, so files and callers that pass
     strings are unchanged)."""
@@ -50,7 +50,7 @@ class FusionMethod(StrEnum):
 FUSIONS = tuple(FusionMethod)
 
 
-class PairMethod(StrEnum):
+class PairMethod(Spelling):
     """How a camera pair's estimate is solved; the value is the deployment file's
     ``fusion.pair_method`` spelling."""
 
@@ -62,17 +62,28 @@ class PairMethod(StrEnum):
 PAIR_METHODS = tuple(PairMethod)
 
 
-class FixStatus(StrEnum):
-    """What fusion made of a point; the value is the spelling of ``fixes.csv``'s ``status``
-    (docs/conventions.md, fix statuses) — :attr:`Fused.status` holds these strings."""
+class FixStatus(Spelling):
+    """A fix's status: ``ok``, or why a point (a frame set) has none — fusion's, and the
+    locator's beyond them (a camera's detection reason, no frames, outside the room). The
+    value is the spelling of ``fixes.csv``'s ``status`` (docs/conventions.md, fix statuses);
+    :attr:`Fused.status` holds these strings."""
 
     OK = "ok"  #: fixed
-    NO_SPOT = "no_spot"  #: no camera saw the LED
     ONE_CAMERA = "one_camera"  #: one camera alone fixes nothing
-    DEGENERATE = "degenerate"  #: the rays barely meet (the cameras' line, in top view)
+    #: the rays barely meet (the cameras' line, in top view), or a predicted error as large
+    #: as the room
+    DEGENERATE = "degenerate"
+    CORRUPT_FRAME = "corrupt_frame"  #: the locator's: the most telling per-camera reason
+    WRONG_SIZE = "wrong_size"
+    TOO_DIM = "too_dim"
+    AT_EDGE = "at_edge"
+    NO_SPOT = "no_spot"  #: no camera saw the LED
+    NO_FRAMES = "no_frames"  #: the locator's: no camera sent a frame
     #: the robust fusion found no subset of two or more cameras that agree (a reflection, a
     #: lamp)
     INCONSISTENT = "inconsistent"
+    #: the locator's: under the floor, over the ceiling or past the walls
+    OUTSIDE_ROOM = "outside_room"
 
 
 #: the statuses by name, as callers import them

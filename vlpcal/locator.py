@@ -17,37 +17,14 @@ import os
 import sys
 from collections import Counter
 from dataclasses import dataclass
-from enum import Enum
 
 import numpy as np
 
 from .deployment import Deployment, load
 from .detection import REASONS, detect_frame, detect_spots
-from .fusion import OK, fuse
+from .fusion import OK, FixStatus, fuse
 from .triangulation import predicted_rms_error
 from .writing import OutputError, OutputSet, spreadsheet_safe
-
-
-class FixStatus(str, Enum):
-    """A fix's status: ``ok``, or why the frame set has no fix (docs/conventions.md#fix-statuses).
-    The value is the files' spelling; a member equals its string and prints as it, so rows,
-    messages and callers that compare strings are unchanged."""
-
-    OK = "ok"
-    ONE_CAMERA = "one_camera"  #: one camera saw the LED
-    DEGENERATE = "degenerate"  #: the rays barely cross: a predicted error as large as the room
-    CORRUPT_FRAME = "corrupt_frame"  #: beyond the fusion's: the most telling per-camera reason
-    WRONG_SIZE = "wrong_size"
-    TOO_DIM = "too_dim"
-    AT_EDGE = "at_edge"
-    NO_SPOT = "no_spot"
-    NO_FRAMES = "no_frames"  #: no camera sent a frame
-    INCONSISTENT = "inconsistent"  #: no two cameras agree (a reflection, a lamp)
-    OUTSIDE_ROOM = "outside_room"  #: under the floor, over the ceiling or past the walls
-
-    __str__ = str.__str__  # "ok", not "FixStatus.OK" (as enum.StrEnum, which needs 3.11)
-    __format__ = str.__format__
-
 
 #: every fix status, as the files spell them
 FIX_STATUSES = tuple(s.value for s in FixStatus)

@@ -4,12 +4,13 @@ the reasons a frame gives no spot, and the thresholds every detector shares."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 
+from ..spelling import Spelling
 
-class Reason(StrEnum):
+
+class Reason(Spelling):
     """Why a frame gives no spot. A ``str``: the value is how files, statuses and messages
     spell it, and compares equal to that string."""
 

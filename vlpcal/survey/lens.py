@@ -21,15 +21,15 @@ costs the fixes nothing, and whether a model helps is decided by what it does to
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from enum import StrEnum
 
 import numpy as np
 
 from ..geometry import Camera
+from ..spelling import Spelling
 from .errors import SurveyError
 
 
-class LensModel(StrEnum):
+class LensModel(Spelling):
     """A nested lens model, simplest first; the value is the spelling of files and reports
     (a member equals its string: ``LensModel.K1 == "k1"``)."""
 
