@@ -512,7 +512,7 @@ def test_a_wand_survey_captured_live_calibrates_with_no_tape(site, tmp_path):
     burst each, the cells nobody measured left empty); `survey calibrate --wand` on the
     bundle puts the cameras where they are, in the marks' frame."""
     from vlpcal.sim.writers import wand_path
-    from vlpcal.survey.plan import plan_marks
+    from vlpcal.survey.free_plan import plan_marks
 
     scene, root = site
     dep = deployment.load(root / "dep.yaml")

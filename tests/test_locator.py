@@ -224,3 +224,33 @@ def test_out_to_a_folder_is_a_one_line_error_leaving_nothing(site, tmp_path):
                                     str(tmp_path / "frames"), "--out", str(tmp_path / "fixes")])
     assert res.exit_code == 2 and "cannot write the fixes there" in res.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fixes", "frames"]
+
+
+def test_a_fix_whose_rays_miss_each_other_says_so_in_its_sigma():
+    """A camera moved 3 cm since the deployment was written: its rays miss the others' by far
+    more than the spot noise, and 452 of 546 ok fixes lay beyond 3 sigma at millimetre sigmas
+    (a hostile probe). Each fix's sigma now holds what its own residuals, and the run's
+    three-camera fixes', say; the deployment as it hangs keeps its sigmas."""
+    from dataclasses import replace
+
+    from vlpcal.deployment import Deployment
+    from vlpcal.geometry import paper_camera
+
+    cams = [paper_camera(f"C{k + 1}", (1.0 + 0.8 * k, 0.9, 2.3)) for k in range(3)]
+    room = [[0, 0], [3.6, 0], [3.6, 1.8], [0, 1.8]]
+    rng = np.random.default_rng(5)
+    X = np.c_[rng.uniform(1.0, 2.6, 400), rng.uniform(0.5, 1.3, 400), rng.uniform(0, 0.5, 400)]
+    uv = np.stack([c.project(X)[0] for c in cams]) + rng.normal(0, 0.04, (3, 400, 2))
+    as_hung = Locator(Deployment("line", 2.3, room, cams, [], {})).locate_pixels(uv)
+    moved = [cams[0], replace(cams[1], position=(cams[1].position[0] + 0.03,
+                                                 *cams[1].position[1:])), cams[2]]
+    stale = Locator(Deployment("line", 2.3, room, moved, [], {})).locate_pixels(uv)
+    for fixes, far in ((as_hung, 0.01), (stale, 0.2)):
+        ok = fixes.status == "ok"
+        err = np.linalg.norm(fixes.X[ok] - X[ok], axis=1)
+        assert ok.mean() > 0.8 and np.median(err) < far
+        assert (err <= 3 * fixes.sigma[ok]).mean() > 0.99, (err / fixes.sigma[ok]).max()
+    assert np.nanmedian(stale.sigma) > 5 * np.nanmedian(as_hung.sigma)
+    from vlpcal.locator import residual_scale
+
+    assert np.median(residual_scale(as_hung.residual, as_hung.used, 0.05)) < 1.5

@@ -15,7 +15,7 @@ import csv
 import json
 import os
 import sys
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,6 +130,24 @@ class FixBatch:
         return Counter(self.status.tolist())
 
 
+#: fixes whose residual scales make the run's (the latest this many of three cameras or more)
+RUN_SCALES = 500
+
+
+def residual_scale(residual, used, pixel_noise: float) -> np.ndarray:
+    """Per fix (``residual`` C×N px, the cameras ``used`` C×N): how many times the spot noise
+    its own reprojection residuals say it had — their sum of squares over its degrees of
+    freedom (two per camera, less three), against ``pixel_noise`` — and at least 1: a fix whose
+    rays miss each other more than noise allows (a camera moved since its calibration, a
+    damaged frame) is that much less certain than the prediction, never more certain."""
+    used = np.asarray(used, bool)
+    dof = 2 * used.sum(axis=0) - 3
+    squares = np.where(used, np.nan_to_num(np.asarray(residual, float)), 0.0) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.sqrt(squares.sum(axis=0) / (np.maximum(dof, 1) * pixel_noise ** 2))
+    return np.where((dof >= 1) & np.isfinite(scale), np.maximum(scale, 1.0), 1.0)
+
+
 class Locator:
     """Turns frames from a deployment's cameras into 3D fixes."""
 
@@ -147,6 +165,10 @@ class Locator:
         #: m: the room's size (its larger side or the ceiling height), against which a fix's
         #: predicted error says whether it is a position at all
         self._size = deployment.size
+        #: the residual scales (:func:`residual_scale`) of the latest fixes that three cameras
+        #: or more placed: their median, the spot noise this run's rays show, holds for every
+        #: fix (two cameras' rays miss each other in depth without a residual to show it)
+        self._scales: deque = deque(maxlen=RUN_SCALES)
         offsets = deployment.pixel_offsets
         self._offset = np.array([offsets.get(c, (0.0, 0.0)) for c in self.camera_ids])
 
@@ -192,6 +214,13 @@ class Locator:
             camera_status = np.where(np.isfinite(uv).all(axis=2), OK, "no_spot").astype(object)
         res = fuse(self.cameras, uv, self.fusion, region_map=self.region_map,
                    pair_method=self.pair_method, max_residual=self.max_residual)
+        scale = residual_scale(res.residual, res.used, self.pixel_noise)
+        three = (res.used.sum(axis=0) >= 3) & np.isfinite(res.X).all(axis=1)
+        self._scales.extend(scale[three].tolist())
+        if self._scales:
+            scale = np.maximum(scale, float(np.median(self._scales)))
+        # the room judges a fix by its predicted error (a wild fix's residual is no licence
+        # to stand outside it); the row carries what its residuals add
         sigma = predicted_rms_error(self.cameras, res.X, res.used, self.pixel_noise)
         status = res.status.copy()
         # rays that nearly meet only far away (two cameras seeing one pixel): a predicted
@@ -208,6 +237,7 @@ class Locator:
             res.used[:, out] = False
             sigma[out] = np.nan
             status[out] = FixStatus.OUTSIDE_ROOM
+        sigma = sigma * scale
         seen = np.isfinite(uv).all(axis=2)
         dropped = seen & ~res.used & np.isfinite(res.X).all(axis=1)[None, :]
         if self.fusion == "robust":

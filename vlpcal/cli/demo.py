@@ -175,7 +175,7 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
         nominal = deployment_of(scene, "nominal")
         try:
             if wand is not None:  # no tape: frame marks, and the install in their frame
-                from ..survey.plan import plan_marks
+                from ..survey.free_plan import plan_marks
 
                 refs = plan_marks(nominal)
             else:
@@ -184,7 +184,7 @@ def simulate(profile_name, deployment_path, seed, out, survey_step, survey_heigh
             raise UserError(f"--free-sets: {e}") from None
         if deployment_path is not None and free_height is None:
             # your own site: the LED carried along the route survey plan gives it
-            from ..survey.plan import free_sweep
+            from ..survey.free_plan import free_sweep
 
             try:
                 route = free_route(nominal, free_sweep(nominal, wand))

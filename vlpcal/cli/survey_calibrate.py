@@ -34,7 +34,7 @@ from ..survey import (
 from ..survey.free import progress_steps
 from ..survey.spots import check_in_images
 from .common import Finite, UserError, _load_deployment, _output_file, echo
-from .survey import FLAGS, _check_survey_positions, _check_wand_fits, say_lines, survey
+from .survey_shared import FLAGS, _check_survey_positions, _check_wand_fits, say_lines
 
 
 class PointSigma(click.ParamType):
@@ -57,7 +57,7 @@ class PointSigma(click.ParamType):
         return v
 
 
-@survey.command("calibrate")
+@click.command("calibrate")
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The nominal deployment (as installed).")
 @click.option("--survey", "survey_path", required=True, type=click.Path(file_okay=False),

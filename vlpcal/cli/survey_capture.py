@@ -23,7 +23,7 @@ from ..datasets import DatasetError, FreeAppender, SurveyAppender, read_points
 from ..live import LiveGrouper
 from ..survey import SurveyError, free_route
 from .common import Finite, UserError, _camera_sources, _load_deployment, echo
-from .survey import CAPTURE_SECONDS, CAPTURE_SETS, _check_survey_positions, survey
+from .survey_shared import CAPTURE_SECONDS, CAPTURE_SETS, _check_survey_positions
 from .view import DEFAULT_BIND
 
 
@@ -101,7 +101,7 @@ def _move_rig(on_point: str, pid, p) -> None:
                         "the survey so far is kept: fix the rig and run again to resume")
 
 
-@survey.command("capture")
+@click.command("capture")
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The deployment (cameras as installed).")
 @click.option("--points", "points_path", required=True, type=click.Path(dir_okay=False),

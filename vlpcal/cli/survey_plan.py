@@ -16,17 +16,16 @@ from ..survey import SurveyError, free_route, plan_references, plan_survey
 from ..survey.free_plan import PROPOSED_WAND, free_sweep, plan_marks, wand_alternative
 from ..writing import OutputSet
 from .common import Finite, UserError, _floats, _load_deployment, _output_file
-from .survey import (
+from .survey_shared import (
     CAPTURE_SECONDS,
     CAPTURE_SETS,
     FLAGS,
     _check_wand_fits,
     say_lines,
-    survey,
 )
 
 
-@survey.command("plan")
+@click.command("plan")
 @click.option("--deployment", "-d", "deployment_path", required=True,
               type=click.Path(dir_okay=False), help="The deployment (room, cameras).")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False),

@@ -161,12 +161,12 @@ def view(path, bind, cameras, spots_url, follow_url, ca_file, duration):
         if target is not None:
             _follow(target, ca_file, hub, t_end)
         elif spots is not None:
-            from .track import _track_spots
+            from .track_live import _track_spots
 
             _track_spots(dep, path, spots, ca_file, duration, None, None, None, None, True,
                          None, lambda watch: None, hub)
         elif cameras:
-            from .track import _track_live
+            from .track_live import _track_live
 
             _track_live(dep, path, cameras, duration, None, None, None, None, True, None,
                         lambda watch: None, hub)

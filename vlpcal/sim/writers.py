@@ -116,7 +116,7 @@ WALL_CLEARANCE = 0.1
 
 def route_path(scene: Scene, route, n: int, seed: int = 0) -> np.ndarray:
     """A free survey's LED (``n×3``) carried as a planned route says (``route``: a
-    :class:`~vlpcal.survey.plan.FreeRoute` in the scene's frame): the ``n`` sets shared
+    :class:`~vlpcal.survey.free_plan.FreeRoute` in the scene's frame): the ``n`` sets shared
     equally by the stops, in walking order; at each stop the LED swept from the route's foot to
     the stop's top and back, a sweep every :data:`~vlpcal.survey.linkage.SWEEP_SETS` sets,
     landing anywhere within the square the plan allows a stop found by eye; kept off the walls
@@ -223,7 +223,7 @@ def simulate_free_survey(scene: Scene, root, references, n_free: int, seed: int 
     measured coordinate is taped (written ± ``profile.tape``). Without ``marks``: ids ``R01``…,
     every coordinate taped.
 
-    ``route``: a planned route (:class:`~vlpcal.survey.plan.FreeRoute`, in the scene's frame)
+    ``route``: a planned route (:class:`~vlpcal.survey.free_plan.FreeRoute`, in the scene's frame)
     the LED — or the wand's centre — follows (:func:`route_path`) instead of wandering the
     room; not with ``height``.
 

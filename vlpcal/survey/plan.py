@@ -1,7 +1,6 @@
 """Planning a tape survey: where to put the LED, in the order an installer walks, on a grid
 as fine as the cameras' precision needs. A free or wand survey's plans are
-:mod:`.free_plan`'s (:func:`__getattr__` finds them here too, for callers that import them
-from this module)."""
+:mod:`.free_plan`'s."""
 
 from __future__ import annotations
 
@@ -296,19 +295,3 @@ def walking_order(pts: np.ndarray, quantum: float) -> np.ndarray:
             order.extend(row.tolist())
             x_at = pts[row[-1], 0]
     return np.array(order, int)
-
-
-#: the names of :mod:`.free_plan` that callers import from here
-_MOVED = ("plan_references", "plan_marks", "FrameMarks", "FreeRoute", "free_route",
-          "free_sweep", "wand_alternative", "REFERENCE_HEIGHTS", "PROPOSED_WAND",
-          "WAND_PROPOSED_MINUTES", "FLOOR_MARKS", "MARK_MARGIN", "QUARTER_WORDS")
-
-
-def __getattr__(name: str):
-    """A free survey's plan imported from here finds it in :mod:`.free_plan` (imported on
-    first use: it imports this module)."""
-    if name in _MOVED:
-        from . import free_plan
-
-        return getattr(free_plan, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
