@@ -15,7 +15,7 @@ import csv
 import json
 import os
 import sys
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -168,7 +168,8 @@ class Locator:
         #: the residual scales (:func:`residual_scale`) of the latest fixes that three cameras
         #: or more placed: their median, the spot noise this run's rays show, holds for every
         #: fix (two cameras' rays miss each other in depth without a residual to show it)
-        self._scales: deque = deque(maxlen=RUN_SCALES)
+        self._scales = np.full(RUN_SCALES, np.nan)
+        self._scaled = 0  # fixes recorded in it so far (a ring: the latest overwrite the oldest)
         offsets = deployment.pixel_offsets
         self._offset = np.array([offsets.get(c, (0.0, 0.0)) for c in self.camera_ids])
 
@@ -215,10 +216,13 @@ class Locator:
         res = fuse(self.cameras, uv, self.fusion, region_map=self.region_map,
                    pair_method=self.pair_method, max_residual=self.max_residual)
         scale = residual_scale(res.residual, res.used, self.pixel_noise)
-        three = (res.used.sum(axis=0) >= 3) & np.isfinite(res.X).all(axis=1)
-        self._scales.extend(scale[three].tolist())
-        if self._scales:
-            scale = np.maximum(scale, float(np.median(self._scales)))
+        three = scale[(res.used.sum(axis=0) >= 3) & np.isfinite(res.X).all(axis=1)]
+        if len(three):
+            at = (self._scaled + np.arange(len(three))[-RUN_SCALES:]) % RUN_SCALES
+            self._scales[at] = three[-RUN_SCALES:]
+            self._scaled += len(three)
+        if self._scaled:
+            scale = np.maximum(scale, float(np.median(self._scales[:self._scaled])))
         # the room judges a fix by its predicted error (a wild fix's residual is no licence
         # to stand outside it); the row carries what its residuals add
         sigma = predicted_rms_error(self.cameras, res.X, res.used, self.pixel_noise)
