@@ -218,7 +218,8 @@ def _track_spots(dep, deployment_path, target, ca_file, duration, lag, spots, ou
     if future:
         said.append(f"{future} captured in the future by their cameras' clocks (skipped)")
     if tracker.late:
-        said.append(f"{tracker.late} came after their rows were written (skipped)")
+        late = ", ".join(f"{c} {n}" for c, n in tracker.late_by_camera().items())
+        said.append(f"{tracker.late} came after their rows were written (skipped: {late})")
     said += subscriber_notes(sub, "tracker", "tracked")
     if sub.disconnects:
         said.append(f"the broker went away {sub.disconnects} time(s)")

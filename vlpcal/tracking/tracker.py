@@ -5,7 +5,7 @@ methods are grouped by idea in the mixins it is made of (:mod:`.path_fit`,
 from __future__ import annotations
 
 import math
-from collections import deque
+from collections import Counter, deque
 
 import numpy as np
 
@@ -60,6 +60,7 @@ class Tracker(PathFit, CaptureTimes, Identity, RigidBodies):
                             f"reads one), got {type(deployment).__name__}")
         self.deployment = deployment
         self.late = 0  #: frames that came after the rows they belonged to were written
+        self._late_of: Counter = Counter()  # … by camera index
         self._latest: dict = {}  #: camera index → the time of its newest frame
         #: s: how long after a frame's capture its row is written (None: half the window, the
         #: smoothest; 0: at once, the window then ending at the frame — for robots that steer
@@ -162,20 +163,23 @@ class Tracker(PathFit, CaptureTimes, Identity, RigidBodies):
         # the camera's newest time counts even for a late frame: a camera whose clock runs
         # ahead, heard first, must not make the others' frames late before they are heard
         self._latest[k] = max(self._latest.get(k, -np.inf), t)
-        if t < self._present() - self.half - self._wait:
-            self.late += 1
-            return []
-        out = self._due(t)
-        self._drop_lost(t, out)
         uvs = np.asarray(uvs, float).reshape(-1, 2)
         cam = self.cameras[k]  # a spot off the image (or not a number) is no spot
         inside = (uvs[:, 0] >= -0.5) & (uvs[:, 0] <= cam.width - 0.5) & (uvs[:, 1] >= -0.5) \
             & (uvs[:, 1] <= cam.height - 0.5)
         uvs = uvs[inside][:self.spots] - self._offset[k]
         rays = self._rays(k, t, uvs)
-        if len(rays) == 1:
+        if len(rays) == 1:  # (a late frame's too: a camera whose times run behind the others'
+            # by more than rows wait is found by the search of its spots, not lost)
             self._one_spot.setdefault(k, deque(maxlen=SKEW_FRAMES)).append(
                 (stated, np.r_[rays[0].xy, 1.0] @ self._R[k]))
+        if t < self._present() - self.half - self._wait:
+            self.late += 1
+            self._late_of[k] += 1
+            self._searched_now()
+            return []
+        out = self._due(t)
+        self._drop_lost(t, out)
         together = any(c != k and t - u <= START_WINDOW * self.period
                        for c, u in self._spotted.items())
         if len(rays):
@@ -213,15 +217,7 @@ class Tracker(PathFit, CaptureTimes, Identity, RigidBodies):
                     ray.judged = True
         if self.codes:
             self._blink(k, t, given, near)
-        self._frames_since_search += 1
-        if self._suspect and self._frames_since_search >= SEARCH_EVERY:
-            self._frames_since_search, self._suspect = 0, False
-            self._search_times()
-        elif self._frames_since_search >= self._vet_every and self._unvetted():
-            vetted = self.latency.vetted.sum()
-            self._frames_since_search = 0
-            if not self._search_times() and self.latency.vetted.sum() == vetted:
-                self._vet_every = min(2 * self._vet_every, VET_EVERY_MOST)
+        self._searched_now()
         if not self._lag:  # rows at once: this frame's too
             out += self._due(t)
         return out
@@ -232,6 +228,24 @@ class Tracker(PathFit, CaptureTimes, Identity, RigidBodies):
         except (KeyError, TypeError):
             raise KeyError(f"camera {camera_id!r} is not in {self.deployment.name} (it has "
                            f"{', '.join(c.id for c in self.cameras)})") from None
+
+    def _searched_now(self) -> None:
+        """After a frame: the cameras' times searched when a window wanted a latency past
+        its linear reach (every :data:`SEARCH_EVERY` frames), or while a camera's times wait
+        to be vetted (with a back-off while the searches tell nothing)."""
+        self._frames_since_search += 1
+        if self._suspect and self._frames_since_search >= SEARCH_EVERY:
+            self._frames_since_search, self._suspect = 0, False
+            self._search_times()
+        elif self._frames_since_search >= self._vet_every and self._unvetted():
+            vetted = self.latency.vetted.sum()
+            self._frames_since_search = 0
+            if not self._search_times() and self.latency.vetted.sum() == vetted:
+                self._vet_every = min(2 * self._vet_every, VET_EVERY_MOST)
+
+    def late_by_camera(self) -> dict:
+        """Camera id → its frames that came after the rows they belonged to were written."""
+        return {self.cameras[k].id: n for k, n in sorted(self._late_of.items())}
 
     def _rays(self, k: int, t: float, uvs) -> list[_Ray]:
         """Camera ``k``'s spots (px) at ``t`` as rays, each with its two equations on the LED's
