@@ -94,11 +94,17 @@ class PathFit:
         variance = np.trace(cov[:3, :3]) + (timing if fit_ok else 0.0)
         sigma = float(np.sqrt(max(variance, 0.0)))
         status = "ok" if fit_ok else "one_camera"
-        if not sigma < DEGENERATE_SHARE * self._size:  # no position worth the name: none
-            # given (as the locator's degenerate fixes), so no robot steers by it; live, the
-            # first second's, before a search has checked the cameras' times, say so
-            status = "times_unchecked" if fit_ok and timing > variance - timing \
-                and not self.latency.vetted[cams].all() else "degenerate"
+        # the motion that would carry a one-camera row was fitted at times not yet checked
+        # (a late camera's first second): no position
+        unchecked = not fit_ok and self.spots == 1 and not self.latency.vetted[
+            sorted({r.camera for r in tr.rays})].all()
+        if unchecked or not sigma < DEGENERATE_SHARE * self._size:
+            # no position worth the name: none given (as the locator's degenerate fixes), so
+            # no robot steers by it; live, the first second's, before a search has checked
+            # the cameras' times, say so
+            status = "times_unchecked" if unchecked or (
+                fit_ok and timing > variance - timing
+                and not self.latency.vetted[cams].all()) else "degenerate"
             fit = np.full(9, np.nan)
         return TrackUpdate(t, tr.led, fit[:3].copy(), fit[3:6].copy(), sigma,
                            "+".join(self.cameras[k].id for k in cams), status)
