@@ -90,3 +90,22 @@ def test_the_command_writes_the_zoned_deployment_beside_its_input(tmp_path):
                          timeout=120)
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert (tmp_path / "hall.yaml").read_bytes() == before
+
+
+def test_a_zone_counts_only_placed_fixes_as_outside_it():
+    """`locate --zone` said "133 fixes outside its polygon" of 80 fixes and 53 sets without
+    one (new-user walk): a set without a fix is no zone's, and not counted as outside."""
+    from types import SimpleNamespace
+
+    from vlpcal.cli.mqtt import ZoneWriter
+
+    kept = []
+    writer = SimpleNamespace(write=lambda fixes, extra=None: kept.extend(fixes))
+    zones = {"west": ([[0, 0], [1, 0], [1, 1], [0, 1]], ["C1", "C2"]),
+             "east": ([[1, 0], [2, 0], [2, 1], [1, 1]], ["C2", "C3"])}
+    zone = ZoneWriter(writer, zones, "west")
+    nan = float("nan")
+    fixes = [SimpleNamespace(x=0.5, y=0.5, z=0.1), SimpleNamespace(x=1.5, y=0.5, z=0.1),
+             SimpleNamespace(x=nan, y=nan, z=nan)]
+    zone.write(fixes)
+    assert kept == fixes[:1] and zone.outside == 1

@@ -137,12 +137,13 @@ class ZoneWriter:
 
         fixes = list(fixes)
         X = np.array([(f.x, f.y, f.z) for f in fixes], float).reshape(-1, 3)
-        ours = np.isfinite(X).all(axis=1)
+        placed = np.isfinite(X).all(axis=1)
+        ours = placed.copy()
         if ours.any():
             where = points(X[ours, :2])
             apart = np.stack([distance(p, where) for p in self.polygons])
             ours[ours] = apart.argmin(axis=0) == self.mine
-        self.outside += int((~ours).sum())
+        self.outside += int((placed & ~ours).sum())  # (a set without a fix is no zone's)
         self.writer.write([f for f, ok in zip(fixes, ours) if ok], extra)
 
     def close(self) -> None:

@@ -167,7 +167,7 @@ def zones(deployment_path, processes, out):
     cameras as can be. Writes the deployment with the zones: block (an existing one is
     replaced) and prints each process's command.
 
-    Example: vlpcal zones -d site.yaml --processes 4 --out site-zoned.yaml
+    Example: vlpcal zones -d deployment.yaml --processes 4 --out deployment-zoned.yaml
     """
     from dataclasses import replace
 
@@ -185,5 +185,4 @@ def zones(deployment_path, processes, out):
     for line in zones_lines(zoning, replaced="zones" in dep.extra):
         echo(line)
     save(replace(dep, extra={**dep.extra, "zones": zoning.block()}), out)
-    echo(f"wrote {out}; each process: vlpcal locate -d {out} --zone ZONE --spots mqtt://… "
-         "(or track)")
+    echo(f"wrote {out}; each process: vlpcal locate -d {out} --zone ZONE --spots mqtt://…")
