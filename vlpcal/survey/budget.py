@@ -6,7 +6,7 @@ camera's pose and lens (a representative model, ``k1``) and every surveyed posit
 positions known to ``tape`` m per axis, the spots to ``spot`` px. Eliminating the positions
 (the Schur complement of their 3 × 3 blocks) leaves the cameras' covariance; a fix at a test
 point moves with the cameras by ``dX/dθ = −F⁻¹ Σ J_Xᵀ J_θ`` (F the fix's information), so the
-calibration adds ``D Cov_θ Dᵀ`` to the fix's own ``σ² F⁻¹`` (FIELD-NOTES: the error budget).
+calibration adds ``D Cov_θ Dᵀ`` to the fix's own ``σ² F⁻¹`` (two independent sources).
 The ratio of the two mean errors is dimensionless: the same survey of the same scene at any
 scale, with tape and spots scaled alike, predicts the same share.
 
