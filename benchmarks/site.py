@@ -46,21 +46,12 @@ from vlpcal.planning.zones import cut_zones
 from vlpcal.sim.broker import Broker
 from vlpcal.sim.streams import Timing, capture_times
 
+from mqtt import LISTENER  # the fixes' subscriber, as benchmarks/mqtt.py runs it
+
 HEIGHT, PITCH_X, PITCH_Y = 4.0, 2.0, 1.5
 #: s: latency percentiles are of the fixes after this (each process's start apart)
 WARM_UP = 1.0
 SPEED = 1.0
-
-#: the subscriber: its own process, writing each fix's arrival time and payload as it comes
-LISTENER = r"""
-import sys, time, paho.mqtt.client as mqtt
-out = open(sys.argv[2], "w", buffering=1)
-c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
-c.on_connect = lambda c, *a: c.subscribe("out/fixes/#", qos=0)
-c.on_message = lambda c, u, m: out.write(f"{time.time()!r}\t{m.payload.decode()}\n")
-c.connect("127.0.0.1", int(sys.argv[1]))
-c.loop_forever()
-"""
 
 #: a locator that says its own CPU time when it ends ("@cpu user system", s)
 LOCATOR = r"""
@@ -127,7 +118,7 @@ def _cpu(pid: int) -> float:
         return float("nan")
 
 
-def run(broker, dep_path, dep, zoning, paths, events, fps: float, seconds: float) -> dict:
+def run(broker, dep_path, dep, zoning, events, fps: float, seconds: float) -> dict:
     import paho.mqtt.client as mqtt
 
     tmp = dep_path.parent
@@ -220,7 +211,7 @@ def main(argv=None) -> int:
                 save(dep, tmp / f"site-{n}.yaml")
                 for fps in sorted(args.fps):
                     events = schedule(dep, paths, fps, args.seconds, args.seed)
-                    row = run(broker, tmp / f"site-{n}.yaml", dep, zoning, paths, events, fps,
+                    row = run(broker, tmp / f"site-{n}.yaml", dep, zoning, events, fps,
                               args.seconds)
                     rows.append(row)
                     print(f"  {n} locators, {fps:g} fps: {row['spots_lost']} spots lost, "
