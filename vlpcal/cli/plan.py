@@ -5,9 +5,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import click
 
-from ..deployment import MAX_ZONES, dumps
+from ..deployment import MAX_ZONES, dumps, save
 from ..planning import Candidate, SiteError, load_site, plan_site, planned_deployment
 from ..planning.check import check_layout
 from ..planning.report import (
@@ -18,6 +20,7 @@ from ..planning.report import (
     verdict_line,
     zones_lines,
 )
+from ..planning.zones import ZoningError, cut_zones
 from ..reports import plan_maps
 from ..survey import SurveyError
 from ..survey.linkage import link_cameras
@@ -169,11 +172,6 @@ def zones(deployment_path, processes, out):
 
     Example: vlpcal zones -d deployment.yaml --processes 4 --out deployment-zoned.yaml
     """
-    from dataclasses import replace
-
-    from ..deployment import save
-    from ..planning.zones import ZoningError, cut_zones
-
     dep = _load_deployment(deployment_path)
     out = _output_file(out, inputs=(deployment_path,), what="the zoned deployment")
     if not str(out).lower().endswith((".yaml", ".yml")):

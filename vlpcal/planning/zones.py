@@ -9,6 +9,7 @@ strips along the room's longer side and grids of strips cut across, whichever ba
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,11 +55,8 @@ class Zoning:
     @property
     def shared(self) -> int:
         """Cameras in more than one zone (on a border)."""
-        seen = np.zeros(0, dtype=object)
-        for z in self.zones:
-            seen = np.concatenate([seen, np.array(z.cameras, dtype=object)])
-        _, counts = np.unique(seen.astype(str), return_counts=True)
-        return int((counts > 1).sum())
+        counts = Counter(c for z in self.zones for c in z.cameras)
+        return sum(n > 1 for n in counts.values())
 
     def block(self) -> list:
         """The deployment's ``zones:`` block."""
