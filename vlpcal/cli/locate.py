@@ -115,6 +115,11 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
     publisher = open_publisher(publish, qos, ca_file, loc.deployment, deployment_path, zone)
     from ..writing import OutputError
 
+    t0 = time.perf_counter()
+    sent = live or out == "-" or publisher  # what a stop cannot take back
+    statuses = _Tally(loc.deployment.name, FitCheck(
+        keep_going, "the fixes so far are kept" if sent else "nothing was written"))
+    notes = []
     try:
         writer = FixWriter(out, fmt, extra_columns=("t_s",) if live else (), live=live)
     except (OSError, OutputError) as e:
@@ -122,20 +127,19 @@ def locate(deployment_path, frames_dir, observations, cameras, spots_url, zone, 
             publisher.close()
         raise UserError(str(e) if isinstance(e, OutputError) else
                         f"{out}: cannot write the fixes there ({e.strerror})") from None
-    if plot is not None:
-        writer = _PlottingWriter(writer, plot, dep, led_of(dep), live, say)
-    if publisher:
-        writer = PublishingWriter(writer, publisher, site_led if zone else led_of(dep),
-                                  utc="t_s" if live else None)
-    if zone is not None:  # written and published: the fixes inside the zone's polygon
-        writer = ZoneWriter(writer, _load_deployment(deployment_path).zones, zone)
+    try:  # (a stop while the writer is wrapped leaves no staged file either)
+        if plot is not None:
+            writer = _PlottingWriter(writer, plot, dep, led_of(dep), live, say)
+        if publisher:
+            writer = PublishingWriter(writer, publisher, site_led if zone else led_of(dep),
+                                      utc="t_s" if live else None)
+        if zone is not None:  # written and published: the fixes inside the zone's polygon
+            writer = ZoneWriter(writer, _load_deployment(deployment_path).zones, zone)
+    except BaseException:
+        writer.abort()
+        raise
     # from here on every way out either closes the writer (the fixes so far are kept) or
     # aborts it (nothing replaced)
-    t0 = time.perf_counter()
-    sent = live or out == "-" or publisher  # what a stop cannot take back
-    statuses = _Tally(loc.deployment.name, FitCheck(
-        keep_going, "the fixes so far are kept" if sent else "nothing was written"))
-    notes = []
     try:
         if frames_dir:
             n = _locate_folder(loc, frames_dir, writer, batch, statuses, notes, quiet)
